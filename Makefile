@@ -1,0 +1,39 @@
+# graspnet_torch: `make help` lists the targets.
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.installed
+
+.DEFAULT_GOAL := help
+.PHONY: help install demo test lint bench urdf clean
+
+help:  ## list the targets
+	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PIP) install --upgrade pip >/dev/null
+	$(PIP) install torch==2.13.0
+	$(PIP) install -e '.[dev]'
+	touch $(STAMP)
+
+install: $(STAMP)  ## create .venv if missing (torch first, pinned) and install the package
+
+demo: $(STAMP)  ## run the main job on the default problem (for now: robot table + pictures)
+	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/demo
+
+test: $(STAMP)  ## ruff check + pytest
+	$(PY) -m ruff check .
+	$(PY) -m pytest
+
+lint: $(STAMP)  ## ruff check
+	$(PY) -m ruff check .
+
+bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
+	$(PY) benchmarks/bench_kinematics.py
+
+urdf: $(STAMP)  ## regenerate the URDFs from urdf/build.py
+	$(PY) urdf/build.py
+
+clean:  ## remove outputs and caches (keeps .venv)
+	rm -rf outputs multirun .pytest_cache .ruff_cache

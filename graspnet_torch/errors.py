@@ -1,0 +1,25 @@
+"""User-facing errors. Each carries one line that says what is wrong and where."""
+
+from __future__ import annotations
+
+__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "ProblemError"]
+
+
+class GraspnetError(Exception):
+    """Base class of the errors a user can cause (bad config, bad problem file, bad checkpoint).
+
+    Command-line entry points turn these into one line on stderr and exit status 2; anything
+    else is a bug and keeps its traceback.
+    """
+
+
+class ConfigError(GraspnetError, ValueError):
+    """A robot or run configuration is invalid (unknown name, missing file, bad key or value)."""
+
+
+class ProblemError(GraspnetError, ValueError):
+    """A grasp problem (file or object) is invalid."""
+
+
+class CheckpointError(GraspnetError, ValueError):
+    """A checkpoint file is missing, corrupted or does not match the robot it is loaded for."""

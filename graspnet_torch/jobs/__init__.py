@@ -1,0 +1,1 @@
+"""Plain functions behind the entry scripts in scripts/ (tests call them directly)."""

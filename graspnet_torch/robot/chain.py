@@ -1,0 +1,202 @@
+"""URDF parsing and serial-chain constants.
+
+pytorch-kinematics parses the URDF and builds each serial chain (which frames, which joints, their
+types, axes and limits); :class:`ChainSpec` reads that chain into float64 constants,
+
+    T(q) = F_0 M_0(q_0) F_1 M_1(q_1) ... M_{n-1}(q_{n-1}) F_n,
+
+where each ``F_i`` is the product of the fixed transforms between two movable joints and ``M_i``
+the motion of joint i about (revolute) or along (prismatic) its axis. Joint origins are taken from
+the URDF in float64 (pytorch-kinematics stores them in float32), so the fast kernel built from a
+``ChainSpec`` is exact to float64 rounding.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from graspnet_torch.errors import ConfigError
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pytorch_kinematics as pk
+
+__all__ = ["ChainSpec", "UrdfModel", "rpy_matrix_np"]
+
+
+def rpy_matrix_np(rpy) -> np.ndarray:
+    """float64 ``Rz(y) Ry(p) Rx(r)`` of URDF rpy angles (radians)."""
+    r, p, y = (float(a) for a in rpy)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _origin_matrix(origin) -> np.ndarray:
+    T = np.eye(4)
+    if origin is not None:
+        T[:3, :3] = rpy_matrix_np(origin.rpy if origin.rpy is not None else (0, 0, 0))
+        T[:3, 3] = origin.xyz if origin.xyz is not None else (0, 0, 0)
+    return T
+
+
+@dataclass(frozen=True)
+class ChainSpec:
+    """float64 constants of one serial chain from ``root`` to ``tip``.
+
+    Attributes:
+        root, tip: link names.
+        joint_names, joint_types: movable joints in chain order; types 'revolute' | 'prismatic'.
+        axes: (n, 3) unit joint axes, each in its joint's frame.
+        offsets: (n + 1, 4, 4) fixed transforms F_0..F_n (see module docstring).
+        lower, upper: (n,) joint limits (rad or m); a continuous joint gets [-pi, pi].
+    """
+
+    root: str
+    tip: str
+    joint_names: tuple[str, ...]
+    joint_types: tuple[str, ...]
+    axes: np.ndarray
+    offsets: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_names)
+
+    def transform(self, q: np.ndarray) -> np.ndarray:
+        """Reference evaluation (float64, one configuration): q (n,) -> T (4, 4) of tip in root."""
+        T = self.offsets[0].copy()
+        for i, kind in enumerate(self.joint_types):
+            M = np.eye(4)
+            if kind == "revolute":
+                a = self.axes[i]
+                K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+                M[:3, :3] = np.eye(3) + math.sin(q[i]) * K + (1 - math.cos(q[i])) * K @ K
+            else:
+                M[:3, 3] = self.axes[i] * q[i]
+            T = T @ M @ self.offsets[i + 1]
+        return T
+
+
+class UrdfModel:
+    """A URDF file parsed by pytorch-kinematics, with its serial chains on demand."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ConfigError(f"URDF file not found: {self.path}")
+        self.xml = self.path.read_text()
+        from pytorch_kinematics.urdf_parser_py.urdf import URDF
+
+        try:
+            self.robot = URDF.from_xml_string(self.xml)
+        except Exception as exc:  # the parser raises assorted types on malformed XML
+            raise ConfigError(f"{self.path}: not a valid URDF ({exc})") from None
+        self.links: dict[str, object] = {link.name: link for link in self.robot.links}
+        self.joints: dict[str, object] = {j.name: j for j in self.robot.joints}
+        self.parent_joint: dict[str, object] = {j.child: j for j in self.robot.joints}
+
+    @property
+    def link_names(self) -> list[str]:
+        return list(self.links)
+
+    @property
+    def movable_joint_names(self) -> list[str]:
+        return [j.name for j in self.robot.joints if j.type in ("revolute", "continuous", "prismatic")]
+
+    @property
+    def root_link(self) -> str:
+        roots = [name for name in self.links if name not in self.parent_joint]
+        if len(roots) != 1:
+            raise ConfigError(f"{self.path}: expected one root link, found {roots}")
+        return roots[0]
+
+    @cached_property
+    def chain(self) -> pk.Chain:
+        """The whole kinematic tree as a pytorch-kinematics ``Chain``."""
+        import pytorch_kinematics as pk
+
+        return pk.build_chain_from_urdf(self.xml)
+
+    def check_link(self, link: str, what: str) -> None:
+        if link not in self.links:
+            raise ConfigError(f"{what}: link '{link}' is not in {self.path.name}")
+
+    def path_joints(self, root: str, tip: str, what: str = "chain") -> list:
+        """URDF joints from ``root`` down to ``tip``, in chain order."""
+        self.check_link(root, what)
+        self.check_link(tip, what)
+        joints, link = [], tip
+        while link != root:
+            joint = self.parent_joint.get(link)
+            if joint is None:
+                raise ConfigError(f"{what}: link '{tip}' is not below '{root}' in {self.path.name}")
+            joints.append(joint)
+            link = joint.parent
+        return joints[::-1]
+
+    def fixed_transform(self, root: str, tip: str, what: str = "frame") -> np.ndarray:
+        """(4, 4) float64 pose of ``tip`` in ``root``; every joint between them must be fixed."""
+        T = np.eye(4)
+        for joint in self.path_joints(root, tip, what):
+            if joint.type != "fixed":
+                raise ConfigError(f"{what}: joint '{joint.name}' between '{root}' and '{tip}' is "
+                                  f"{joint.type}, expected only fixed joints")
+            T = T @ self._link_offset(joint.child) @ _origin_matrix(joint.origin)
+        return T
+
+    def serial_chain(self, root: str, tip: str) -> pk.SerialChain:
+        """The pytorch-kinematics ``SerialChain`` from ``root`` to ``tip`` (the reference in tests)."""
+        import pytorch_kinematics as pk
+
+        self.path_joints(root, tip)  # clear error first
+        return pk.SerialChain(self.chain, tip, root)
+
+    def _link_offset(self, link: str) -> np.ndarray:
+        return _origin_matrix(getattr(self.links[link], "origin", None))
+
+    def chain_spec(self, root: str, tip: str, what: str = "chain") -> ChainSpec:
+        """float64 constants of the serial chain from ``root`` to ``tip``.
+
+        The frame sequence, joint types, axes and limits come from the pytorch-kinematics chain;
+        joint origins are re-read from the URDF in float64.
+        """
+        self.path_joints(root, tip, what)
+        sc = self.serial_chain(root, tip)
+        frames = sc.get_frame_names(exclude_fixed=False)
+        offsets, names, types, axes, lower, upper = [], [], [], [], [], []
+        current = np.eye(4)
+        for frame_name in frames[1:]:  # the root frame is the chain's origin
+            frame = sc.find_frame(frame_name)
+            urdf_joint = self.joints[frame.joint.name]
+            current = current @ self._link_offset(frame_name) @ _origin_matrix(urdf_joint.origin)
+            if frame.joint.joint_type == "fixed":
+                continue
+            offsets.append(current)
+            current = np.eye(4)
+            names.append(frame.joint.name)
+            types.append(frame.joint.joint_type)
+            axis = np.asarray(urdf_joint.axis if urdf_joint.axis is not None else
+                              frame.joint.axis.tolist(), dtype=np.float64)
+            axes.append(axis / np.linalg.norm(axis))
+            lim = urdf_joint.limit
+            if urdf_joint.type == "continuous" or lim is None:
+                lower.append(-math.pi)
+                upper.append(math.pi)
+            else:
+                lower.append(float(lim.lower))
+                upper.append(float(lim.upper))
+        offsets.append(current)
+        n = len(names)
+        return ChainSpec(root=root, tip=tip, joint_names=tuple(names), joint_types=tuple(types),
+                         axes=np.asarray(axes, dtype=np.float64).reshape(n, 3),
+                         offsets=np.stack(offsets), lower=np.asarray(lower, dtype=np.float64),
+                         upper=np.asarray(upper, dtype=np.float64))

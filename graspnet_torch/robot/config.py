@@ -1,0 +1,176 @@
+"""Typed robot configuration, read from ``configs/robot/<name>.yaml``.
+
+The YAML keys are those of shared/INTERFACE.md; files give lengths in metres and angles in
+degrees, the dataclasses hold SI units (metres, radians). See configs/robot/hand.yaml for a
+commented example.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.paths import configs_dir, resolve_repo_path
+
+__all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg"]
+
+
+@dataclass(frozen=True)
+class ChainCfg:
+    """A serial chain named by its first and last link."""
+
+    base: str
+    tip: str
+
+
+@dataclass(frozen=True)
+class PoseBounds:
+    """Box bounds of a 6-D pose ``(x, y, z, rx, ry, rz)``: metres and radians.
+
+    Attributes:
+        lower, upper: (6,) float64 arrays.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def from_degrees(cls, bounds: Mapping[str, Any], where: str) -> PoseBounds:
+        """From ``{min: [x, y, z, rx, ry, rz], max: [...]}`` with angles in degrees."""
+        if not isinstance(bounds, Mapping) or set(bounds) != {"min", "max"}:
+            raise ConfigError(f"{where}: expected a mapping with keys 'min' and 'max'")
+        arrays = []
+        for key in ("min", "max"):
+            value = bounds[key]
+            try:
+                arr = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ConfigError(f"{where}.{key}: expected 6 numbers, got {value!r}") from None
+            if arr.shape != (6,):
+                raise ConfigError(f"{where}.{key}: expected 6 numbers (x, y, z, rx, ry, rz), got {value!r}")
+            if not np.all(np.isfinite(arr)):
+                raise ConfigError(f"{where}.{key}: numbers must be finite, got {value!r}")
+            arrays.append(np.concatenate([arr[:3], np.radians(arr[3:])]))
+        lower, upper = arrays
+        bad = np.nonzero(lower > upper)[0]
+        if bad.size:
+            names = ("x", "y", "z", "rx", "ry", "rz")
+            raise ConfigError(f"{where}: min > max for {', '.join(names[i] for i in bad)}")
+        return cls(lower, upper)
+
+    def to_degrees(self) -> dict[str, list[float]]:
+        conv = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
+        return {"min": (self.lower * conv).tolist(), "max": (self.upper * conv).tolist()}
+
+
+@dataclass(frozen=True)
+class RobotCfg:
+    """A robot: its URDF and the named links that give it its structure.
+
+    Attributes:
+        name: robot name.
+        urdf: absolute path of the URDF.
+        palm_link: the link whose pose the configuration network chooses (hand) or the arm moves.
+        fingers: finger name -> chain from its fixed base frame to its fingertip; thumb first.
+        palm_bounds: search space of the palm pose, or None (robots whose palm the arm moves).
+        arm: chain from the arm's base to ``palm_link`` (arm_hand, manus), or None.
+        mobile_base: chain from the world to the platform carrying the arm (manus), or None.
+        gripper_points: the two marked point links of a gripper (manus), or ().
+        home: joint name -> home value as written in the file (degrees for revolute joints, metres
+            for prismatic ones), for pictures; missing joints are 0.
+        source: the file this came from, for error messages.
+    """
+
+    name: str
+    urdf: Path
+    palm_link: str
+    fingers: dict[str, ChainCfg] = field(default_factory=dict)
+    palm_bounds: PoseBounds | None = None
+    arm: ChainCfg | None = None
+    mobile_base: ChainCfg | None = None
+    gripper_points: tuple[str, ...] = ()
+    home: dict[str, float] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], source: str = "<memory>") -> RobotCfg:
+        """Validate a parsed robot config (YAML mapping, Hydra ``DictConfig`` as a container)."""
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
+        known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
+                 "gripper_points", "home", "description"}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown)}")
+        for key in ("name", "urdf", "palm_link"):
+            if not isinstance(data.get(key), str) or not data[key]:
+                raise ConfigError(f"{source}: '{key}' must be a non-empty string")
+        fingers = {}
+        raw_fingers = data.get("fingers") or {}
+        if not isinstance(raw_fingers, Mapping):
+            raise ConfigError(f"{source}: 'fingers' must map finger names to {{base, tip}}")
+        for fname, chain in raw_fingers.items():
+            fingers[str(fname)] = _chain(chain, f"{source}: fingers.{fname}")
+        bounds = data.get("palm_bounds")
+        palm_bounds = PoseBounds.from_degrees(bounds, f"{source}: palm_bounds") if bounds is not None else None
+        arm = _chain(data["arm"], f"{source}: arm") if data.get("arm") is not None else None
+        base = _chain(data["mobile_base"], f"{source}: mobile_base") if data.get("mobile_base") is not None else None
+        points = data.get("gripper_points") or ()
+        if points and (not isinstance(points, list | tuple) or len(points) != 2
+                       or not all(isinstance(p, str) for p in points)):
+            raise ConfigError(f"{source}: 'gripper_points' must list two link names")
+        if not fingers and not points:
+            raise ConfigError(f"{source}: a robot needs 'fingers' or 'gripper_points'")
+        if arm is None and palm_bounds is None:
+            raise ConfigError(f"{source}: a robot without an 'arm' needs 'palm_bounds'")
+        home = {}
+        for joint, value in (data.get("home") or {}).items():
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise ConfigError(f"{source}: home.{joint} must be a finite number, got {value!r}")
+            home[str(joint)] = float(value)
+        urdf = resolve_repo_path(data["urdf"])
+        if not urdf.is_file():
+            raise ConfigError(f"{source}: URDF file not found: {data['urdf']} (looked at {urdf})")
+        return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
+                   palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
+                   home=home, source=source)
+
+
+def _chain(value: Any, where: str) -> ChainCfg:
+    if not isinstance(value, Mapping) or set(value) != {"base", "tip"}:
+        raise ConfigError(f"{where}: expected {{base: <link>, tip: <link>}}, got {value!r}")
+    if not all(isinstance(value[k], str) and value[k] for k in ("base", "tip")):
+        raise ConfigError(f"{where}: base and tip must be link names")
+    return ChainCfg(value["base"], value["tip"])
+
+
+def available_robots() -> list[str]:
+    """Names of the robot configs shipped under ``configs/robot/``."""
+    return sorted(p.stem for p in (configs_dir() / "robot").glob("*.yaml"))
+
+
+def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
+    """A robot config by name (``configs/robot/<name>.yaml``) or by path to a YAML file."""
+    text = str(name_or_path)
+    path = Path(text)
+    if not (text.endswith((".yaml", ".yml")) or path.is_file()):
+        path = configs_dir() / "robot" / f"{text}.yaml"
+        if not path.is_file():
+            raise ConfigError(f"unknown robot '{text}': expected one of {', '.join(available_robots())} "
+                              f"(configs/robot/) or a path to a robot YAML file")
+    elif not path.is_file():
+        raise ConfigError(f"robot config file not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ConfigError(f"{path}: malformed YAML{where}") from None
+    return RobotCfg.from_mapping(data, source=str(path))

@@ -1,0 +1,380 @@
+"""The robot: URDF + robot config -> chains, limits, frames and batched kinematics.
+
+Frames. *World* is the URDF's root link frame (for the ``hand``, whose palm floats, world is the
+frame the palm pose is given in). The *palm* frame is ``palm_link``. Each finger has a fixed
+*base* frame on the palm; the FCNN learns each finger's inverse kinematics in its base frame.
+
+Joint tensors. Finger joints are ``(..., F, n)``: F fingers in ``robot.finger_names`` order
+(thumb first), n joints each in chain order (abduction, MCP, PIP, DIP for the shipped hand).
+Body joints (the arm, or the mobile base then the arm) are ``(..., m)`` in
+``robot.body_joint_names`` order. Angles in radians, lengths in metres. Every method follows the
+dtype and device of its inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.robot.chain import ChainSpec, UrdfModel
+from graspnet_torch.robot.config import PoseBounds, RobotCfg, load_robot_cfg
+from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.transforms import pose_to_rt, transform_points, untransform_points
+
+__all__ = ["Finger", "Posture", "Robot", "load_robot"]
+
+
+@dataclass(frozen=True)
+class Finger:
+    """One finger: its serial chain (base -> tip) and where its base sits on the palm.
+
+    Attributes:
+        name: finger name.
+        chain: constants of the chain from the base link to the fingertip link.
+        base_in_palm: (4, 4) float64 pose of the base frame in the palm frame.
+    """
+
+    name: str
+    chain: ChainSpec
+    base_in_palm: np.ndarray
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.chain.joint_names
+
+    @property
+    def n_joints(self) -> int:
+        return self.chain.n_joints
+
+
+@dataclass(frozen=True)
+class Posture:
+    """A whole-robot configuration.
+
+    Attributes:
+        palm_pose: (6,) palm pose in the world (x, y, z, rx, ry, rz); for robots with a body it is
+            the pose the body's forward kinematics gives.
+        fingers: (F, n) finger joints.
+        body: (m,) body joints (empty for the hand).
+    """
+
+    palm_pose: Tensor
+    fingers: Tensor
+    body: Tensor
+
+
+class Robot:
+    """Kinematics of a robot described by a :class:`RobotCfg`.
+
+    Build with :meth:`from_config` or :func:`load_robot`.
+    """
+
+    def __init__(self, cfg: RobotCfg):
+        self.cfg = cfg
+        self.name = cfg.name
+        self.urdf = UrdfModel(cfg.urdf)
+        src = cfg.source
+        self.urdf.check_link(cfg.palm_link, f"{src}: palm_link")
+
+        fingers = []
+        for fname, chain in cfg.fingers.items():
+            what = f"{src}: finger '{fname}'"
+            self.urdf.check_link(chain.base, f"{what} base")
+            self.urdf.check_link(chain.tip, f"{what} tip")
+            base_in_palm = self.urdf.fixed_transform(cfg.palm_link, chain.base, f"{what} base")
+            spec = self.urdf.chain_spec(chain.base, chain.tip, what)
+            if spec.n_joints == 0:
+                raise ConfigError(f"{what}: no movable joint between '{chain.base}' and '{chain.tip}'")
+            fingers.append(Finger(fname, spec, base_in_palm))
+        if fingers:
+            ref = fingers[0].chain.joint_types
+            for f in fingers[1:]:
+                if f.chain.joint_types != ref:
+                    raise ConfigError(f"{src}: finger '{f.name}' has joints {f.chain.joint_types} but "
+                                      f"'{fingers[0].name}' has {ref}; all fingers must have the same "
+                                      f"number and types of joints")
+        self.fingers: dict[str, Finger] = {f.name: f for f in fingers}
+        self.finger_names: tuple[str, ...] = tuple(self.fingers)
+        self.finger_kernel: ChainKernel | None = ChainKernel([f.chain for f in fingers]) if fingers else None
+
+        self.body: ChainSpec | None = None
+        self.body_kernel: ChainKernel | None = None
+        self.gripper_kernel: ChainKernel | None = None
+        if cfg.arm is not None:
+            root = self.urdf.root_link
+            self.urdf.check_link(cfg.arm.base, f"{src}: arm base")
+            if cfg.arm.tip != cfg.palm_link:
+                raise ConfigError(f"{src}: arm tip '{cfg.arm.tip}' must be the palm_link '{cfg.palm_link}'")
+            self.body = self.urdf.chain_spec(root, cfg.palm_link, f"{src}: arm")
+            arm_joints = self.urdf.chain_spec(cfg.arm.base, cfg.arm.tip, f"{src}: arm").joint_names
+            base_joints = ()
+            if cfg.mobile_base is not None:
+                base_joints = self.urdf.chain_spec(cfg.mobile_base.base, cfg.mobile_base.tip,
+                                                   f"{src}: mobile_base").joint_names
+            if self.body.joint_names != base_joints + arm_joints:
+                raise ConfigError(f"{src}: the joints from '{root}' to '{cfg.palm_link}' "
+                                  f"{self.body.joint_names} are not mobile_base + arm joints")
+            self.body_kernel = ChainKernel(self.body)
+            if cfg.gripper_points:
+                specs = [self.urdf.chain_spec(root, pt, f"{src}: gripper_points") for pt in cfg.gripper_points]
+                for spec in specs:
+                    if spec.joint_names != self.body.joint_names:
+                        raise ConfigError(f"{src}: gripper point '{spec.tip}' must hang rigidly from "
+                                          f"'{cfg.palm_link}'")
+                self.gripper_kernel = ChainKernel(specs)
+        elif cfg.gripper_points:
+            raise ConfigError(f"{src}: gripper_points need an arm")
+        self._consts: dict[tuple, dict[str, Tensor]] = {}
+
+    @classmethod
+    def from_config(cls, cfg: RobotCfg | str | Path) -> Robot:
+        """From a :class:`RobotCfg`, a robot name (``configs/robot/<name>.yaml``) or a YAML path."""
+        return cls(cfg if isinstance(cfg, RobotCfg) else load_robot_cfg(cfg))
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def n_fingers(self) -> int:
+        return len(self.fingers)
+
+    @property
+    def joints_per_finger(self) -> int:
+        return self.finger_kernel.n_joints if self.finger_kernel is not None else 0
+
+    @property
+    def n_finger_joints(self) -> int:
+        return self.n_fingers * self.joints_per_finger
+
+    @property
+    def body_joint_names(self) -> tuple[str, ...]:
+        return self.body.joint_names if self.body is not None else ()
+
+    @property
+    def has_body(self) -> bool:
+        return self.body is not None
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom the solver controls: finger joints + body joints, or + 6 palm-pose
+        DOF for a free-floating hand."""
+        return self.n_finger_joints + (len(self.body_joint_names) if self.has_body else 6)
+
+    @property
+    def n_chains(self) -> int:
+        """Serial chains this robot evaluates: one per finger, plus the body chain, plus one per
+        gripper point."""
+        return self.n_fingers + (1 if self.has_body else 0) + len(self.cfg.gripper_points)
+
+    @property
+    def palm_bounds(self) -> PoseBounds | None:
+        return self.cfg.palm_bounds
+
+    @cached_property
+    def finger_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(F, n) lower and upper finger joint limits, radians."""
+        return (np.stack([f.chain.lower for f in self.fingers.values()]),
+                np.stack([f.chain.upper for f in self.fingers.values()]))
+
+    @cached_property
+    def body_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(m,) lower and upper body joint limits (radians or metres)."""
+        if self.body is None:
+            return np.zeros(0), np.zeros(0)
+        return self.body.lower.copy(), self.body.upper.copy()
+
+    def finger_index(self, name: str) -> int:
+        try:
+            return self.finger_names.index(name)
+        except ValueError:
+            raise ConfigError(f"robot '{self.name}' has no finger '{name}' (fingers: "
+                              f"{', '.join(self.finger_names)})") from None
+
+    def _const(self, dtype: torch.dtype, device: torch.device) -> dict[str, Tensor]:
+        key = (dtype, device)
+        c = self._consts.get(key)
+        if c is None:
+            base = np.stack([f.base_in_palm for f in self.fingers.values()]) if self.fingers else np.zeros((0, 4, 4))
+            lo, hi = self.finger_limits if self.fingers else (np.zeros((0, 0)), np.zeros((0, 0)))
+            c = {"base_R": torch.as_tensor(base[:, :3, :3], dtype=dtype, device=device),
+                 "base_t": torch.as_tensor(base[:, :3, 3], dtype=dtype, device=device),
+                 "finger_lower": torch.as_tensor(lo, dtype=dtype, device=device),
+                 "finger_upper": torch.as_tensor(hi, dtype=dtype, device=device)}
+            self._consts[key] = c
+        return c
+
+    def finger_bounds(
+        self, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"
+    ) -> tuple[Tensor, Tensor]:
+        """(F, n) lower and upper finger joint limits as tensors."""
+        c = self._const(dtype, torch.device(device))
+        return c["finger_lower"], c["finger_upper"]
+
+    # ------------------------------------------------------------------ checks
+    def _check_fingers(self, q: Tensor) -> None:
+        if self.finger_kernel is None:
+            raise ValueError(f"robot '{self.name}' has no fingers")
+        F, n = self.n_fingers, self.joints_per_finger
+        if not isinstance(q, Tensor) or q.dim() < 2 or tuple(q.shape[-2:]) != (F, n):
+            shape = tuple(q.shape) if isinstance(q, Tensor) else type(q).__name__
+            raise ValueError(f"finger joints must have shape (..., {F}, {n}) ({F} fingers "
+                             f"{', '.join(self.finger_names)} x {n} joints); got {shape}")
+
+    def _check_body(self, q: Tensor) -> None:
+        if self.body_kernel is None:
+            raise ValueError(f"robot '{self.name}' has no arm")
+        m = len(self.body_joint_names)
+        if not isinstance(q, Tensor) or q.dim() < 1 or q.shape[-1] != m:
+            shape = tuple(q.shape) if isinstance(q, Tensor) else type(q).__name__
+            raise ValueError(f"body joints must have shape (..., {m}) ({', '.join(self.body_joint_names)}); "
+                             f"got {shape}")
+
+    @staticmethod
+    def _check_pose(pose: Tensor, what: str = "palm pose") -> None:
+        if not isinstance(pose, Tensor) or pose.dim() < 1 or pose.shape[-1] != 6:
+            shape = tuple(pose.shape) if isinstance(pose, Tensor) else type(pose).__name__
+            raise ValueError(f"{what} must have shape (..., 6) (x, y, z, rx, ry, rz); got {shape}")
+
+    # ------------------------------------------------------------------ finger kinematics
+    def fingertips_base(self, q: Tensor) -> Tensor:
+        """Fingertips, each in its finger's base frame. q: (..., F, n) -> (..., F, 3)."""
+        self._check_fingers(q)
+        return self.finger_kernel.position(q)
+
+    def fingertips_base_jacobian(self, q: Tensor) -> tuple[Tensor, Tensor]:
+        """Fingertips and d tip / d q in each finger's base frame.
+
+        q: (..., F, n) -> p: (..., F, 3), J: (..., F, 3, n).
+        """
+        self._check_fingers(q)
+        return self.finger_kernel.position_jacobian(q)
+
+    def base_to_palm(self, points: Tensor) -> Tensor:
+        """Points given in each finger's base frame -> palm frame. (..., F, 3) -> (..., F, 3)."""
+        c = self._const(points.dtype, points.device)
+        return transform_points(c["base_R"], c["base_t"], points)
+
+    def palm_to_base(self, points: Tensor) -> Tensor:
+        """Points given in the palm frame -> each finger's base frame. (..., F, 3) -> (..., F, 3)."""
+        c = self._const(points.dtype, points.device)
+        return untransform_points(c["base_R"], c["base_t"], points)
+
+    def fingertips_palm(self, q: Tensor) -> Tensor:
+        """Fingertips in the palm frame. q: (..., F, n) -> (..., F, 3)."""
+        return self.base_to_palm(self.fingertips_base(q))
+
+    def fingertips_world(self, palm_pose: Tensor, q: Tensor) -> Tensor:
+        """Fingertips in the world for a palm pose.
+
+        palm_pose: (..., 6); q: (..., F, n) -> (..., F, 3).
+        """
+        self._check_pose(palm_pose)
+        R, t = pose_to_rt(palm_pose)
+        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.fingertips_palm(q))
+
+    def world_to_bases(self, points: Tensor, palm_pose: Tensor) -> Tensor:
+        """Points in the world, one per finger, -> each in its finger's base frame.
+
+        points: (..., F, 3); palm_pose: (..., 6) -> (..., F, 3).
+        """
+        self._check_pose(palm_pose)
+        R, t = pose_to_rt(palm_pose)
+        return self.palm_to_base(untransform_points(R.unsqueeze(-3), t.unsqueeze(-2), points))
+
+    # ------------------------------------------------------------------ body kinematics
+    def palm_frame(self, q_body: Tensor) -> tuple[Tensor, Tensor]:
+        """Palm frame in the world from the body joints (arm FK).
+
+        q_body: (..., m) -> R: (..., 3, 3), t: (..., 3).
+        """
+        self._check_body(q_body)
+        return self.body_kernel.pose(q_body)
+
+    def fingertips_world_from_body(self, q_body: Tensor, q: Tensor) -> Tensor:
+        """Fingertips in the world from body and finger joints. (..., m), (..., F, n) -> (..., F, 3)."""
+        R, t = self.palm_frame(q_body)
+        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.fingertips_palm(q))
+
+    def world_to_bases_from_body(self, points: Tensor, q_body: Tensor) -> Tensor:
+        """World points, one per finger -> finger base frames, palm placed by the body joints."""
+        R, t = self.palm_frame(q_body)
+        return self.palm_to_base(untransform_points(R.unsqueeze(-3), t.unsqueeze(-2), points))
+
+    def gripper_points(self, q_body: Tensor) -> Tensor:
+        """The gripper's marked points in the world. q_body: (..., m) -> (..., 2, 3)."""
+        self._check_body(q_body)
+        if self.gripper_kernel is None:
+            raise ValueError(f"robot '{self.name}' has no gripper points")
+        K = self.gripper_kernel.num_chains
+        return self.gripper_kernel.position(q_body.unsqueeze(-2).expand(*q_body.shape[:-1], K, q_body.shape[-1]))
+
+    # ------------------------------------------------------------------ postures
+    def home_posture(self, dtype: torch.dtype = torch.float64) -> Posture:
+        """The config's ``home`` joints (degrees/metres in the file), clipped to the joint limits;
+        a free hand's palm sits at the world origin."""
+        home = self.cfg.home
+        names = set(self.urdf.movable_joint_names)
+        unknown = sorted(set(home) - names)
+        if unknown:
+            raise ConfigError(f"{self.cfg.source}: home names unknown joint(s) {', '.join(unknown)}")
+
+        def values(spec_names, lower, upper, types):
+            out = []
+            for name, lo, hi, kind in zip(spec_names, lower, upper, types, strict=True):
+                v = home.get(name, 0.0)
+                out.append(min(max(math.radians(v) if kind == "revolute" else v, lo), hi))
+            return out
+
+        fingers = [values(f.joint_names, f.chain.lower, f.chain.upper, f.chain.joint_types)
+                   for f in self.fingers.values()]
+        finger_q = torch.tensor(fingers, dtype=dtype).reshape(self.n_fingers, self.joints_per_finger)
+        if self.body is not None:
+            body_q = torch.tensor(values(self.body.joint_names, self.body.lower, self.body.upper,
+                                         self.body.joint_types), dtype=dtype)
+            R, t = self.palm_frame(body_q)
+            from graspnet_torch.robot.transforms import rt_to_pose
+
+            palm = rt_to_pose(R, t)
+        else:
+            body_q = torch.zeros(0, dtype=dtype)
+            palm = torch.zeros(6, dtype=dtype)
+        return Posture(palm_pose=palm, fingers=finger_q, body=body_q)
+
+    def joint_values(self, posture: Posture) -> dict[str, float]:
+        """Every movable URDF joint's value in a posture (radians / metres)."""
+        out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
+        for k, f in enumerate(self.fingers.values()):
+            out.update(zip(f.joint_names, posture.fingers[k].tolist(), strict=True))
+        return out
+
+    def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
+        """(4, 4) float64 world pose of every link, from pytorch-kinematics (for pictures and
+        collision scenes; not a hot path)."""
+        chain = self.urdf.chain.to(dtype=torch.float64)
+        values = self.joint_values(posture)
+        names = chain.get_joint_parameter_names()
+        th = torch.tensor([[values.get(n, 0.0) for n in names]], dtype=torch.float64)
+        frames = chain.forward_kinematics(th)
+        if self.body is None:
+            from graspnet_torch.robot.transforms import pose_to_matrix
+
+            world = pose_to_matrix(posture.palm_pose.to(torch.float64)).numpy()
+            root_to_palm = self.urdf.fixed_transform(self.urdf.root_link, self.cfg.palm_link)
+            world = world @ np.linalg.inv(root_to_palm)
+        else:
+            world = np.eye(4)
+        return {name: world @ T.get_matrix()[0].numpy() for name, T in frames.items()}
+
+    def __repr__(self) -> str:
+        return (f"Robot('{self.name}': {len(self.urdf.links)} links, {len(self.urdf.movable_joint_names)} "
+                f"movable joints, {self.n_chains} chains, {self.dof} DOF)")
+
+
+def load_robot(name: str | Path | RobotCfg) -> Robot:
+    """A robot by name (``configs/robot/<name>.yaml``), YAML path or config."""
+    return Robot.from_config(name)

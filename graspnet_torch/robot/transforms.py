@@ -1,0 +1,140 @@
+"""Rigid transforms in the project's pose convention.
+
+A pose is ``(x, y, z, rx, ry, rz)``: a translation in metres and fixed-axis roll/pitch/yaw in
+radians with ``R = Rz(rz) @ Ry(ry) @ Rx(rx)`` (the URDF ``rpy`` convention). Files a person reads
+give the angles in degrees; :func:`pose_from_degrees` / :func:`pose_to_degrees` convert.
+
+All functions broadcast over leading batch dimensions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+__all__ = [
+    "compose",
+    "invert",
+    "matrix_to_pose",
+    "matrix_to_rpy",
+    "pose_from_degrees",
+    "pose_to_degrees",
+    "pose_to_matrix",
+    "pose_to_rt",
+    "rpy_to_matrix",
+    "rt_to_pose",
+    "transform_points",
+    "untransform_points",
+]
+
+
+def rpy_to_matrix(rpy: Tensor) -> Tensor:
+    """Rotation matrices of fixed-axis roll/pitch/yaw angles.
+
+    Args:
+        rpy: (..., 3) angles (rx, ry, rz) in radians.
+    Returns:
+        (..., 3, 3) ``Rz(rz) @ Ry(ry) @ Rx(rx)``.
+    """
+    c = torch.cos(rpy)
+    s = torch.sin(rpy)
+    cr, cp, cy = c.unbind(-1)
+    sr, sp, sy = s.unbind(-1)
+    row0 = torch.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], dim=-1)
+    row1 = torch.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], dim=-1)
+    row2 = torch.stack([-sp, cp * sr, cp * cr], dim=-1)
+    return torch.stack([row0, row1, row2], dim=-2)
+
+
+def matrix_to_rpy(R: Tensor) -> Tensor:
+    """Inverse of :func:`rpy_to_matrix`, with pitch in [-pi/2, pi/2].
+
+    At gimbal lock (``|pitch| = pi/2``) roll is set to 0 and the rotation about z goes to yaw.
+
+    Args:
+        R: (..., 3, 3) rotation matrices.
+    Returns:
+        (..., 3) angles (rx, ry, rz) in radians.
+    """
+    r00, r10, r20 = R[..., 0, 0], R[..., 1, 0], R[..., 2, 0]
+    cp = torch.sqrt(r00 * r00 + r10 * r10)
+    pitch = torch.atan2(-r20, cp)
+    locked = cp < 1e-9 if R.dtype == torch.float64 else cp < 1e-5
+    roll = torch.where(locked, torch.zeros_like(cp), torch.atan2(R[..., 2, 1], R[..., 2, 2]))
+    yaw = torch.where(locked, torch.atan2(-R[..., 0, 1], R[..., 1, 1]), torch.atan2(r10, r00))
+    return torch.stack([roll, pitch, yaw], dim=-1)
+
+
+def pose_to_rt(pose: Tensor) -> tuple[Tensor, Tensor]:
+    """Split poses into rotation and translation.
+
+    Args:
+        pose: (..., 6) ``(x, y, z, rx, ry, rz)``, metres and radians.
+    Returns:
+        R: (..., 3, 3); t: (..., 3).
+    """
+    return rpy_to_matrix(pose[..., 3:]), pose[..., :3]
+
+
+def rt_to_pose(R: Tensor, t: Tensor) -> Tensor:
+    """Inverse of :func:`pose_to_rt`: (..., 3, 3), (..., 3) -> (..., 6)."""
+    return torch.cat([t, matrix_to_rpy(R)], dim=-1)
+
+
+def pose_to_matrix(pose: Tensor) -> Tensor:
+    """(..., 6) poses -> (..., 4, 4) homogeneous matrices."""
+    R, t = pose_to_rt(pose)
+    T = torch.zeros(*pose.shape[:-1], 4, 4, dtype=pose.dtype, device=pose.device)
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def matrix_to_pose(T: Tensor) -> Tensor:
+    """(..., 4, 4) homogeneous matrices -> (..., 6) poses."""
+    return rt_to_pose(T[..., :3, :3], T[..., :3, 3])
+
+
+def transform_points(R: Tensor, t: Tensor, points: Tensor) -> Tensor:
+    """Express points given in a frame in its parent: ``R @ p + t``.
+
+    Args:
+        R: (..., 3, 3); t: (..., 3); points: (..., 3), all broadcastable.
+    Returns:
+        (..., 3).
+    """
+    return (R @ points.unsqueeze(-1)).squeeze(-1) + t
+
+
+def untransform_points(R: Tensor, t: Tensor, points: Tensor) -> Tensor:
+    """Express points given in the parent in the frame ``(R, t)``: ``R^T @ (p - t)``."""
+    return ((points - t).unsqueeze(-2) @ R).squeeze(-2)
+
+
+def compose(R1: Tensor, t1: Tensor, R2: Tensor, t2: Tensor) -> tuple[Tensor, Tensor]:
+    """``(R1, t1) o (R2, t2)``: the pose of frame 2 given in frame 1, expressed in frame 1's parent."""
+    return R1 @ R2, transform_points(R1, t1, t2)
+
+
+def invert(R: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """Inverse transform: ``(R^T, -R^T t)``."""
+    Rt = R.transpose(-1, -2)
+    return Rt, -(Rt @ t.unsqueeze(-1)).squeeze(-1)
+
+
+_DEG = math.pi / 180.0
+
+
+def pose_from_degrees(pose_deg: Tensor) -> Tensor:
+    """(..., 6) pose with angles in degrees -> angles in radians (translation untouched)."""
+    scale = torch.tensor([1.0, 1.0, 1.0, _DEG, _DEG, _DEG], dtype=pose_deg.dtype, device=pose_deg.device)
+    return pose_deg * scale
+
+
+def pose_to_degrees(pose: Tensor) -> Tensor:
+    """(..., 6) pose with angles in radians -> angles in degrees (translation untouched)."""
+    scale = torch.tensor([1.0, 1.0, 1.0, 1 / _DEG, 1 / _DEG, 1 / _DEG], dtype=pose.dtype, device=pose.device)
+    return pose * scale

@@ -1,0 +1,130 @@
+"""Pictures of robots (PNG), drawn from their collision primitives with matplotlib.
+
+matplotlib is imported here only, lazily, and always with the non-interactive Agg backend.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from graspnet_torch.robot.geometry import Shape, link_shapes
+from graspnet_torch.robot.robot import Posture, Robot
+
+__all__ = ["Panel", "draw_shapes", "new_figure", "render_robot", "save_figure"]
+
+
+def new_figure(n_views: int, size: float = 4.2):
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(size * n_views, size + 0.4), dpi=110)
+    axes = [fig.add_subplot(1, n_views, k + 1, projection="3d") for k in range(n_views)]
+    return fig, axes
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    """Save atomically (temporary file, then rename) and close the figure."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, bbox_inches="tight")
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def _sphere(radius: float, n: int = 10):
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 2 * n), np.linspace(0, np.pi, n))
+    return radius * np.cos(u) * np.sin(v), radius * np.sin(u) * np.sin(v), radius * np.cos(v)
+
+
+def _cylinder(radius: float, length: float, n: int = 14):
+    u, h = np.meshgrid(np.linspace(0, 2 * np.pi, n), np.array([-length / 2, length / 2]))
+    return radius * np.cos(u), radius * np.sin(u), h
+
+
+def _apply(T: np.ndarray, X, Y, Z):
+    pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()])
+    out = T[:3, :3] @ pts + T[:3, 3:4]
+    return (out[0].reshape(X.shape), out[1].reshape(X.shape), out[2].reshape(X.shape))
+
+
+def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alpha: float = 1.0) -> np.ndarray:
+    """Draw primitives at their links' world frames; returns (N, 3) points spanning the drawing."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    extent = []
+    for s in shapes:
+        T = frames[s.link] @ s.origin
+        color = s.rgba[:3]
+        if s.kind == "box":
+            hx, hy, hz = (0.5 * d for d in s.size)
+            corners = np.array([[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)])
+            w = corners @ T[:3, :3].T + T[:3, 3]
+            faces = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]]
+            ax.add_collection3d(Poly3DCollection([w[f] for f in faces], facecolor=color, edgecolor=(0, 0, 0, 0.25),
+                                                 linewidth=0.3, alpha=alpha))
+            extent.append(w)
+        else:
+            X, Y, Z = _sphere(s.size[0]) if s.kind == "sphere" else _cylinder(*s.size)
+            X, Y, Z = _apply(T, X, Y, Z)
+            ax.plot_surface(X, Y, Z, color=color, shade=True, linewidth=0, antialiased=False, alpha=alpha)
+            extent.append(np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1))
+    return np.concatenate(extent) if extent else np.zeros((0, 3))
+
+
+def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) -> None:
+    lo, hi = points.min(0), points.max(0)
+    center, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-3) * 1.05
+    ax.set_xlim(center[0] - half, center[0] + half)
+    ax.set_ylim(center[1] - half, center[1] + half)
+    ax.set_zlim(center[2] - half, center[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_xlabel("x (m)", fontsize=7)
+    ax.set_ylabel("y (m)", fontsize=7)
+    ax.set_zlabel("z (m)", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.set_title(title, fontsize=9)
+
+
+@dataclass(frozen=True)
+class Panel:
+    """One picture panel: a posture seen from (elevation, azimuth) degrees, with optional red
+    markers (N, 3) in the world (e.g. contact points)."""
+
+    caption: str
+    posture: Posture
+    view: tuple[float, float] = (15.0, -60.0)
+    markers: np.ndarray | None = None
+
+
+def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title: str | None = None) -> Path:
+    """Draw a robot in one or more panels and save a PNG atomically."""
+    shapes = link_shapes(robot.urdf)
+    fig, axes = new_figure(len(panels))
+    for ax, panel in zip(axes, panels, strict=True):
+        pts = draw_shapes(ax, shapes, robot.link_frames(panel.posture))
+        if panel.markers is not None and len(panel.markers):
+            mk = np.asarray(panel.markers)
+            ax.scatter(mk[:, 0], mk[:, 1], mk[:, 2], color="red", s=14, depthshade=False)
+            pts = np.concatenate([pts, mk])
+        _frame_axes(ax, pts, *panel.view, panel.caption)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return save_figure(fig, path)

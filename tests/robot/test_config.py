@@ -1,0 +1,106 @@
+"""Robot configs: every shipped config loads; bad configs are refused with a clear message."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+import graspnet_torch as gt
+from graspnet_torch.paths import configs_dir
+
+
+def test_shipped_robots_are_listed():
+    assert set(gt.available_robots()) >= {"hand", "arm_hand", "manus"}
+
+
+@pytest.mark.parametrize("name", ["hand", "arm_hand", "manus"])
+def test_every_shipped_config_loads(name):
+    cfg = gt.load_robot_cfg(name)
+    assert cfg.name == name and cfg.urdf.is_file()
+
+
+def test_hand_palm_bounds_are_paper_table_1():
+    b = gt.load_robot_cfg("hand").palm_bounds
+    d = math.pi / 180
+    np.testing.assert_allclose(b.lower, [-0.1, -0.1, 0.15, -45 * d, -45 * d, -135 * d])
+    np.testing.assert_allclose(b.upper, [0.1, 0.1, 0.25, 45 * d, 45 * d, -45 * d])
+    assert b.to_degrees() == {"min": pytest.approx([-0.1, -0.1, 0.15, -45, -45, -135]),
+                              "max": pytest.approx([0.1, 0.1, 0.25, 45, 45, -45])}
+
+
+def _hand_yaml(tmp_path, **changes):
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    for key, value in changes.items():
+        if value is None:
+            data.pop(key)
+        else:
+            data[key] = value
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_unknown_robot_name():
+    with pytest.raises(gt.ConfigError, match=r"unknown robot 'robonaut'.*hand"):
+        gt.load_robot("robonaut")
+
+
+def test_missing_urdf_file(tmp_path):
+    with pytest.raises(gt.ConfigError, match=r"URDF file not found: urdf/nope.urdf"):
+        gt.load_robot(_hand_yaml(tmp_path, urdf="urdf/nope.urdf"))
+
+
+def test_finger_link_not_in_urdf(tmp_path):
+    fingers = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())["fingers"]
+    fingers["index"] = {"base": "index_base", "tip": "index_nail"}
+    with pytest.raises(gt.ConfigError, match=r"finger 'index' tip: link 'index_nail' is not in hand.urdf"):
+        gt.load_robot(_hand_yaml(tmp_path, fingers=fingers))
+    fingers["index"] = {"base": "index_root", "tip": "index_tip"}
+    with pytest.raises(gt.ConfigError, match=r"finger 'index' base: link 'index_root'"):
+        gt.load_robot(_hand_yaml(tmp_path, fingers=fingers))
+
+
+def test_finger_tip_not_below_base(tmp_path):
+    fingers = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())["fingers"]
+    fingers["index"] = {"base": "index_base", "tip": "middle_tip"}
+    with pytest.raises(gt.ConfigError, match=r"'middle_tip' is not below 'index_base'"):
+        gt.load_robot(_hand_yaml(tmp_path, fingers=fingers))
+
+
+def test_finger_base_must_be_rigid_on_palm(tmp_path):
+    fingers = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())["fingers"]
+    fingers["index"] = {"base": "index_proximal", "tip": "index_tip"}
+    with pytest.raises(gt.ConfigError,
+                       match=r"joint 'index_abd' between 'palm' and 'index_proximal' is revolute, expected only fixed"):
+        gt.load_robot(_hand_yaml(tmp_path, fingers=fingers))
+
+
+@pytest.mark.parametrize(
+    ("bounds", "message"),
+    [({"min": [0, 0, 0, 0, 0, 0], "max": [1, 1, 1, 1, 1, -1]}, "min > max for rz"),
+     ({"min": [0, 0, 0, 0, 0], "max": [1, 1, 1, 1, 1, 1]}, r"palm_bounds.min: expected 6 numbers"),
+     ({"min": [0, 0, 0, 0, 0, ".nan"], "max": [1, 1, 1, 1, 1, 1]}, "must be finite"),
+     ({"low": [0] * 6, "max": [1] * 6}, "keys 'min' and 'max'")],
+)
+def test_bad_palm_bounds(tmp_path, bounds, message):
+    if bounds.get("min") and bounds["min"][-1] == ".nan":
+        bounds = {"min": [0, 0, 0, 0, 0, float("nan")], "max": bounds["max"]}
+    with pytest.raises(gt.ConfigError, match=message):
+        gt.load_robot(_hand_yaml(tmp_path, palm_bounds=bounds))
+
+
+def test_unknown_key_and_missing_key(tmp_path):
+    with pytest.raises(gt.ConfigError, match=r"unknown key.*palm_bound"):
+        gt.load_robot(_hand_yaml(tmp_path, palm_bound={"min": [0] * 6, "max": [1] * 6}))
+    with pytest.raises(gt.ConfigError, match=r"'palm_link' must be a non-empty string"):
+        gt.load_robot(_hand_yaml(tmp_path, palm_link=None))
+
+
+def test_malformed_yaml_names_the_file(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("name: hand\nfingers: [unclosed\n")
+    with pytest.raises(gt.ConfigError, match=r"broken.yaml: malformed YAML \(line"):
+        gt.load_robot(path)

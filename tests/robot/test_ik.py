@@ -1,0 +1,46 @@
+"""Damped pseudo-inverse steps (eq. 5) against the formulas they implement."""
+
+from __future__ import annotations
+
+import torch
+
+from graspnet_torch.robot import ChainKernel
+from graspnet_torch.robot.ik import damped_pinv_step, refine, solve3_symmetric
+from tests.conftest import uniform
+
+
+def test_solve3_matches_linalg(gen):
+    M = torch.randn(50, 3, 3, generator=gen, dtype=torch.float64)
+    A = M @ M.transpose(-1, -2) + 0.1 * torch.eye(3, dtype=torch.float64)
+    b = torch.randn(50, 3, generator=gen, dtype=torch.float64)
+    assert (solve3_symmetric(A, b) - torch.linalg.solve(A, b)).abs().max() < 1e-10
+
+
+def test_undamped_step_is_the_pseudo_inverse(gen):
+    J = torch.randn(20, 3, 4, generator=gen, dtype=torch.float64)
+    e = torch.randn(20, 3, generator=gen, dtype=torch.float64)
+    expected = (torch.linalg.pinv(J) @ e.unsqueeze(-1)).squeeze(-1)
+    assert (damped_pinv_step(J, e) - expected).abs().max() < 1e-10
+
+
+def test_damped_step_formula(gen):
+    J = torch.randn(20, 3, 4, generator=gen, dtype=torch.float64)
+    e = torch.randn(20, 3, generator=gen, dtype=torch.float64)
+    lam = 0.05
+    A = J @ J.transpose(-1, -2) + lam**2 * torch.eye(3, dtype=torch.float64)
+    expected = (J.transpose(-1, -2) @ torch.linalg.solve(A, e).unsqueeze(-1)).squeeze(-1)
+    assert (damped_pinv_step(J, e, lam) - expected).abs().max() < 1e-10
+
+
+def test_refine_reduces_error_and_respects_limits(hand, gen):
+    spec = hand.fingers["index"].chain
+    kernel = ChainKernel(spec)
+    lo, hi = torch.tensor(spec.lower), torch.tensor(spec.upper)
+    q_true = uniform(spec.lower, spec.upper, 200, gen)
+    targets = kernel.position(q_true)
+    q0 = torch.clamp(q_true + 0.15 * torch.randn(q_true.shape, generator=gen, dtype=torch.float64), lo, hi)
+    e0 = torch.linalg.norm(kernel.position(q0) - targets, dim=-1)
+    q, e = refine(kernel.position_jacobian, q0, targets, lo, hi, iterations=5)
+    assert (q >= lo).all() and (q <= hi).all()
+    assert torch.median(e) < 0.01 * torch.median(e0)
+    assert torch.allclose(e, torch.linalg.norm(kernel.position(q) - targets, dim=-1))
