@@ -37,10 +37,10 @@ def main() -> None:
         lo, hi = torch.tensor(spec.lower, dtype=torch.float32), torch.tensor(spec.upper, dtype=torch.float32)
         for B in args.batches:
             q = lo + (hi - lo) * torch.rand(B, spec.n_joints, generator=torch.Generator().manual_seed(B))
-            fns = [lambda q=q: ours.position(q),
-                   lambda q=q: ref.forward_kinematics(q).get_matrix()[:, :3, 3],
-                   lambda q=q: ours.position_jacobian(q),
-                   lambda q=q: ref.jacobian(q, ret_eef_pose=True)]
+            fns = [lambda q=q, k=ours: k.position(q),
+                   lambda q=q, r=ref: r.forward_kinematics(q).get_matrix()[:, :3, 3],
+                   lambda q=q, k=ours: k.position_jacobian(q),
+                   lambda q=q, r=ref: r.jacobian(q, ret_eef_pose=True)]
             t_fk, t_fk_ref, t_j, t_j_ref = time_interleaved(fns, min_time=args.min_time)
             rows.append([label, B, B / t_fk / 1e6, B / t_fk_ref / 1e6, t_fk_ref / t_fk,
                          B / t_j / 1e6, B / t_j_ref / 1e6, t_j_ref / t_j])
