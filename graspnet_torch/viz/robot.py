@@ -5,14 +5,13 @@ matplotlib is imported here only, lazily, and always with the non-interactive Ag
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.io import atomic_path
 from graspnet_torch.robot.geometry import Shape, link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 
@@ -34,18 +33,12 @@ def save_figure(fig, path: str | Path) -> Path:
     """Save atomically (temporary file, then rename) and close the figure."""
     import matplotlib.pyplot as plt
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, bbox_inches="tight")
-        os.replace(tmp, path)
+        with atomic_path(path, suffix=".png") as tmp:
+            fig.savefig(tmp, bbox_inches="tight")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    return Path(path)
 
 
 def _sphere(radius: float, n: int = 10):
