@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo test lint bench urdf clean
+.PHONY: help install demo test lint bench bench-fcnn bench-fcnn-train fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -31,6 +31,15 @@ lint: $(STAMP)  ## ruff check
 
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
 	$(PY) benchmarks/bench_kinematics.py
+
+bench-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
+	$(PY) benchmarks/bench_fcnn.py
+
+bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from scratch
+	$(PY) benchmarks/bench_fcnn_training.py
+
+fcnn: $(STAMP)  ## retrain the shipped FCNN checkpoint checkpoints/hand/fcnn.pt (fixed seed)
+	$(PY) scripts/train_fcnn.py robot=hand export=true hydra.run.dir=outputs/train_fcnn/hand-export
 
 urdf: $(STAMP)  ## regenerate the URDFs from urdf/build.py
 	$(PY) urdf/build.py

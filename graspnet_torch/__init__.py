@@ -9,6 +9,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 """
 
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, ProblemError
+from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
 from graspnet_torch.robot import (
     ChainKernel,
     ChainSpec,
@@ -28,6 +29,10 @@ __all__ = [
     "ChainSpec",
     "CheckpointError",
     "ConfigError",
+    "ExpertSet",
+    "ExpertSetCfg",
+    "FCNNTrainCfg",
+    "FingerIK",
     "GraspnetError",
     "PoseBounds",
     "Posture",
@@ -36,6 +41,7 @@ __all__ = [
     "RobotCfg",
     "__version__",
     "available_robots",
+    "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
 ]

@@ -338,16 +338,16 @@ class ChainKernel:
         for dst, fn in prog.steps:
             regs[dst] = fn(regs)
         vals = [regs[v] if isinstance(v, int) else v.expand(K, B) for v in prog.outputs]
-        flat = torch.stack(vals, dim=0) if vals else q.new_zeros(0, K, B)  # (m, K, B)
         results, start = [], 0
+        lead = batch + ((K,) if self.stacked else ())
         for name in outputs:
             shape = (3,) if name == "p" else (3, 3) if name == "R" else (3, n)
             m = int(np.prod(shape))
-            block = flat[start : start + m].reshape(*shape, K, B)
+            block = vals[start : start + m]
             start += m
-            block = block.movedim((-1, -2), (0, 1))  # (B, K, *shape)
-            lead = batch + ((K,) if self.stacked else ())
-            results.append(block.reshape(*lead, *shape))
+            # (B, K, m), contiguous (strided outputs make some later ops, e.g. vector_norm, 50x slower)
+            out = torch.stack(block, dim=0).permute(2, 1, 0).contiguous() if block else q.new_zeros(B, K, 0)
+            results.append(out.reshape(*lead, *shape))
         return results
 
     # ------------------------------------------------------------------ public API

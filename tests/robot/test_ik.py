@@ -44,3 +44,10 @@ def test_refine_reduces_error_and_respects_limits(hand, gen):
     assert (q >= lo).all() and (q <= hi).all()
     assert torch.median(e) < 0.01 * torch.median(e0)
     assert torch.allclose(e, torch.linalg.norm(kernel.position(q) - targets, dim=-1))
+
+
+def test_step_for_chains_with_fewer_than_three_joints(gen):
+    J = torch.randn(20, 3, 2, generator=gen, dtype=torch.float64)
+    e = torch.randn(20, 3, generator=gen, dtype=torch.float64)
+    expected = (torch.linalg.pinv(J) @ e.unsqueeze(-1)).squeeze(-1)
+    assert (damped_pinv_step(J, e) - expected).abs().max() < 1e-10

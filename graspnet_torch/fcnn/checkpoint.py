@@ -1,0 +1,116 @@
+"""FCNN checkpoints: trained expert sets of a robot's fingers, one file per robot.
+
+The file (``torch.save`` of plain dicts and tensors, loaded with ``weights_only=True``) records for
+each finger the chain it was trained for (joint names and a fingerprint of its geometry and
+limits): loading it for a robot whose finger differs is refused with a clear error, as is a
+corrupted file. Files are written atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from graspnet_torch.errors import CheckpointError
+from graspnet_torch.fcnn.experts import ExpertSet, ExpertSetCfg
+from graspnet_torch.fcnn.ik import FingerIK
+from graspnet_torch.io import atomic_path
+from graspnet_torch.paths import checkpoints_dir
+from graspnet_torch.robot.chain import ChainSpec
+from graspnet_torch.robot.robot import Robot, load_robot
+
+__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "save_finger_ik"]
+
+FORMAT = "graspnet_torch.fcnn/1"
+
+
+def chain_fingerprint(chain: ChainSpec) -> str:
+    """A hash of what a finger's inverse kinematics depends on: joint types, axes, fixed
+    transforms and limits (rounded to 1e-9)."""
+    h = hashlib.sha256()
+    h.update(",".join(chain.joint_types).encode())
+    for arr in (chain.axes, chain.offsets, chain.lower, chain.upper):
+        h.update(np.round(np.asarray(arr, dtype=np.float64), 9).tobytes())
+    return h.hexdigest()[:16]
+
+
+def default_checkpoint(robot_name: str) -> Path:
+    return checkpoints_dir() / robot_name / "fcnn.pt"
+
+
+def save_finger_ik(ik: FingerIK, path: str | Path, info: dict | None = None) -> Path:
+    """Write ``ik``'s experts (active ones only) to ``path`` atomically."""
+    fingers = {}
+    for name, experts in ik.experts.items():
+        E = experts.n_active
+        state = {k: v[:E].detach().cpu().clone() if k in ("W1", "b1", "W2", "b2", "W3", "b3", "rep_postures")
+                 else v.detach().cpu().clone() for k, v in experts.state_dict().items() if k != "active"}
+        chain = ik.robot.fingers[name].chain
+        fingers[name] = {"state": state, "n_experts": E, "hidden": experts.cfg.hidden,
+                         "max_experts": experts.cfg.max_experts, "joint_names": list(chain.joint_names),
+                         "fingerprint": chain_fingerprint(chain)}
+    payload = {"format": FORMAT, "robot": ik.robot.name, "fingers": fingers, "info": info or {}}
+    with atomic_path(path, suffix=".pt") as tmp:
+        torch.save(payload, tmp)
+    return Path(path)
+
+
+def _experts_from(entry: dict, robot: Robot, finger: str, where: str) -> ExpertSet:
+    chain = robot.fingers[finger].chain
+    if list(entry["joint_names"]) != list(chain.joint_names) or entry["fingerprint"] != chain_fingerprint(chain):
+        raise CheckpointError(f"{where}: finger '{finger}' was trained for a different chain than robot "
+                              f"'{robot.name}' has now (URDF or limits changed?); retrain with "
+                              f"`python scripts/train_fcnn.py robot={robot.name}`")
+    E, n = int(entry["n_experts"]), chain.n_joints
+    state = entry["state"]
+    cfg = ExpertSetCfg(hidden=int(entry["hidden"]), max_experts=max(int(entry["max_experts"]), E))
+    experts = ExpertSet(n, state["x_center"], state["x_scale"], state["q_lower"], state["q_upper"], cfg)
+    full = experts.state_dict()
+    for key in ("W1", "b1", "W2", "b2", "W3", "b3", "rep_postures"):
+        if tuple(state[key].shape[1:]) != tuple(full[key].shape[1:]) or state[key].shape[0] != E:
+            want = (E, *full[key].shape[1:])
+            raise CheckpointError(f"{where}: finger '{finger}': tensor '{key}' has shape "
+                                  f"{tuple(state[key].shape)}, expected {want}")
+        full[key][:E] = state[key]
+    full["active"][:E] = True
+    for key in ("x_center", "x_scale", "q_lower", "q_upper"):
+        full[key] = state[key]
+    experts.load_state_dict(full)
+    return experts
+
+
+def load_finger_ik(robot: str | Robot = "hand", path: str | Path | None = None) -> FingerIK:
+    """Trained finger IK of a robot: ``checkpoints/<robot>/fcnn.pt`` unless ``path`` is given.
+
+    Raises:
+        CheckpointError: missing, corrupted or mismatched checkpoint (the message names the file).
+    """
+    robot = robot if isinstance(robot, Robot) else load_robot(robot)
+    path = Path(path) if path is not None else default_checkpoint(robot.name)
+    where = str(path)
+    if not path.is_file():
+        raise CheckpointError(f"{where}: FCNN checkpoint not found; train one with "
+                              f"`python scripts/train_fcnn.py robot={robot.name}`")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises assorted errors on truncated or foreign files
+        raise CheckpointError(f"{where}: not a readable checkpoint ({type(exc).__name__})") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise CheckpointError(f"{where}: not an FCNN checkpoint (format {found!r}, expected {FORMAT!r})")
+    if payload.get("robot") != robot.name:
+        raise CheckpointError(f"{where}: trained for robot '{payload.get('robot')}', not '{robot.name}'")
+    try:
+        fingers = payload["fingers"]
+        unknown = [f for f in fingers if f not in robot.fingers]
+        if unknown:
+            raise CheckpointError(f"{where}: fingers {unknown} are not fingers of robot '{robot.name}'")
+        experts = {f: _experts_from(fingers[f], robot, f, where) for f in robot.finger_names if f in fingers}
+    except (KeyError, TypeError, RuntimeError) as exc:
+        raise CheckpointError(f"{where}: malformed checkpoint ({type(exc).__name__}: {exc})") from None
+    if not experts:
+        raise CheckpointError(f"{where}: holds no finger of robot '{robot.name}'")
+    return FingerIK(robot, experts)

@@ -1,0 +1,217 @@
+"""Finger inverse kinematics from trained expert sets: competition, then optional refinement.
+
+For a fingertip target every expert of the finger proposes joint angles (clamped to the joint
+limits); forward kinematics scores them and the expert with the smallest fingertip error wins
+(paper section 3). Refinement runs ``refine`` steps of eq. 5 with the damped pseudo-inverse,
+clamped to the limits. All experts of all requested fingers are evaluated together: their
+weights are stacked (padded to the largest expert count) and the finger chains run as one
+stacked kernel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from graspnet_torch.fcnn.experts import ExpertSet
+from graspnet_torch.robot.ik import limited_step
+from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.robot import Robot
+
+__all__ = ["FingerIK"]
+
+
+@dataclass
+class _Bank:
+    """Stacked expert weights of F fingers, padded to E experts: W1 (F*E, 3, H), ..."""
+
+    fingers: tuple[str, ...]
+    n_experts: int
+    params: tuple[Tensor, ...]
+    valid: Tensor  # (E, 1, F) experts that exist
+    x_center: Tensor  # (F, 3)
+    x_scale: Tensor
+    q_mid: Tensor  # (F, n)
+    q_half: Tensor
+    lower: Tensor  # (F, n)
+    upper: Tensor
+    kernel: ChainKernel
+
+
+class FingerIK:
+    """Learned inverse kinematics of a robot's fingers.
+
+    Args:
+        robot: the robot the experts were trained for.
+        experts: finger name -> trained :class:`ExpertSet`.
+        damping: lambda of the damped pseudo-inverse used by refinement (m).
+    """
+
+    def __init__(self, robot: Robot, experts: dict[str, ExpertSet], damping: float = 1e-4):
+        missing = [f for f in experts if f not in robot.fingers]
+        if missing:
+            raise ValueError(f"experts for unknown finger(s) {missing} of robot '{robot.name}'")
+        self.robot = robot
+        self.experts = dict(experts)
+        self.damping = damping
+        self._banks: dict[tuple, _Bank] = {}
+
+    @property
+    def finger_names(self) -> tuple[str, ...]:
+        return tuple(f for f in self.robot.finger_names if f in self.experts)
+
+    def n_experts(self, finger: str) -> int:
+        return self.experts[finger].n_active
+
+    # ------------------------------------------------------------------ banks
+    def _bank(self, fingers: tuple[str, ...], dtype: torch.dtype, device: torch.device) -> _Bank:
+        key = (fingers, dtype, device)
+        bank = self._banks.get(key)
+        if bank is not None:
+            return bank
+        sets = [self.experts[f] for f in fingers]
+        E = max(s.n_active for s in sets)
+        F = len(fingers)
+        names = ("W1", "b1", "W2", "b2", "W3", "b3")
+        params = []
+        for name in names:
+            per = []
+            for s in sets:
+                p = getattr(s, name).detach()[: s.n_active]
+                pad = p.new_zeros((E - s.n_active, *p.shape[1:]))
+                per.append(torch.cat([p, pad]))
+            params.append(torch.stack(per).reshape(F * E, *per[0].shape[1:]).to(dtype=dtype, device=device))
+        valid = torch.zeros(E, 1, F, dtype=torch.bool, device=device)
+        for k, s in enumerate(sets):
+            valid[: s.n_active, 0, k] = True
+
+        def stack(attr: str) -> Tensor:
+            return torch.stack([getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
+
+        lower, upper = stack("q_lower"), stack("q_upper")
+        kernel = ChainKernel([self.robot.fingers[f].chain for f in fingers])
+        bank = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
+                     (lower + upper) / 2, (upper - lower) / 2, lower, upper, kernel)
+        self._banks[key] = bank
+        return bank
+
+    # ------------------------------------------------------------------ solving
+    @staticmethod
+    def _check_targets(targets: Tensor, F: int, what: str) -> None:
+        if not isinstance(targets, Tensor) or not targets.is_floating_point():
+            raise TypeError(f"{what} must be a floating-point torch.Tensor, got "
+                            f"{type(targets).__name__ if not isinstance(targets, Tensor) else targets.dtype}")
+        want = "(B, 3)" if F == 0 else f"(B, {F}, 3)"
+        ok = targets.dim() == 2 and targets.shape[1] == 3 if F == 0 else \
+            targets.dim() == 3 and tuple(targets.shape[1:]) == (F, 3)
+        if not ok:
+            raise ValueError(f"{what} must have shape {want}, got {tuple(targets.shape)}")
+        bad = ~torch.isfinite(targets).all(dim=-1)
+        if bool(bad.any()):
+            rows = torch.nonzero(bad.reshape(targets.shape[0], -1).any(-1)).squeeze(1)[:5].tolist()
+            raise ValueError(f"{what} contain NaN or inf (first rows: {rows})")
+
+    def compete(self, targets: Tensor, fingers: Sequence[str], candidates: int = 1) -> tuple[Tensor, Tensor]:
+        """Competition among experts, no refinement.
+
+        targets: (B, F, 3) in each finger's base frame -> q: (B, F, n) within limits (the winning
+        expert's answer), error: (B, F) m. With ``candidates = k > 1`` the k best experts' answers
+        come back instead: q (k, B, F, n), error (k, B, F), best first (missing experts: inf error).
+        """
+        bank = self._bank(tuple(fingers), targets.dtype, targets.device)
+        B, F = targets.shape[0], len(bank.fingers)
+        E = bank.n_experts
+        xn = ((targets - bank.x_center) / bank.x_scale).permute(1, 0, 2)  # (F, B, 3)
+        xn = xn.unsqueeze(1).expand(F, E, B, 3).reshape(F * E, B, 3)
+        W1, b1, W2, b2, W3, b3 = bank.params
+        h = torch.tanh(torch.baddbmm(b1, xn, W1))
+        h = torch.tanh(torch.baddbmm(b2, h, W2))
+        u = torch.baddbmm(b3, h, W3).reshape(F, E, B, -1).permute(1, 2, 0, 3)  # (E, B, F, n)
+        q = torch.clamp(bank.q_mid + u * bank.q_half, bank.lower, bank.upper)
+        err = torch.linalg.vector_norm(bank.kernel.position(q) - targets, dim=-1)  # (E, B, F)
+        err = torch.where(bank.valid, err, torch.full_like(err, float("inf")))
+        if candidates <= 1:
+            best, win = err.min(dim=0)
+            q_best = q.gather(0, win.unsqueeze(0).unsqueeze(-1).expand(1, B, F, q.shape[-1])).squeeze(0)
+            return q_best, best
+        k = min(candidates, E)
+        best, win = torch.topk(err, k, dim=0, largest=False)
+        return q.gather(0, win.unsqueeze(-1).expand(k, B, F, q.shape[-1])), best
+
+    def refine(self, q: Tensor, targets: Tensor, fingers: Sequence[str], iterations: int) -> tuple[Tensor, Tensor]:
+        """``iterations`` steps of eq. 5 (damped pseudo-inverse) within the joint limits: a joint
+        whose step would cross its limit is locked and the step re-solved with the others
+        (:func:`~graspnet_torch.robot.ik.limited_step`).
+
+        A step is kept only where it reduces the fingertip error, so refinement never makes a
+        solution worse (an undamped step near a singularity can overshoot, and the clamp to the
+        limits can then land far away). Costs one FK+Jacobian per iteration, like plain eq. 5.
+
+        q: (B, F, n); targets: (B, F, 3) -> q: (B, F, n), error: (B, F) m.
+        """
+        bank = self._bank(tuple(fingers), targets.dtype, targets.device)
+        p, J = bank.kernel.position_jacobian(q)
+        err = torch.linalg.vector_norm(targets - p, dim=-1)
+        for _ in range(iterations):
+            q_new = limited_step(J, targets - p, q, bank.lower, bank.upper, self.damping)
+            p_new, J_new = bank.kernel.position_jacobian(q_new)
+            err_new = torch.linalg.vector_norm(targets - p_new, dim=-1)
+            better = err_new < err
+            q = torch.where(better.unsqueeze(-1), q_new, q)
+            p = torch.where(better.unsqueeze(-1), p_new, p)
+            J = torch.where(better.unsqueeze(-1).unsqueeze(-1), J_new, J)
+            err = torch.where(better, err_new, err)
+        return q, err
+
+    def solve_fingers(self, targets: Tensor, fingers: Sequence[str] | None = None, refine: int = 0,
+                      candidates: int = 1) -> tuple[Tensor, Tensor]:
+        """Joint angles of several fingers at once.
+
+        Args:
+            targets: (B, F, 3) fingertip targets, each in its finger's base frame (metres).
+            fingers: the F finger names (default: every finger with experts, in robot order).
+            refine: refinement iterations of eq. 5 after the competition.
+            candidates: refine the answers of the ``candidates`` best experts (not only the
+                winner's) and keep the best result; 1 is the paper's procedure. More candidates
+                cost proportionally more refinement but rescue the rare target whose winning
+                answer refines into a joint limit.
+        Returns:
+            q: (B, F, n) joint angles within limits (radians); error: (B, F) fingertip error (m).
+            Unreachable targets come back with their error, never an exception.
+        """
+        fingers = tuple(fingers) if fingers is not None else self.finger_names
+        unknown = [f for f in fingers if f not in self.experts]
+        if unknown:
+            raise ValueError(f"no experts for finger(s) {unknown}; have {list(self.finger_names)}")
+        self._check_targets(targets, len(fingers), "targets")
+        if candidates <= 1 or refine <= 0:
+            q, err = self.compete(targets, fingers)
+            if refine > 0:
+                q, err = self.refine(q, targets, fingers, refine)
+            return q, err
+        q, err = self.compete(targets, fingers, candidates)  # (k, B, F, n), (k, B, F)
+        k, B, F, n = q.shape
+        q, err = self.refine(q.reshape(k * B, F, n), targets.repeat(k, 1, 1), fingers, refine)
+        err = err.reshape(k, B, F)
+        best, pick = err.min(dim=0)
+        q = q.reshape(k, B, F, n).gather(0, pick.unsqueeze(0).unsqueeze(-1).expand(1, B, F, n)).squeeze(0)
+        return q, best
+
+    def solve(self, finger: str, targets: Tensor, refine: int = 0, candidates: int = 1) -> tuple[Tensor, Tensor]:
+        """Joint angles of one finger.
+
+        targets: (B, 3) fingertip targets in the finger's base frame (metres) ->
+        q: (B, n) within limits, error: (B,) fingertip error (m). See :meth:`solve_fingers`.
+        """
+        if finger not in self.experts:
+            raise ValueError(f"no experts for finger '{finger}'; have {list(self.finger_names)}")
+        self._check_targets(targets, 0, "targets")
+        q, err = self.solve_fingers(targets.unsqueeze(1), (finger,), refine, candidates)
+        return q.squeeze(1), err.squeeze(1)
+
+    def __repr__(self) -> str:
+        counts = ", ".join(f"{f}: {self.n_experts(f)}" for f in self.finger_names)
+        return f"FingerIK(robot='{self.robot.name}', experts {{{counts}}})"

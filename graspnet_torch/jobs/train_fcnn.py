@@ -1,0 +1,173 @@
+"""Train the FCNN of every finger of a robot: progress bar, TensorBoard, resumable state,
+closing accuracy table, and (``export``) the checkpoint that ``gt.load_finger_ik`` reads."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from graspnet_torch.errors import CheckpointError, ConfigError
+from graspnet_torch.fcnn.checkpoint import chain_fingerprint, default_checkpoint, save_finger_ik
+from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
+from graspnet_torch.fcnn.ik import FingerIK
+from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
+from graspnet_torch.io import atomic_path
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.table import format_table
+
+__all__ = ["evaluate_ik", "train_fcnn"]
+
+STATE_FORMAT = "graspnet_torch.fcnn-train-state/1"
+
+
+def evaluate_ik(ik: FingerIK, n: int = 10_000, refine: int = 3) -> list[dict]:
+    """Per finger: competition alone and with ``refine`` iterations on n held-out targets."""
+    rows = []
+    for finger in ik.finger_names:
+        lo, hi = (torch.tensor(a, dtype=torch.float32) for a in (ik.robot.fingers[finger].chain.lower,
+                                                                  ik.robot.fingers[finger].chain.upper))
+        _, x = heldout_targets(ik, finger, n)
+        q0, e0 = ik.solve(finger, x)
+        q3, e3 = ik.solve(finger, x, refine=refine)
+        within = bool(((q3 >= lo - 1e-6) & (q3 <= hi + 1e-6)).all() and ((q0 >= lo - 1e-6) & (q0 <= hi + 1e-6)).all())
+        rows.append({"finger": finger, "experts": ik.n_experts(finger), "competition": error_stats(e0),
+                     "refined": error_stats(e3), "refine": refine, "within_limits": within})
+    return rows
+
+
+def _closing_table(rows: list[dict], points: dict[str, int]) -> str:
+    headers = ["finger", "experts", "train points", "median mm", "p95 mm", "max mm",
+               f"median mm (+{rows[0]['refine']})", "p95 mm", "max mm", "<1 mm %"]
+    body = [[r["finger"], r["experts"], points.get(r["finger"], 0), r["competition"]["median_mm"],
+             r["competition"]["p95_mm"], r["competition"]["max_mm"], r["refined"]["median_mm"],
+             r["refined"]["p95_mm"], r["refined"]["max_mm"], round(r["refined"]["within_1mm_pct"], 2)]
+            for r in rows]
+    return format_table(headers, body, floatfmt=".3g")
+
+
+def _cfg_signature(cfg: FCNNTrainCfg) -> dict:
+    d = dataclasses.asdict(cfg)
+    d.pop("epochs")  # resuming may extend training
+    return d
+
+
+def _save_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int, trainers: dict, finished: list[str]) -> None:
+    payload = {"format": STATE_FORMAT, "robot": robot.name, "seed": seed, "cfg": _cfg_signature(cfg),
+               "fingerprints": {f: chain_fingerprint(robot.fingers[f].chain) for f in trainers},
+               "fingers": {f: t.state_dict() for f, t in trainers.items()}, "finished": list(finished)}
+    with atomic_path(path, suffix=".pt") as tmp:
+        torch.save(payload, tmp)
+
+
+def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise CheckpointError(f"{path}: cannot resume, not a readable training state ({type(exc).__name__})") from None
+    if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
+        raise CheckpointError(f"{path}: cannot resume, not an FCNN training state")
+    if state["robot"] != robot.name or state["seed"] != seed:
+        raise ConfigError(f"{path}: cannot resume, it trains robot '{state['robot']}' with seed {state['seed']}, "
+                          f"not '{robot.name}' with seed {seed}")
+    if state["cfg"] != _cfg_signature(cfg):
+        changed = sorted(k for k in state["cfg"] if state["cfg"][k] != _cfg_signature(cfg).get(k))
+        raise ConfigError(f"{path}: cannot resume with different fcnn settings ({', '.join(changed)}); "
+                          f"only fcnn.epochs may change")
+    for f, fp in state["fingerprints"].items():
+        if f in robot.fingers and chain_fingerprint(robot.fingers[f].chain) != fp:
+            raise CheckpointError(f"{path}: cannot resume, finger '{f}' of robot '{robot.name}' has changed")
+    return state
+
+
+def train_fcnn(
+    robot: Robot,
+    cfg: FCNNTrainCfg,
+    run_dir: str | Path,
+    *,
+    seed: int = 0,
+    fingers: list[str] | None = None,
+    resume: bool = False,
+    export: bool | str | Path = False,
+    checkpoint_every: int = 25,
+    progress: bool = True,
+    eval_targets: int = 10_000,
+) -> tuple[FingerIK, list[dict]]:
+    """Train the experts of ``fingers`` (default: all) and return the IK and the closing table rows.
+
+    Writes ``run_dir/state.pt`` (resumable, every ``checkpoint_every`` epochs and after each
+    finger), ``run_dir/fcnn.pt`` (the trained experts), TensorBoard logs under ``run_dir/tb`` and,
+    with ``export``, the checkpoint ``checkpoints/<robot>/fcnn.pt`` (or the given path).
+    """
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm import tqdm
+
+    run_dir = Path(run_dir)
+    fingers = list(fingers) if fingers else list(robot.finger_names)
+    for f in fingers:
+        robot.finger_index(f)  # clear error for unknown names
+    state_path = run_dir / "state.pt"
+    state = None
+    if resume:
+        if state_path.is_file():
+            state = _load_state(state_path, robot, cfg, seed)
+            print(f"resuming {state_path} (finished: {', '.join(state['finished']) or 'none'})", file=sys.stderr)
+        else:
+            print(f"nothing to resume at {state_path}; starting a new run", file=sys.stderr)
+    trainers: dict[str, FingerTrainer] = {}
+    finished: list[str] = list(state["finished"]) if state else []
+    points: dict[str, int] = {}
+    writer = SummaryWriter(str(run_dir / "tb"))
+    t_start = time.perf_counter()
+    try:
+        for finger in fingers:
+            trainer = FingerTrainer(robot.fingers[finger].chain, cfg, seed=seed + 101 * robot.finger_index(finger),
+                                    name=finger)
+            if state and finger in state["fingers"]:
+                trainer.load_state_dict(state["fingers"][finger])
+            trainers[finger] = trainer
+            bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
+                       disable=not progress, file=sys.stderr, dynamic_ncols=True, leave=True)
+            while trainer.epochs_done < cfg.epochs:
+                stats = trainer.epoch()
+                ep = trainer.epochs_done
+                for e, loss in enumerate(stats.get("loss", [])):
+                    writer.add_scalar(f"{finger}/loss/expert_{e}", loss, ep)
+                for e, count in enumerate(stats["points_per_expert"]):
+                    writer.add_scalar(f"{finger}/points/expert_{e}", count, ep)
+                writer.add_scalar(f"{finger}/experts", stats["experts"], ep)
+                writer.add_scalar(f"{finger}/unsolved_targets", stats["unsolved"], ep)
+                postfix = {"experts": stats["experts"], "points": len(trainer.data)}
+                if ep % cfg.val_every == 0 or ep == cfg.epochs:
+                    val = trainer.validate()
+                    writer.add_scalar(f"{finger}/val/median_mm", val["median_mm"], ep)
+                    writer.add_scalar(f"{finger}/val/p95_mm", val["p95_mm"], ep)
+                    postfix["val median mm"] = f"{val['median_mm']:.3f}"
+                bar.set_postfix(postfix)
+                bar.update(1)
+                if ep % checkpoint_every == 0:
+                    _save_state(state_path, robot, cfg, seed, trainers, finished)
+            bar.close()
+            if finger not in finished:
+                finished.append(finger)
+            points[finger] = len(trainer.data)
+            _save_state(state_path, robot, cfg, seed, trainers, finished)
+    finally:
+        writer.flush()
+        writer.close()
+    elapsed = time.perf_counter() - t_start
+    ik = FingerIK(robot, {f: t.experts for f, t in trainers.items()})
+    rows = evaluate_ik(ik, n=eval_targets)
+    info = {"seed": seed, "epochs": cfg.epochs, "train_seconds": round(elapsed, 1),
+            "heldout": {r["finger"]: {"competition": r["competition"], "refined": r["refined"]} for r in rows}}
+    save_finger_ik(ik, run_dir / "fcnn.pt", info)
+    if export:
+        target = default_checkpoint(robot.name) if export is True else Path(export)
+        save_finger_ik(ik, target, info)
+        print(f"exported {target}")
+    print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
+    print(_closing_table(rows, points))
+    return ik, rows
