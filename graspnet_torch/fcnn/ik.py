@@ -167,7 +167,8 @@ class FingerIK:
         return q, err
 
     def solve_fingers(self, targets: Tensor, fingers: Sequence[str] | None = None, refine: int = 0,
-                      candidates: int = 1) -> tuple[Tensor, Tensor]:
+                      candidates: int = 1, fallback_restarts: int = 0, tol: float = 1e-3,
+                      fallback_iterations: int = 20) -> tuple[Tensor, Tensor]:
         """Joint angles of several fingers at once.
 
         Args:
@@ -178,6 +179,11 @@ class FingerIK:
                 winner's) and keep the best result; 1 is the paper's procedure. More candidates
                 cost proportionally more refinement but rescue the rare target whose winning
                 answer refines into a joint limit.
+            fallback_restarts: off (0) by default. Otherwise targets whose error is still at
+                least ``tol`` after the above are retried from that many random postures (refined
+                ``fallback_iterations`` times; the best answer is kept). About 1 target in 10^4
+                needs it (a corner of the workspace that no expert covers), so it costs almost
+                nothing on average. Deterministic: the random postures come from a fixed seed.
         Returns:
             q: (B, F, n) joint angles within limits (radians); error: (B, F) fingertip error (m).
             Unreachable targets come back with their error, never an exception.
@@ -191,16 +197,38 @@ class FingerIK:
             q, err = self.compete(targets, fingers)
             if refine > 0:
                 q, err = self.refine(q, targets, fingers, refine)
-            return q, err
-        q, err = self.compete(targets, fingers, candidates)  # (k, B, F, n), (k, B, F)
-        k, B, F, n = q.shape
-        q, err = self.refine(q.reshape(k * B, F, n), targets.repeat(k, 1, 1), fingers, refine)
-        err = err.reshape(k, B, F)
-        best, pick = err.min(dim=0)
-        q = q.reshape(k, B, F, n).gather(0, pick.unsqueeze(0).unsqueeze(-1).expand(1, B, F, n)).squeeze(0)
-        return q, best
+        else:
+            q, err = self.compete(targets, fingers, candidates)  # (k, B, F, n), (k, B, F)
+            k, B, F, n = q.shape
+            q, err = self.refine(q.reshape(k * B, F, n), targets.repeat(k, 1, 1), fingers, refine)
+            err = err.reshape(k, B, F)
+            err, pick = err.min(dim=0)
+            q = q.reshape(k, B, F, n).gather(0, pick.unsqueeze(0).unsqueeze(-1).expand(1, B, F, n)).squeeze(0)
+        if fallback_restarts > 0:
+            q, err = self._fallback(q, err, targets, fingers, fallback_restarts, tol, fallback_iterations)
+        return q, err
 
-    def solve(self, finger: str, targets: Tensor, refine: int = 0, candidates: int = 1) -> tuple[Tensor, Tensor]:
+    def _fallback(self, q: Tensor, err: Tensor, targets: Tensor, fingers: tuple[str, ...], restarts: int,
+                  tol: float, iterations: int) -> tuple[Tensor, Tensor]:
+        rows = torch.nonzero((err >= tol).any(-1)).squeeze(1)
+        if rows.numel() == 0:
+            return q, err
+        bank = self._bank(fingers, targets.dtype, targets.device)
+        R, nr, (F, n) = restarts, rows.numel(), bank.lower.shape
+        gen = torch.Generator(device=targets.device).manual_seed(0)
+        u = torch.rand(R * nr, F, n, generator=gen, dtype=targets.dtype, device=targets.device)
+        q_r, e_r = self.refine(bank.lower + (bank.upper - bank.lower) * u, targets[rows].repeat(R, 1, 1), fingers,
+                               iterations)
+        best, pick = e_r.reshape(R, nr, F).min(dim=0)
+        q_best = q_r.reshape(R, nr, F, n).gather(0, pick.unsqueeze(0).unsqueeze(-1).expand(1, nr, F, n)).squeeze(0)
+        better = best < err[rows]
+        q, err = q.clone(), err.clone()
+        q[rows] = torch.where(better.unsqueeze(-1), q_best, q[rows])
+        err[rows] = torch.where(better, best, err[rows])
+        return q, err
+
+    def solve(self, finger: str, targets: Tensor, refine: int = 0, candidates: int = 1,
+              fallback_restarts: int = 0, tol: float = 1e-3) -> tuple[Tensor, Tensor]:
         """Joint angles of one finger.
 
         targets: (B, 3) fingertip targets in the finger's base frame (metres) ->
@@ -209,7 +237,7 @@ class FingerIK:
         if finger not in self.experts:
             raise ValueError(f"no experts for finger '{finger}'; have {list(self.finger_names)}")
         self._check_targets(targets, 0, "targets")
-        q, err = self.solve_fingers(targets.unsqueeze(1), (finger,), refine, candidates)
+        q, err = self.solve_fingers(targets.unsqueeze(1), (finger,), refine, candidates, fallback_restarts, tol)
         return q.squeeze(1), err.squeeze(1)
 
     def __repr__(self) -> str:

@@ -120,3 +120,21 @@ def test_checkpoint_for_another_robot_or_chain_is_refused(ik, tmp_path):
     changed = gt.load_robot(tmp_path / "hand.yaml")
     with pytest.raises(gt.CheckpointError, match=r"finger '\w+' was trained for a different chain"):
         gt.load_finger_ik(changed, default_checkpoint("hand"))
+
+
+def test_candidates_and_fallback_never_worsen_and_rescue_poor_answers(hand, index_chain):
+    """With an untrained expert the winner's answer is poor; refining more candidates and the
+    random-restart fallback can only lower the error, and the fallback solves most targets."""
+    from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
+
+    trainer = FingerTrainer(index_chain, FCNNTrainCfg(val_targets=500), seed=0)  # never trained
+    untrained = gt.FingerIK(hand, {"index": trainer.experts})
+    x = trainer.val_x
+    _, e1 = untrained.solve("index", x, refine=1)
+    _, e2 = untrained.solve("index", x, refine=1, candidates=2)
+    _, e3 = untrained.solve("index", x, refine=1, fallback_restarts=10)
+    assert bool((e2 <= e1 + 1e-9).all()) and bool((e3 <= e1 + 1e-9).all())
+    assert float((e1 < 1e-3).float().mean()) < 0.5
+    assert float((e3 < 1e-3).float().mean()) > 0.95
+    again = untrained.solve("index", x, refine=1, fallback_restarts=10)[1]
+    assert torch.equal(again, e3)  # deterministic

@@ -64,3 +64,33 @@ def test_script_trains_and_refuses_bad_input(tmp_path):
     assert res.returncode == 2
     assert res.stderr.strip().splitlines() == [
         "error: robot 'hand' has no finger 'little' (fingers: thumb, index, middle, ring, pinky)"]
+
+
+def test_interrupted_run_resumes_to_the_same_result(hand, tmp_path, monkeypatch):
+    """Kill the run during the 2nd finger's 4th epoch; resume=true finishes it, and the experts
+    equal those of an uninterrupted run (state is saved every checkpoint_every epochs)."""
+    from graspnet_torch.fcnn import train as train_module
+
+    cfg = FCNNTrainCfg(**{**TINY.__dict__, "epochs": 5})
+    straight, _ = train_fcnn(hand, cfg, tmp_path / "straight", fingers=["thumb", "ring"], progress=False,
+                             eval_targets=100)
+    original = train_module.FingerTrainer.epoch
+    calls = {"n": 0}
+
+    def dying_epoch(self):
+        calls["n"] += 1
+        if calls["n"] == 5 + 4:  # thumb's 5 epochs, then ring's 4th
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(train_module.FingerTrainer, "epoch", dying_epoch)
+    with pytest.raises(KeyboardInterrupt):
+        train_fcnn(hand, cfg, tmp_path / "run", fingers=["thumb", "ring"], progress=False, checkpoint_every=2)
+    assert (tmp_path / "run" / "state.pt").is_file() and not (tmp_path / "run" / "fcnn.pt").exists()
+    monkeypatch.setattr(train_module.FingerTrainer, "epoch", original)
+    resumed, _ = train_fcnn(hand, cfg, tmp_path / "run", fingers=["thumb", "ring"], resume=True, progress=False,
+                            eval_targets=100, checkpoint_every=2)
+    for finger in ("thumb", "ring"):
+        a, b = resumed.experts[finger].state_dict(), straight.experts[finger].state_dict()
+        for key in a:
+            assert torch.allclose(a[key], b[key], atol=1e-6), (finger, key)
