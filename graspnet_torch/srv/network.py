@@ -121,7 +121,7 @@ class ConfigurationNetwork(nn.Module):
         """
         if self._cache is None:
             raise RuntimeError("reinforce() needs a forward() first")
-        x, h1, h2, noise, o, a, mu, sigma, r_hat = self._cache
+        x, h1, h2, noise, o, _a, _mu, sigma, r_hat = self._cache
         self._cache = None
         r_b = r.to(o.dtype).reshape(-1, 1, 1).expand_as(o)
         if active is not None:

@@ -67,7 +67,7 @@ def test_no_theta_update_when_sigma_is_zero(gen):
         phi.zero_()
         phi_b[0, 0, 0] = 1.3
         phi_b[0, 0, 1] = 0.2
-    o, a, mu, sigma, r_hat = SRVFunction.apply(i, theta, theta_b, phi, phi_b, noise, SigmaCfg())
+    o, a, mu, sigma, _r_hat = SRVFunction.apply(i, theta, theta_b, phi, phi_b, noise, SigmaCfg())
     assert float(sigma[0, 0, 0]) == 0.0 and float(sigma[0, 0, 1]) > 0
     assert float(a[0, 0, 0]) == float(mu[0, 0, 0])
     o.backward(torch.full_like(o, 0.5))
