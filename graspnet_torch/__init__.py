@@ -21,6 +21,9 @@ from graspnet_torch.robot import (
     load_robot,
     load_robot_cfg,
 )
+from graspnet_torch.solver import GraspResult, NoiseCfg, RewardCfg, SolverCfg, TrialResult, solve
+from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
+from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks
 
 __version__ = "0.1.0"
 
@@ -29,19 +32,33 @@ __all__ = [
     "ChainSpec",
     "CheckpointError",
     "ConfigError",
+    "ConfigurationNetwork",
+    "Contact",
     "ExpertSet",
     "ExpertSetCfg",
     "FCNNTrainCfg",
     "FingerIK",
+    "GraspProblem",
+    "GraspResult",
     "GraspnetError",
+    "NoiseCfg",
     "PoseBounds",
     "Posture",
     "ProblemError",
+    "RewardCfg",
     "Robot",
     "RobotCfg",
+    "SRVFunction",
+    "SRVNetCfg",
+    "Shape",
+    "SigmaCfg",
+    "SolverCfg",
+    "TrialResult",
     "__version__",
     "available_robots",
+    "available_tasks",
     "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
+    "solve",
 ]

@@ -114,14 +114,8 @@ class FingerIK:
             rows = torch.nonzero(bad.reshape(targets.shape[0], -1).any(-1)).squeeze(1)[:5].tolist()
             raise ValueError(f"{what} contain NaN or inf (first rows: {rows})")
 
-    def compete(self, targets: Tensor, fingers: Sequence[str], candidates: int = 1) -> tuple[Tensor, Tensor]:
-        """Competition among experts, no refinement.
-
-        targets: (B, F, 3) in each finger's base frame -> q: (B, F, n) within limits (the winning
-        expert's answer), error: (B, F) m. With ``candidates = k > 1`` the k best experts' answers
-        come back instead: q (k, B, F, n), error (k, B, F), best first (missing experts: inf error).
-        """
-        bank = self._bank(tuple(fingers), targets.dtype, targets.device)
+    def _proposals(self, targets: Tensor, bank: _Bank) -> Tensor:
+        """Every expert's answer for every target, clamped to the limits: (E, B, F, n)."""
         B, F = targets.shape[0], len(bank.fingers)
         E = bank.n_experts
         xn = ((targets - bank.x_center) / bank.x_scale).permute(1, 0, 2)  # (F, B, 3)
@@ -130,33 +124,70 @@ class FingerIK:
         h = torch.tanh(torch.baddbmm(b1, xn, W1))
         h = torch.tanh(torch.baddbmm(b2, h, W2))
         u = torch.baddbmm(b3, h, W3).reshape(F, E, B, -1).permute(1, 2, 0, 3)  # (E, B, F, n)
-        q = torch.clamp(bank.q_mid + u * bank.q_half, bank.lower, bank.upper)
+        return torch.clamp(bank.q_mid + u * bank.q_half, bank.lower, bank.upper)
+
+    def compete(self, targets: Tensor, fingers: Sequence[str], candidates: int = 1) -> tuple[Tensor, Tensor]:
+        """Competition among experts, no refinement.
+
+        targets: (B, F, 3) in each finger's base frame -> q: (B, F, n) within limits (the winning
+        expert's answer), error: (B, F) m. With ``candidates = k > 1`` the k best experts' answers
+        come back instead: q (k, B, F, n), error (k, B, F), best first (missing experts: inf error).
+        """
+        bank = self._bank(tuple(fingers), targets.dtype, targets.device)
+        q = self._proposals(targets, bank)
+        E, B, F, n = q.shape
         err = torch.linalg.vector_norm(bank.kernel.position(q) - targets, dim=-1)  # (E, B, F)
         err = torch.where(bank.valid, err, torch.full_like(err, float("inf")))
         if candidates <= 1:
             best, win = err.min(dim=0)
-            q_best = q.gather(0, win.unsqueeze(0).unsqueeze(-1).expand(1, B, F, q.shape[-1])).squeeze(0)
-            return q_best, best
+            return q.gather(0, win.unsqueeze(0).unsqueeze(-1).expand(1, B, F, n)).squeeze(0), best
         k = min(candidates, E)
         best, win = torch.topk(err, k, dim=0, largest=False)
-        return q.gather(0, win.unsqueeze(-1).expand(k, B, F, q.shape[-1])), best
+        return q.gather(0, win.unsqueeze(-1).expand(k, B, F, n)), best
 
-    def refine(self, q: Tensor, targets: Tensor, fingers: Sequence[str], iterations: int) -> tuple[Tensor, Tensor]:
+    def compete_jacobian(self, targets: Tensor, fingers: Sequence[str]) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """Competition that also returns the winners' fingertips and Jacobians, so that a
+        refinement can start without another forward-kinematics pass (:meth:`refine`'s ``start``).
+
+        targets: (B, F, 3) -> q (B, F, n), error (B, F), tips (B, F, 3), J (B, F, 3, n).
+        """
+        bank = self._bank(tuple(fingers), targets.dtype, targets.device)
+        q = self._proposals(targets, bank)
+        _E, B, F, _n = q.shape
+        p, J = bank.kernel.position_jacobian(q)
+        err = torch.linalg.vector_norm(p - targets, dim=-1)
+        err = torch.where(bank.valid, err, torch.full_like(err, float("inf")))
+        best, win = err.min(dim=0)
+        w = win
+
+        def pick(t: Tensor) -> Tensor:
+            return t.gather(0, w.view(1, B, F, *([1] * (t.dim() - 3))).expand(1, *t.shape[1:])).squeeze(0)
+
+        return pick(q), best, pick(p), pick(J)
+
+    def refine(self, q: Tensor, targets: Tensor, fingers: Sequence[str], iterations: int,
+               start: tuple[Tensor, Tensor] | None = None) -> tuple[Tensor, Tensor]:
         """``iterations`` steps of eq. 5 (damped pseudo-inverse) within the joint limits: a joint
         whose step would cross its limit is locked and the step re-solved with the others
         (:func:`~graspnet_torch.robot.ik.limited_step`).
 
         A step is kept only where it reduces the fingertip error, so refinement never makes a
         solution worse (an undamped step near a singularity can overshoot, and the clamp to the
-        limits can then land far away). Costs one FK+Jacobian per iteration, like plain eq. 5.
+        limits can then land far away). Costs one forward kinematics per iteration, like plain eq. 5.
 
-        q: (B, F, n); targets: (B, F, 3) -> q: (B, F, n), error: (B, F) m.
+        q: (B, F, n); targets: (B, F, 3); start: optional (tips (B, F, 3), J (B, F, 3, n)) at q ->
+        q: (B, F, n), error: (B, F) m.
         """
         bank = self._bank(tuple(fingers), targets.dtype, targets.device)
-        p, J = bank.kernel.position_jacobian(q)
+        p, J = start if start is not None else bank.kernel.position_jacobian(q)
         err = torch.linalg.vector_norm(targets - p, dim=-1)
-        for _ in range(iterations):
+        for it in range(iterations):
             q_new = limited_step(J, targets - p, q, bank.lower, bank.upper, self.damping)
+            if it == iterations - 1:  # the last step needs positions only
+                p_new = bank.kernel.position(q_new)
+                err_new = torch.linalg.vector_norm(targets - p_new, dim=-1)
+                better = err_new < err
+                return torch.where(better.unsqueeze(-1), q_new, q), torch.where(better, err_new, err)
             p_new, J_new = bank.kernel.position_jacobian(q_new)
             err_new = torch.linalg.vector_norm(targets - p_new, dim=-1)
             better = err_new < err

@@ -3,8 +3,8 @@
     theta(k+1) = theta(k) + J^+(theta(k)) (X_D - g(theta(k))),
     J^+ = J^T (J J^T + lambda^2 I)^-1        (damped least squares; lambda = 0 is eq. 5 exactly)
 
-The 3x3 system is solved in closed form (adjugate), which is exact and several times faster than
-``torch.linalg.solve`` on small batches.
+The 3x3 system is solved by LAPACK for a handful of systems and in closed form (adjugate) for
+large batches, whichever is faster.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ import torch
 from torch import Tensor
 
 __all__ = ["damped_pinv_step", "limited_step", "refine", "solve3_symmetric"]
+
+SMALL_BATCH = 256
 
 
 def solve3_symmetric(A: Tensor, b: Tensor) -> Tensor:
@@ -38,35 +40,38 @@ def damped_pinv_step(J: Tensor, err: Tensor, damping: float = 0.0) -> Tensor:
     ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular).
     """
     n = J.shape[-1]
+    Jt = J.transpose(-1, -2)
     if n < 3:
-        A = J.transpose(-1, -2) @ J
+        A = Jt @ J
         if damping:
-            A = A + (damping * damping) * torch.eye(n, dtype=J.dtype, device=J.device)
-        return torch.linalg.solve(A, (J.transpose(-1, -2) @ err.unsqueeze(-1))).squeeze(-1)
-    A = J @ J.transpose(-1, -2)
+            A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
+        return torch.linalg.solve(A, (Jt @ err.unsqueeze(-1))).squeeze(-1)
+    A = J @ Jt
     if damping:
-        A = A + (damping * damping) * torch.eye(3, dtype=J.dtype, device=J.device)
-    y = solve3_symmetric(A, err)
-    return (J.transpose(-1, -2) @ y.unsqueeze(-1)).squeeze(-1)
+        A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
+    if A.numel() <= SMALL_BATCH * 9:  # LAPACK is faster for a handful of systems, the adjugate for many
+        y = torch.linalg.solve_ex(A, err)[0]
+    else:
+        y = solve3_symmetric(A, err)
+    return (Jt @ y.unsqueeze(-1)).squeeze(-1)
 
 
 def limited_step(J: Tensor, err: Tensor, q: Tensor, lower: Tensor, upper: Tensor, damping: float) -> Tensor:
     """A damped pseudo-inverse step that respects joint limits by re-solving, not just clamping.
 
-    Joints whose step would cross a limit are locked (their Jacobian columns zeroed) and the step
-    is solved again with the others; a redundant chain can usually still make the full Cartesian
-    correction that way, where a plain clamp would stall against the limit. Returns the new
-    posture, within limits.
+    A joint that sits at a limit and that the error would push further out (the sign of
+    ``(J^T err)_j``, the steepest-descent direction) is locked: its Jacobian column is zeroed and the
+    step solved with the other joints, which a redundant chain can usually use to make the full
+    Cartesian correction, where a plain clamp would stall against the limit (an active-set step).
+    Joints that cross a limit during the step are clamped, and locked at the next step. Returns the
+    new posture, within limits.
 
     J: (..., 3, n); err: (..., 3); q: (..., n); lower, upper: broadcastable to q -> (..., n).
     """
-    dq = damped_pinv_step(J, err, damping)
-    q_new = q + dq
-    over = (q_new < lower) | (q_new > upper)
-    if bool(over.any()):
-        locked = damped_pinv_step(J * (~over).unsqueeze(-2).to(J.dtype), err, damping)
-        q_new = torch.where(over.any(-1, keepdim=True), q + locked, q_new)
-    return torch.clamp(q_new, lower, upper)
+    g = (J.transpose(-1, -2) @ err.unsqueeze(-1)).squeeze(-1)
+    lock = ((q <= lower) & (g < 0)) | ((q >= upper) & (g > 0))
+    dq = damped_pinv_step(J.masked_fill(lock.unsqueeze(-2), 0.0), err, damping)
+    return torch.clamp(q + dq, lower, upper)
 
 
 def refine(

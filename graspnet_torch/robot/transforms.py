@@ -42,10 +42,11 @@ def rpy_to_matrix(rpy: Tensor) -> Tensor:
     s = torch.sin(rpy)
     cr, cp, cy = c.unbind(-1)
     sr, sp, sy = s.unbind(-1)
-    row0 = torch.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], dim=-1)
-    row1 = torch.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], dim=-1)
-    row2 = torch.stack([-sp, cp * sr, cp * cr], dim=-1)
-    return torch.stack([row0, row1, row2], dim=-2)
+    spsr, spcr = sp * sr, sp * cr
+    entries = [cy * cp, cy * spsr - sy * cr, cy * spcr + sy * sr,
+               sy * cp, sy * spsr + cy * cr, sy * spcr - cy * sr,
+               -sp, cp * sr, cp * cr]
+    return torch.stack(entries, dim=-1).unflatten(-1, (3, 3))
 
 
 def matrix_to_rpy(R: Tensor) -> Tensor:

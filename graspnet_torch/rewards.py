@@ -1,0 +1,69 @@
+"""Evaluation and reinforcement signals (paper eq. 3, 14, 15, 20-29).
+
+All functions are elementwise over leading batch dimensions; errors and distances in metres.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+__all__ = [
+    "add_noise",
+    "manus_reward",
+    "r1",
+    "r2",
+    "r3",
+    "r4",
+    "total_error",
+]
+
+
+def total_error(desired: Tensor, actual: Tensor) -> Tensor:
+    """Eq. 3: E_k = sum_i |PX_i^D - PX_i^M| over the fingers. (..., F, 3), (..., F, 3) -> (...)."""
+    return torch.linalg.vector_norm(desired - actual, dim=-1).sum(-1)
+
+
+def r1(error: Tensor, a: float = 1.0) -> Tensor:
+    """Eq. 14 / 20: R_1 = 1 - tanh(a E) (h = tanh, the paper's choice), in (0, 1]."""
+    return 1.0 - torch.tanh(a * error)
+
+
+def r2(reward: Tensor, collisions: Tensor) -> Tensor:
+    """Eq. 21: R_1 halved whenever there is a collision."""
+    return torch.where(collisions > 0, reward / 2, reward)
+
+
+def r3(reward: Tensor, collisions: Tensor, iteration: int, max_iterations: int) -> Tensor:
+    """Eq. 22 (shaping): R_1 / (1 + i / p) when there is a collision."""
+    return torch.where(collisions > 0, reward / (1 + iteration / max_iterations), reward)
+
+
+def r4(reward: Tensor, collisions: Tensor, iteration: int, max_iterations: int, beta: float = 0.25) -> Tensor:
+    """Eq. 23 (shaping graded by the number c of collisions): R_1 / (1 + c^beta i / p)."""
+    c = collisions.to(reward.dtype)
+    return torch.where(collisions > 0, reward / (1 + c.clamp(min=1) ** beta * (iteration / max_iterations)), reward)
+
+
+def manus_reward(gripper: Tensor, target: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Eq. 24-29: the MANUS two-point criterion.
+
+    gripper, target: (..., 2, 3) the two marked points on the gripper and on the object.
+    Returns (R, R_1, R_2, d): R_1 = |n_gripper . n_object| (24), d = min(d_1, d_2) (26-28) over the two
+    pairings of the points, R_2 = 1 - tanh(d) (25), R = (R_1 + R_2) / 2 (29).
+    """
+    n_g = torch.nn.functional.normalize(gripper[..., 1, :] - gripper[..., 0, :], dim=-1)
+    n_o = torch.nn.functional.normalize(target[..., 1, :] - target[..., 0, :], dim=-1)
+    rr1 = (n_g * n_o).sum(-1).abs()
+    d1 = (target[..., 0, :] - gripper[..., 0, :]).norm(dim=-1) + (target[..., 1, :] - gripper[..., 1, :]).norm(dim=-1)
+    d2 = (target[..., 1, :] - gripper[..., 0, :]).norm(dim=-1) + (target[..., 0, :] - gripper[..., 1, :]).norm(dim=-1)
+    d = torch.minimum(d1, d2)
+    rr2 = 1.0 - torch.tanh(d)
+    return (rr1 + rr2) / 2, rr1, rr2, d
+
+
+def add_noise(reward: Tensor, sigma: float, generator: torch.Generator | None = None) -> Tensor:
+    """Eq. 15: r + N(0, sigma_n), modelling low-quality sensors (not clipped)."""
+    if sigma <= 0:
+        return reward
+    return reward + sigma * torch.randn(reward.shape, generator=generator, dtype=reward.dtype, device=reward.device)

@@ -1,0 +1,58 @@
+"""Typed settings of the closed loop (Hydra groups ``solver/``, ``reward/``, ``noise/``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["NoiseCfg", "RewardCfg", "SolverCfg"]
+
+
+@dataclass(frozen=True)
+class RewardCfg:
+    """Reinforcement: R_1 = 1 - tanh(a E) (eq. 14 / 20), E the total fingertip error in metres.
+
+    Attributes:
+        kind: 'r1' for the hand (collision shaping R2-R4 comes with obstacles).
+        a: slope of the evaluation (the paper gives a = 1.5 for the arm, none for the hand; with
+            a = 1 the default threshold r > 0.99 means E < 10 mm).
+    """
+
+    kind: str = "r1"
+    a: float = 1.0
+
+
+@dataclass(frozen=True)
+class NoiseCfg:
+    """Sensor noise on the reinforcement: r + N(0, sigma) (eq. 15)."""
+
+    sigma: float = 0.0
+
+
+@dataclass(frozen=True)
+class SolverCfg:
+    """The closed loop of section 2.4.
+
+    Attributes:
+        max_iterations: iteration budget per trial.
+        threshold: a trial stops once its (noise-free) reinforcement exceeds this (paper: 0.99);
+            ``None`` or > 1 never stops early (fixed-length runs such as the noise study).
+        refine: FCNN refinement iterations (eq. 5) inside the loop, per evaluation (0: the
+            paper's FCNN, competition among experts only).
+        final_refine: refinement iterations applied after the loop to the reported configuration's
+            fingers (the palm pose is kept); the reported errors are those of the refined joints.
+        candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
+        report: 'best' (the configuration with the highest observed reinforcement; without
+            noise, the smallest error) or 'final' (the last one).
+        history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
+            errors, time) for logs and plots.
+        dtype: 'float32' (hot path) or 'float64'.
+    """
+
+    max_iterations: int = 2000
+    threshold: float | None = 0.99
+    refine: int = 0
+    final_refine: int = 3
+    candidates: int = 1
+    report: str = "best"
+    history: bool = True
+    dtype: str = "float32"

@@ -1,0 +1,101 @@
+"""Grasp results and their JSON form (shared/INTERFACE.md).
+
+Angles in degrees, lengths in metres, errors in millimetres. The reported errors are recomputed
+in float64 from the reported configuration by forward kinematics against the problem's contacts,
+so a result can be checked from the URDF alone.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from graspnet_torch.io import atomic_write_text
+
+__all__ = ["GraspResult", "TrialResult"]
+
+
+@dataclass
+class TrialResult:
+    """One trial: the configuration it found and how good it is."""
+
+    success: bool
+    palm_pose: list[float]  # palm_link in the world: x, y, z (m), rx, ry, rz (deg)
+    joints: dict[str, list[float]]  # every finger, joints in chain order (deg)
+    fingertip_error_mm: dict[str, float]  # contact fingers
+    total_error_mm: float  # eq. 3
+    iterations: int
+    reinforcement: float  # noise-free, at the reported configuration
+    wall_time_s: float
+    collisions: int = 0
+    arm_joints: list[float] | None = None  # arm_hand and manus only (deg; metres for prismatic)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        if d["arm_joints"] is None:
+            d.pop("arm_joints")
+        return d
+
+
+@dataclass
+class GraspResult:
+    """The best trial's fields at top level, plus every trial."""
+
+    robot: str
+    trials: list[TrialResult]
+    problem: str | None = None
+    seed: int | None = None
+    settings: dict = field(default_factory=dict)
+
+    outcome: object | None = field(default=None, repr=False, compare=False)  # the loop's tensors and curves
+
+    @property
+    def best(self) -> TrialResult:
+        """The successful trial with the smallest total error (else the smallest error)."""
+        return min(self.trials, key=lambda t: (not t.success, t.total_error_mm))
+
+    @property
+    def success(self) -> bool:
+        return self.best.success
+
+    @property
+    def palm_pose(self) -> list[float]:
+        return self.best.palm_pose
+
+    @property
+    def joints(self) -> dict[str, list[float]]:
+        return self.best.joints
+
+    @property
+    def fingertip_error_mm(self) -> dict[str, float]:
+        return self.best.fingertip_error_mm
+
+    @property
+    def total_error_mm(self) -> float:
+        return self.best.total_error_mm
+
+    @property
+    def iterations(self) -> int:
+        return self.best.iterations
+
+    @property
+    def reinforcement(self) -> float:
+        return self.best.reinforcement
+
+    def to_dict(self) -> dict:
+        out = {"robot": self.robot, **self.best.to_dict(), "trials": [t.to_dict() for t in self.trials]}
+        if self.problem is not None:
+            out["problem"] = self.problem
+        if self.seed is not None:
+            out["seed"] = self.seed
+        if self.settings:
+            out["settings"] = self.settings
+        return out
+
+    def to_json(self, indent: int | None = 2) -> str:
+        return json.dumps(self.to_dict(), indent=indent)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the JSON atomically (never a half-written file)."""
+        return atomic_write_text(path, self.to_json() + "\n")

@@ -1,0 +1,5 @@
+"""Grasp problems: objects, contact sets, problem files and shipped tasks."""
+
+from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture, Shape, available_tasks
+
+__all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]

@@ -1,0 +1,308 @@
+"""Grasp problems: a robot, an object, one contact per finger (problem files, shipped tasks).
+
+A problem file (YAML or JSON; schema in shared/INTERFACE.md) is validated completely before any
+work starts; every refusal is a :class:`~graspnet_torch.errors.ProblemError` with one line that
+names the file and the offending entry. Files give angles in degrees; the dataclasses hold
+metres and radians.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.paths import configs_dir, resolve_repo_path
+from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
+
+__all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
+
+SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
+KNOWN_KEYS = {"robot", "object", "contacts", "palm_bounds", "obstacles", "name", "description", "reference", "notes"}
+
+
+def _numbers(value: Any, n: int, where: str, what: str = "numbers") -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ProblemError(f"{where}: expected {n} {what}, got {value!r}") from None
+    if arr.shape != (n,):
+        raise ProblemError(f"{where}: expected {n} {what}, got {value!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ProblemError(f"{where}: numbers must be finite, got {value!r}")
+    return arr
+
+
+def _pose(value: Any, where: str) -> np.ndarray:
+    """(x, y, z, rx, ry, rz) in metres and degrees -> metres and radians."""
+    p = _numbers(value, 6, where, "numbers (x, y, z in m, rx, ry, rz in degrees)")
+    return np.concatenate([p[:3], np.radians(p[3:])])
+
+
+@dataclass(frozen=True)
+class Shape:
+    """An object or obstacle.
+
+    Attributes:
+        kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
+        size: box (x, y, z); cylinder (radius, height) along its z; sphere (radius,); mesh: ().
+        pose: (6,) frame of the shape in the world (m, rad); the shape is centred on it.
+        mesh: path of a mesh file (kind 'mesh').
+    """
+
+    kind: str
+    size: tuple[float, ...]
+    pose: np.ndarray
+    mesh: Path | None = None
+
+    @classmethod
+    def from_mapping(cls, data: Any, where: str) -> Shape:
+        if not isinstance(data, Mapping):
+            raise ProblemError(f"{where}: expected a mapping with shape, size and pose")
+        unknown = sorted(set(data) - {"shape", "size", "pose", "name"})
+        if unknown:
+            raise ProblemError(f"{where}: unknown key(s) {', '.join(unknown)}")
+        kind = data.get("shape")
+        if kind not in (*SHAPES, "mesh"):
+            raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {kind!r}")
+        pose = _pose(data.get("pose", [0, 0, 0, 0, 0, 0]), f"{where}.pose")
+        if kind == "mesh":
+            size = data.get("size")
+            paths = size if isinstance(size, list) else [size]
+            if len(paths) != 1 or not isinstance(paths[0], str):
+                raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
+            path = resolve_repo_path(paths[0])
+            if not path.is_file():
+                raise ProblemError(f"{where}.size: mesh file not found: {paths[0]}")
+            return cls(kind, (), pose, path)
+        size = _numbers(data.get("size"), SHAPES[kind], f"{where}.size")
+        if np.any(size <= 0):
+            raise ProblemError(f"{where}.size: dimensions must be positive, got {data.get('size')!r}")
+        return cls(kind, tuple(float(s) for s in size), pose)
+
+    def to_mapping(self) -> dict:
+        pose = [*self.pose[:3].tolist(), *np.degrees(self.pose[3:]).tolist()]
+        size = [str(self.mesh)] if self.kind == "mesh" else list(self.size)
+        return {"shape": self.kind, "size": size, "pose": pose}
+
+    def trimesh(self):
+        """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
+        import trimesh
+
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        if self.kind == "box":
+            mesh = trimesh.creation.box(extents=self.size)
+        elif self.kind == "cylinder":
+            mesh = trimesh.creation.cylinder(radius=self.size[0], height=self.size[1], sections=48)
+        elif self.kind == "sphere":
+            mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
+        else:
+            mesh = trimesh.load(self.mesh, force="mesh")
+        T = np.eye(4)
+        T[:3, :3] = rpy_matrix_np(self.pose[3:])
+        T[:3, 3] = self.pose[:3]
+        return mesh.apply_transform(T)
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One contact: the finger that touches it and its position in the object frame (m)."""
+
+    finger: str
+    position: np.ndarray
+
+
+@dataclass(frozen=True)
+class ReferencePosture:
+    """A known posture that reaches every contact (shipped tasks carry one, to show that the task
+    is reachable): palm pose (6,) in m/rad and finger joints per finger in radians."""
+
+    palm_pose: np.ndarray
+    joints: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class GraspProblem:
+    """A grasp problem: which robot, where each finger must touch, within which palm bounds.
+
+    Attributes:
+        robot: robot name (``configs/robot/<robot>.yaml``).
+        contacts: one per finger (2 to the number of fingers), positions in the object frame.
+        object: the grasped object (optional; pictures and collisions); its pose places the
+            object frame in the world. Without an object, the object frame is the world.
+        palm_bounds: search space of the palm pose, or None for the robot's default.
+        obstacles: other shapes in the world.
+        name, description: for tasks.
+        reference: a posture known to solve the problem (optional).
+        source: where it came from, for messages.
+    """
+
+    robot: str
+    contacts: tuple[Contact, ...]
+    object: Shape | None = None
+    palm_bounds: PoseBounds | None = None
+    obstacles: tuple[Shape, ...] = ()
+    name: str | None = None
+    description: str | None = None
+    reference: ReferencePosture | None = None
+    source: str = "<memory>"
+    robot_cfg: RobotCfg | None = field(default=None, repr=False, compare=False)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_mapping(cls, data: Any, source: str = "<memory>", robot_cfg: RobotCfg | None = None) -> GraspProblem:
+        """Validate a parsed problem; ``robot_cfg`` overrides loading ``configs/robot/<robot>.yaml``."""
+        if not isinstance(data, Mapping):
+            raise ProblemError(f"{source}: a problem must be a mapping with robot and contacts, got "
+                               f"{type(data).__name__}")
+        unknown = sorted(set(data) - KNOWN_KEYS)
+        if unknown:
+            raise ProblemError(f"{source}: unknown key(s) {', '.join(unknown)} "
+                               f"(expected {', '.join(sorted(KNOWN_KEYS))})")
+        robot = data.get("robot")
+        if not isinstance(robot, str) or not robot:
+            raise ProblemError(f"{source}: 'robot' must name a robot ({', '.join(available_robots())})")
+        if robot_cfg is None:
+            try:
+                robot_cfg = load_robot_cfg(robot)
+            except ConfigError as exc:
+                raise ProblemError(f"{source}: robot: {exc}") from None
+        elif robot_cfg.name != robot:
+            raise ProblemError(f"{source}: the problem is for robot '{robot}', not '{robot_cfg.name}'")
+        fingers = list(robot_cfg.fingers)
+        raw = data.get("contacts")
+        if not isinstance(raw, Sequence) or isinstance(raw, str):
+            raise ProblemError(f"{source}: 'contacts' must be a list of {{finger, position}}")
+        if not 2 <= len(raw) <= len(fingers):
+            raise ProblemError(f"{source}: contacts: need 2 to {len(fingers)} contacts (at most one per finger of "
+                               f"'{robot}'), got {len(raw)}")
+        contacts, seen = [], {}
+        for k, entry in enumerate(raw):
+            where = f"{source}: contacts[{k}]"
+            if not isinstance(entry, Mapping) or set(entry) - {"finger", "position"} or "finger" not in entry:
+                raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {entry!r}")
+            finger = entry["finger"]
+            if finger not in fingers:
+                raise ProblemError(f"{where}.finger: unknown finger {finger!r} for robot '{robot}' (fingers: "
+                                   f"{', '.join(fingers)})")
+            if finger in seen:
+                raise ProblemError(f"{where}.finger: finger '{finger}' appears twice (contacts[{seen[finger]}] "
+                                   f"and contacts[{k}])")
+            seen[finger] = k
+            contacts.append(Contact(finger, _numbers(entry.get("position"), 3, f"{where}.position",
+                                                     "numbers (x, y, z in metres)")))
+        obj = Shape.from_mapping(data["object"], f"{source}: object") if data.get("object") is not None else None
+        bounds = None
+        if data.get("palm_bounds") is not None:
+            try:
+                bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
+            except ConfigError as exc:
+                raise ProblemError(str(exc)) from None
+        obstacles = data.get("obstacles") or []
+        if not isinstance(obstacles, list):
+            raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
+        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]") for k, o in enumerate(obstacles))
+        reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
+        for key in ("name", "description"):
+            if data.get(key) is not None and not isinstance(data[key], str):
+                raise ProblemError(f"{source}: '{key}' must be a string")
+        return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
+                   name=data.get("name"), description=data.get("description"), reference=reference,
+                   source=source, robot_cfg=robot_cfg)
+
+    @staticmethod
+    def _reference(data: Any, contacts: list[Contact], robot_cfg: RobotCfg, source: str) -> ReferencePosture | None:
+        if data is None:
+            return None
+        where = f"{source}: reference"
+        if not isinstance(data, Mapping) or set(data) != {"palm_pose", "joints"}:
+            raise ProblemError(f"{where}: expected {{palm_pose: [...], joints: {{finger: [...]}}}}")
+        joints = {}
+        for finger, values in (data["joints"] or {}).items():
+            if finger not in robot_cfg.fingers:
+                raise ProblemError(f"{where}.joints: unknown finger {finger!r}")
+            arr = np.asarray(values, dtype=np.float64)
+            if arr.ndim != 1 or not np.all(np.isfinite(arr)):
+                raise ProblemError(f"{where}.joints.{finger}: expected finite numbers (degrees)")
+            joints[finger] = np.radians(arr)
+        missing = [c.finger for c in contacts if c.finger not in joints]
+        if missing:
+            raise ProblemError(f"{where}.joints: missing finger(s) {', '.join(missing)}")
+        return ReferencePosture(_pose(data["palm_pose"], f"{where}.palm_pose"), joints)
+
+    @classmethod
+    def from_file(cls, path: str | Path, robot_cfg: RobotCfg | None = None) -> GraspProblem:
+        """Read and validate a problem file (``.json``, else YAML)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ProblemError(f"problem file not found: {path}")
+        text = path.read_text()
+        try:
+            data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        except json.JSONDecodeError as exc:
+            raise ProblemError(f"{path}: malformed JSON (line {exc.lineno}: {exc.msg})") from None
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" (line {mark.line + 1})" if mark is not None else ""
+            raise ProblemError(f"{path}: malformed YAML{where}") from None
+        return cls.from_mapping(data, source=str(path), robot_cfg=robot_cfg)
+
+    @classmethod
+    def from_task(cls, name: str) -> GraspProblem:
+        """A task shipped under ``configs/task/<name>.yaml``."""
+        path = configs_dir() / "task" / f"{name}.yaml"
+        if not path.is_file():
+            raise ProblemError(f"unknown task '{name}': expected one of {', '.join(available_tasks())} (configs/task/)")
+        problem = cls.from_file(path)
+        return problem if problem.name else cls(**{**problem.__dict__, "name": name})
+
+    # ------------------------------------------------------------------ views
+    @property
+    def fingers(self) -> tuple[str, ...]:
+        return tuple(c.finger for c in self.contacts)
+
+    def bounds(self) -> PoseBounds:
+        """The palm search space: the problem's, else the robot's default."""
+        if self.palm_bounds is not None:
+            return self.palm_bounds
+        if self.robot_cfg is not None and self.robot_cfg.palm_bounds is not None:
+            return self.robot_cfg.palm_bounds
+        raise ProblemError(f"{self.source}: no palm_bounds in the problem nor in robot '{self.robot}'")
+
+    def contacts_object(self) -> np.ndarray:
+        """(F, 3) contact positions in the object frame."""
+        return np.stack([c.position for c in self.contacts])
+
+    def contacts_world(self) -> np.ndarray:
+        """(F, 3) contact positions in the world (object pose applied)."""
+        pts = self.contacts_object()
+        if self.object is None:
+            return pts
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        return pts @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
+
+    def to_mapping(self) -> dict:
+        """The problem as a problem-file mapping (degrees)."""
+        out: dict[str, Any] = {"robot": self.robot}
+        if self.name:
+            out["name"] = self.name
+        if self.object is not None:
+            out["object"] = self.object.to_mapping()
+        out["contacts"] = [{"finger": c.finger, "position": c.position.tolist()} for c in self.contacts]
+        if self.palm_bounds is not None:
+            out["palm_bounds"] = self.palm_bounds.to_degrees()
+        if self.obstacles:
+            out["obstacles"] = [o.to_mapping() for o in self.obstacles]
+        return out
+
+
+def available_tasks() -> list[str]:
+    return sorted(p.stem for p in (configs_dir() / "task").glob("*.yaml"))
