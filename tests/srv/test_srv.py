@@ -94,7 +94,8 @@ def test_lms_rule_converges_to_the_mean_reinforcement(gen):
 def test_sigma_function():
     r_hat = torch.tensor([-1.0, 0.0, 0.5, 1.0, 1.5])
     assert torch.allclose(sigma_of(r_hat, SigmaCfg(scale=2.0)), torch.tensor([4.0, 2.0, 1.0, 0.0, 0.0]))
-    assert torch.allclose(sigma_of(r_hat, SigmaCfg(kind="quadratic", scale=1.0)), torch.tensor([4.0, 1.0, 0.25, 0.0, 0.0]))
+    quadratic = sigma_of(r_hat, SigmaCfg(kind="quadratic", scale=1.0))
+    assert torch.allclose(quadratic, torch.tensor([4.0, 1.0, 0.25, 0.0, 0.0]))
     assert torch.allclose(sigma_of(r_hat, SigmaCfg(scale=1.0, floor=0.1)), torch.tensor([2.0, 1.0, 0.5, 0.1, 0.1]))
     with pytest.raises(ValueError, match="linear"):
         SigmaCfg(kind="cubic")
@@ -108,7 +109,8 @@ def test_one_srv_unit_learns_a_bandit():
     phi, phi_b = torch.zeros(1, 1, 1, requires_grad=True), torch.zeros(1, 1, 1, requires_grad=True)
     opt = torch.optim.SGD([{"params": [theta, theta_b], "lr": 0.2}, {"params": [phi, phi_b], "lr": 0.1}])
     for _ in range(3000):
-        o, *_ = SRVFunction.apply(i, theta, theta_b, phi, phi_b, torch.randn(1, 1, 1, generator=gen), SigmaCfg(scale=1.0))
+        noise = torch.randn(1, 1, 1, generator=gen)
+        o, *_ = SRVFunction.apply(i, theta, theta_b, phi, phi_b, noise, SigmaCfg(scale=1.0))
         r = torch.exp(-(((o.detach() - 0.7) / 0.15) ** 2))
         opt.zero_grad()
         o.backward(r)
