@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo test lint bench bench-fcnn bench-fcnn-train fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -19,8 +19,11 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)  ## create .venv if missing (torch first, pinned) and install the package
 
-demo: $(STAMP)  ## run the main job on the default problem (for now: robot table + pictures)
-	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/demo
+demo: $(STAMP)  ## solve the default problem (task glass3, 20 trials) -> outputs/demo/
+	$(PY) scripts/solve_grasp.py task=glass3 hydra.run.dir=outputs/demo
+
+robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
+	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots
 
 test: $(STAMP)  ## ruff check + pytest
 	$(PY) -m ruff check .

@@ -6,10 +6,12 @@
 
 from __future__ import annotations
 
+import sys
+
 import hydra
 from omegaconf import DictConfig
 
-from graspnet_torch.jobs.cli import user_errors_exit_2
+from graspnet_torch.jobs.cli import check_group_overrides, user_errors_exit_2
 from graspnet_torch.jobs.inspect_robots import inspect_robots
 
 
@@ -20,4 +22,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    check_group_overrides(sys.argv[1:], ("robot", "fcnn"))
     main()

@@ -7,12 +7,14 @@
 
 from __future__ import annotations
 
+import sys
+
 import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
 from graspnet_torch.fcnn.train import FCNNTrainCfg
-from graspnet_torch.jobs.cli import user_errors_exit_2
+from graspnet_torch.jobs.cli import check_group_overrides, user_errors_exit_2
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.robot import Robot, RobotCfg
 
@@ -29,4 +31,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    check_group_overrides(sys.argv[1:], ("robot", "fcnn"))
     main()

@@ -9,7 +9,7 @@ from typing import TypeVar
 
 from graspnet_torch.errors import GraspnetError
 
-__all__ = ["user_errors_exit_2"]
+__all__ = ["check_group_overrides", "user_errors_exit_2"]
 
 T = TypeVar("T")
 
@@ -26,3 +26,19 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
             sys.exit(2)
 
     return wrapper
+
+
+def check_group_overrides(argv: list[str], groups: tuple[str, ...]) -> None:
+    """Refuse ``group=option`` arguments naming no file under ``configs/<group>/``: one line on
+    stderr and exit 2, before Hydra composes anything (Hydra itself would exit 1)."""
+    from graspnet_torch.paths import configs_dir
+
+    for arg in argv:
+        key, sep, value = arg.lstrip("+~").partition("=")
+        if not sep or key not in groups or value in ("null", ""):
+            continue
+        options = sorted(p.stem for p in (configs_dir() / key).glob("*.yaml"))
+        if value not in options:
+            print(f"error: unknown {key} '{value}': expected one of {', '.join(options)} (configs/{key}/)",
+                  file=sys.stderr)
+            sys.exit(2)

@@ -79,12 +79,19 @@ def polish(env: HandEnvironment, config: torch.Tensor, joints: torch.Tensor, ite
 
 def _report(robot: Robot, problem: GraspProblem, outcome: LoopOutcome, reward: RewardCfg,
             solver: SolverCfg) -> list[TrialResult]:
-    """Per-trial results, errors recomputed in float64 by FK of the reported configuration."""
+    """Per-trial results, errors recomputed in float64 by FK of the reported configuration.
+
+    The loop runs in float32, whose rounded limits can exceed the exact ones by ~1e-7 rad; the
+    reported configuration is clamped to the exact (float64) bounds and limits first.
+    """
+    bounds = problem.bounds()
     palm = outcome.config.detach().to(torch.float64).cpu()
+    palm = torch.clamp(palm, torch.as_tensor(bounds.lower), torch.as_tensor(bounds.upper))
     T = palm.shape[0]
     idx = [robot.finger_index(f) for f in problem.fingers]
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
     q = robot.home_posture(torch.float64).fingers.expand(T, -1, -1).clone()
-    q[:, idx] = outcome.joints.detach().to(torch.float64).cpu()
+    q[:, idx] = torch.clamp(outcome.joints.detach().to(torch.float64).cpu(), flo[idx], fhi[idx])
     tips = robot.fingertips_world(palm, q)[:, idx]
     contacts = torch.as_tensor(problem.contacts_world(), dtype=torch.float64)
     err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres

@@ -41,6 +41,7 @@ class SolverCfg:
         final_refine: refinement iterations applied after the loop to the reported configuration's
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
+        time_budget: wall-clock seconds after which the loop stops (``None``: no limit).
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
@@ -50,6 +51,7 @@ class SolverCfg:
 
     max_iterations: int = 2000
     threshold: float | None = 0.99
+    time_budget: float | None = None
     refine: int = 0
     final_refine: int = 3
     candidates: int = 1

@@ -152,6 +152,9 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             hist["time"].append(time.perf_counter() - t0)
         o_new = step.o if all_active else torch.where(active.unsqueeze(1), step.o, o_prev)
         o_prev2, o_prev = o_prev, o_new
+        if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
+            iterations = torch.where(active, torch.full_like(iterations, k + 1), iterations)
+            break
         if threshold is not None:
             done = active & (observed > threshold)
             if bool(done.any()):

@@ -15,7 +15,7 @@ from graspnet_torch.io import atomic_path
 from graspnet_torch.robot.geometry import Shape, link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 
-__all__ = ["Panel", "draw_shapes", "new_figure", "render_robot", "save_figure"]
+__all__ = ["Panel", "draw_mesh", "draw_shapes", "new_figure", "render_robot", "save_figure"]
 
 
 def new_figure(n_views: int, size: float = 4.2):
@@ -99,12 +99,22 @@ def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) ->
 @dataclass(frozen=True)
 class Panel:
     """One picture panel: a posture seen from (elevation, azimuth) degrees, with optional red
-    markers (N, 3) in the world (e.g. contact points)."""
+    markers (N, 3) in the world (e.g. contact points) and trimesh meshes (objects, obstacles)."""
 
     caption: str
     posture: Posture
     view: tuple[float, float] = (15.0, -60.0)
     markers: np.ndarray | None = None
+    meshes: tuple = ()
+
+
+def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndarray:
+    """Draw a trimesh.Trimesh (world coordinates); returns its vertices."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    ax.add_collection3d(Poly3DCollection(mesh.vertices[mesh.faces], facecolor=color, edgecolor=(0, 0, 0, 0.05),
+                                         linewidth=0.2, alpha=alpha))
+    return np.asarray(mesh.vertices)
 
 
 def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title: str | None = None) -> Path:
@@ -113,6 +123,8 @@ def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title:
     fig, axes = new_figure(len(panels))
     for ax, panel in zip(axes, panels, strict=True):
         pts = draw_shapes(ax, shapes, robot.link_frames(panel.posture))
+        for mesh in panel.meshes:
+            pts = np.concatenate([pts, draw_mesh(ax, mesh)])
         if panel.markers is not None and len(panel.markers):
             mk = np.asarray(panel.markers)
             ax.scatter(mk[:, 0], mk[:, 1], mk[:, 2], color="red", s=14, depthshade=False)

@@ -1,0 +1,68 @@
+"""The main job's command line: outputs, exit statuses, refusals that write nothing."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from graspnet_torch.paths import repo_root
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), *args],
+                          capture_output=True, text=True, cwd=repo_root())
+
+
+def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
+    res = _run("task=glass3", "trials=4", "seed=0", "max_iterations=80", f"hydra.run.dir={tmp_path}")
+    assert res.returncode == 0, res.stderr
+    data = json.loads((tmp_path / "result.json").read_text())
+    assert data["robot"] == "hand" and len(data["trials"]) == 4
+    assert set(data["fingertip_error_mm"]) == {"thumb", "index", "middle"}
+    for png in ("posture.png", "learning.png"):
+        assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
+    assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
+    assert "trial" in res.stdout and "glass3" in res.stdout
+
+
+def test_problem_file_with_out_and_noise(tmp_path):
+    problem = tmp_path / "p.yaml"
+    problem.write_text((repo_root() / "configs" / "task" / "glass3.yaml").read_text())
+    out = tmp_path / "deep" / "result.json"
+    res = _run(f"problem={problem}", f"out={out}", "trials=2", "max_iterations=30", "noise=sigma0.1",
+               "pictures=false", "tensorboard=false", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 0, res.stderr
+    data = json.loads(out.read_text())
+    assert data["settings"]["noise_sigma"] == 0.1 and data["settings"]["threshold"] is None
+    assert all(t["iterations"] == 30 for t in data["trials"])
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["task=bottle"], "unknown task 'bottle'"),
+    (["noise=loud"], "unknown noise 'loud'"),
+    (["robot=arm_hand"], "the problem is for robot 'hand', but robot=arm_hand was given"),
+    (["trials=0"], "trials must be a positive integer"),
+    (["problem=/nonexistent/p.yaml"], "problem file not found"),
+])
+def test_refused_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args, message):
+    out = tmp_path / "result.json"
+    res = _run(*args, f"out={out}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], res.stderr
+    assert not out.exists()
+    assert not list(tmp_path.rglob("*.png")) and not list(tmp_path.rglob("result.json"))
+
+
+def test_bad_problem_file_exits_2(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("robot: hand\ncontacts:\n  - {finger: index, position: [0, 0, 0]}\n"
+                   "  - {finger: index, position: [0, 0, 1]}\n")
+    res = _run(f"problem={bad}", f"out={tmp_path / 'r.json'}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines() == [
+        f"error: {bad}: contacts[1].finger: finger 'index' appears twice (contacts[0] and contacts[1])"]
+    assert not (tmp_path / "r.json").exists()

@@ -1,0 +1,93 @@
+"""The closed loop: solves reachable problems, is reproducible, reports checkable results."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.solver import SolverCfg
+
+
+def problem_from_posture(robot, fingers, seed=0):
+    """Contacts = the fingertips of a random posture (palm pose within bounds, joints within limits)."""
+    g = torch.Generator().manual_seed(seed)
+    b = robot.palm_bounds
+    lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
+    pose = lo + (hi - lo) * (0.25 + 0.5 * torch.rand(6, generator=g, dtype=torch.float64))
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = flo + (fhi - flo) * (0.2 + 0.6 * torch.rand(flo.shape, generator=g, dtype=torch.float64))
+    tips = robot.fingertips_world(pose, q)
+    return gt.GraspProblem.from_mapping(
+        {"robot": "hand", "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers]},
+        source="from-posture")
+
+
+def test_loop_solves_a_reachable_problem(hand):
+    problem = problem_from_posture(hand, ("thumb", "index", "middle"), seed=3)
+    result = gt.solve(problem, trials=8, seed=0, max_iterations=1500)
+    assert result.success
+    assert result.total_error_mm < 10.0
+    assert sum(t.success for t in result.trials) >= 4
+
+
+def test_same_seed_same_result_and_other_seed_differs(hand):
+    problem = gt.GraspProblem.from_task("glass3")
+    kw = dict(trials=3, max_iterations=60, solver=SolverCfg(threshold=None))
+    a = gt.solve(problem, seed=7, **kw)
+    b = gt.solve(problem, seed=7, **kw)
+    c = gt.solve(problem, seed=8, **kw)
+    strip = lambda r: [{k: v for k, v in t.to_dict().items() if k != "wall_time_s"} for t in r.trials]  # noqa: E731
+    assert strip(a) == strip(b)
+    assert strip(a) != strip(c)
+
+
+def test_result_errors_are_fk_of_the_reported_configuration(hand):
+    """Recompute the errors from the JSON alone (degrees -> FK in float64 -> distance to contacts)."""
+    problem = gt.GraspProblem.from_task("glass4")
+    result = gt.solve(problem, trials=4, seed=1, max_iterations=200)
+    data = json.loads(result.to_json())
+    assert set(data) >= {"robot", "success", "palm_pose", "joints", "fingertip_error_mm", "total_error_mm",
+                         "collisions", "iterations", "reinforcement", "wall_time_s", "trials"}
+    assert len(data["trials"]) == 4 and data["robot"] == "hand"
+    d = math.pi / 180
+    contacts = torch.as_tensor(problem.contacts_world())
+    for trial in [data, *data["trials"]]:
+        pose = torch.tensor(trial["palm_pose"][:3] + [a * d for a in trial["palm_pose"][3:]], dtype=torch.float64)
+        q = torch.tensor([[a * d for a in trial["joints"][f]] for f in hand.finger_names], dtype=torch.float64)
+        tips = hand.fingertips_world(pose, q)
+        for k, f in enumerate(problem.fingers):
+            err = float(torch.linalg.vector_norm(tips[hand.finger_index(f)] - contacts[k])) * 1000
+            assert math.isclose(err, trial["fingertip_error_mm"][f], rel_tol=1e-9, abs_tol=1e-9)
+        assert math.isclose(sum(trial["fingertip_error_mm"].values()), trial["total_error_mm"], rel_tol=1e-9)
+        assert math.isclose(trial["reinforcement"], 1 - math.tanh(trial["total_error_mm"] / 1000), rel_tol=1e-9)
+        lo, hi = hand.finger_limits
+        assert bool(((q.numpy() >= lo - 1e-9) & (q.numpy() <= hi + 1e-9)).all())
+    best = min(data["trials"], key=lambda t: (not t["success"], t["total_error_mm"]))
+    assert data["total_error_mm"] == best["total_error_mm"]
+
+
+def test_stopped_trials_freeze_and_report_their_stop(hand):
+    problem = gt.GraspProblem.from_task("glass3")
+    result = gt.solve(problem, trials=6, seed=0, max_iterations=400)
+    h = result.outcome.history
+    for t, trial in enumerate(result.trials):
+        if trial.success and trial.iterations < h["total"].shape[0]:
+            k = trial.iterations
+            assert bool((h["total"][k - 1:, t] == h["total"][k - 1, t]).all())  # curve held after the stop
+            assert float(h["reinforcement"][k - 1, t]) > 0.99
+
+
+def test_noise_and_fixed_budget(hand):
+    problem = gt.GraspProblem.from_task("glass3")
+    result = gt.solve(problem, trials=2, seed=0, max_iterations=50, noise=0.2, solver=SolverCfg(threshold=None))
+    assert all(t.iterations == 50 for t in result.trials)
+    assert result.outcome.history["total"].shape == (50, 2)
+
+
+def test_bad_settings():
+    with pytest.raises(ValueError, match="report"):
+        gt.solve("glass3", trials=1, max_iterations=2, solver=SolverCfg(report="worst"))

@@ -1,0 +1,117 @@
+"""Problem files: the valid ones load, every shipped task is reachable, bad ones are refused."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import graspnet_torch as gt
+
+GOOD = {"robot": "hand",
+        "object": {"shape": "cylinder", "size": [0.035, 0.12], "pose": [0.0, 0.0, 0.06, 0, 0, 90]},
+        "contacts": [{"finger": "thumb", "position": [0.035, 0.0, 0.02]},
+                     {"finger": "index", "position": [-0.03, 0.018, 0.03]}]}
+
+
+def _write(tmp_path, data, name="p.yaml"):
+    import yaml
+
+    path = tmp_path / name
+    path.write_text(json.dumps(data) if name.endswith(".json") else yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize("name", ["p.yaml", "p.json"])
+def test_valid_problem_file(tmp_path, name):
+    p = gt.GraspProblem.from_file(_write(tmp_path, GOOD, name))
+    assert p.robot == "hand" and p.fingers == ("thumb", "index")
+    np.testing.assert_allclose(p.object.pose[3:], [0, 0, math.pi / 2])
+    world = p.contacts_world()  # rotated 90 deg about z, then lifted
+    np.testing.assert_allclose(world[0], [0.0, 0.035, 0.08], atol=1e-12)
+    np.testing.assert_allclose(p.bounds().lower, gt.load_robot_cfg("hand").palm_bounds.lower)
+
+
+@pytest.mark.parametrize("task", ["block5", "glass3", "glass4", "videotape5"])
+def test_shipped_task_is_reachable(hand, task):
+    """Its reference posture puts every fingertip on its contact, within bounds and limits."""
+    p = gt.GraspProblem.from_task(task)
+    ref = p.reference
+    bounds = p.bounds()
+    assert bool(np.all(ref.palm_pose >= bounds.lower) and np.all(ref.palm_pose <= bounds.upper))
+    q = hand.home_posture().fingers.clone()
+    lo, hi = hand.finger_limits
+    for f, v in ref.joints.items():
+        k = hand.finger_index(f)
+        assert bool(np.all(v >= lo[k] - 1e-9) and np.all(v <= hi[k] + 1e-9)), f
+        q[k] = torch.as_tensor(v)
+    tips = hand.fingertips_world(torch.as_tensor(ref.palm_pose), q)[[hand.finger_index(f) for f in p.fingers]]
+    err = torch.linalg.vector_norm(tips - torch.as_tensor(p.contacts_world()), dim=-1)
+    assert float(err.max()) < 2e-4
+    # contacts lie on the object's surface
+    mesh = p.object.trimesh()
+    import trimesh
+
+    d = np.abs(trimesh.proximity.signed_distance(mesh, p.contacts_world()))
+    assert float(d.max()) < 1.5e-3  # the cylinder is a 48-gon
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"robot": "robonaut"}, r"robot: unknown robot 'robonaut'"),
+    ({"robot": 3}, r"'robot' must name a robot"),
+    ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}]}, r"need 2 to 5 contacts.*got 1"),
+    ({"contacts": [{"finger": f, "position": [0, 0, 0]} for f in ("thumb", "index", "middle", "ring", "pinky", "thumb")]},
+     r"need 2 to 5 contacts.*got 6"),
+    ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}, {"finger": "little", "position": [0, 0, 0]}]},
+     r"contacts\[1\].finger: unknown finger 'little' for robot 'hand' \(fingers: thumb, index, middle, ring, pinky\)"),
+    ({"contacts": [{"finger": "index", "position": [0, 0, 0]}, {"finger": "index", "position": [0, 0, 1]}]},
+     r"contacts\[1\].finger: finger 'index' appears twice \(contacts\[0\] and contacts\[1\]\)"),
+    ({"contacts": [{"finger": "thumb", "position": [0, 0, ".nan"]}, {"finger": "index", "position": [0, 0, 0]}]},
+     r"contacts\[0\].position: numbers must be finite"),
+    ({"contacts": [{"finger": "thumb", "position": [0, 0]}, {"finger": "index", "position": [0, 0, 0]}]},
+     r"contacts\[0\].position: expected 3 numbers"),
+    ({"palm_bounds": {"min": [0, 0, 0, 0, 0, 10], "max": [1, 1, 1, 1, 1, 0]}}, r"palm_bounds: min > max for rz"),
+    ({"object": {"shape": "torus", "size": [1], "pose": [0] * 6}}, r"object.shape: expected box, cylinder, sphere"),
+    ({"object": {"shape": "box", "size": [0.1, 0.1], "pose": [0] * 6}}, r"object.size: expected 3 numbers"),
+    ({"object": {"shape": "sphere", "size": [-0.1], "pose": [0] * 6}}, r"object.size: dimensions must be positive"),
+    ({"contact": []}, r"unknown key\(s\) contact"),
+])
+def test_bad_problem_is_refused_with_one_clear_line(tmp_path, change, message):
+    data = {**GOOD, **change}
+    if "contact" in change:
+        data = {**GOOD, "contact": []}
+    text = json.dumps(data).replace('".nan"', "NaN")
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(gt.ProblemError, match=message) as info:
+        gt.GraspProblem.from_file(path)
+    assert "\n" not in str(info.value) and "bad.json" in str(info.value)
+
+
+def test_missing_and_malformed_files(tmp_path):
+    with pytest.raises(gt.ProblemError, match=r"problem file not found: .*nope.yaml"):
+        gt.GraspProblem.from_file(tmp_path / "nope.yaml")
+    (tmp_path / "m.yaml").write_text("robot: hand\ncontacts: [\n")
+    with pytest.raises(gt.ProblemError, match=r"m.yaml: malformed YAML \(line \d+\)"):
+        gt.GraspProblem.from_file(tmp_path / "m.yaml")
+    (tmp_path / "m.json").write_text('{"robot": "hand",')
+    with pytest.raises(gt.ProblemError, match=r"m.json: malformed JSON \(line 1"):
+        gt.GraspProblem.from_file(tmp_path / "m.json")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(gt.ProblemError, match=r"must be a mapping"):
+        gt.GraspProblem.from_file(tmp_path / "list.yaml")
+
+
+def test_unknown_task():
+    with pytest.raises(gt.ProblemError, match=r"unknown task 'bottle'.*glass3"):
+        gt.GraspProblem.from_task("bottle")
+
+
+def test_round_trip_through_mapping(tmp_path):
+    p = gt.GraspProblem.from_task("videotape5")
+    again = gt.GraspProblem.from_mapping(p.to_mapping(), source="again")
+    np.testing.assert_allclose(again.contacts_world(), p.contacts_world())
+    assert again.fingers == p.fingers
