@@ -24,17 +24,18 @@ def test_r1_to_r4():
     assert torch.allclose(rewards.r3(r, c, 500, 2000), torch.stack([r[0], r[1] / 1.25, r[2] / 1.25]))
     r4 = rewards.r4(r, c, 500, 2000, beta=0.25)
     assert torch.allclose(r4, torch.stack([r[0], r[1] / (1 + 0.25), r[2] / (1 + 3**0.25 * 0.25)]))
-    assert torch.allclose(rewards.r4(r, torch.tensor([1, 1, 1]), 700, 2000), rewards.r3(r, torch.tensor([1, 1, 1]), 700, 2000))
+    one = torch.tensor([1, 1, 1])
+    assert torch.allclose(rewards.r4(r, one, 700, 2000), rewards.r3(r, one, 700, 2000))  # c = 1: R4 = R3
     assert torch.allclose(rewards.r3(r, c, 2000, 2000), rewards.r2(r, c))  # i = p: R3 = R2
 
 
 def test_manus_reward():
     g = torch.tensor([[0.0, 0, 0], [0.07, 0, 0]], dtype=torch.float64)
     # swapped pairing: d takes the better of the two pairings (eq. 26-28)
-    R, R1, R2, d = rewards.manus_reward(g, g.flip(0))
+    R, R1, _R2, d = rewards.manus_reward(g, g.flip(0))
     assert math.isclose(float(d), 0.0, abs_tol=1e-15) and math.isclose(float(R1), 1.0) and math.isclose(float(R), 1.0)
     t = torch.tensor([[0.0, 0.01, 0], [0.0, 0.08, 0]], dtype=torch.float64)  # orthogonal axis
-    R, R1, R2, d = rewards.manus_reward(g, t)
+    R, R1, _R2, d = rewards.manus_reward(g, t)
     d1 = 0.01 + math.hypot(0.07, 0.08)
     d2 = 0.08 + math.hypot(0.07, 0.01)
     assert math.isclose(float(R1), 0.0, abs_tol=1e-12) and math.isclose(float(d), min(d1, d2))

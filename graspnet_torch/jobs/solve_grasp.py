@@ -127,9 +127,10 @@ def solve_grasp(cfg: Mapping[str, Any], run_dir: str | Path) -> GraspResult:
     print(_trial_table(result, fingers))
     n_ok = sum(t.success for t in result.trials)
     errors = np.array([t.total_error_mm for t in result.trials])
+    per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
     print(f"\n{problem.name or problem.source}: {n_ok}/{trials} trials reached r > {solver.threshold}; best total "
-          f"error {best.total_error_mm:.3f} mm ({', '.join(f'{f} {best.fingertip_error_mm[f]:.3f}' for f in fingers)}); "
-          f"median {np.median(errors):.3f} mm; {result.outcome.wall_time_s:.2f} s for {trials} trials batched")
+          f"error {best.total_error_mm:.3f} mm ({per_finger}); median {np.median(errors):.3f} mm; "
+          f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     result.save(out)
     print(f"result: {out}")
     if cfg.get("tensorboard", True):

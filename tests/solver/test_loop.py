@@ -22,7 +22,8 @@ def problem_from_posture(robot, fingers, seed=0):
     q = flo + (fhi - flo) * (0.2 + 0.6 * torch.rand(flo.shape, generator=g, dtype=torch.float64))
     tips = robot.fingertips_world(pose, q)
     return gt.GraspProblem.from_mapping(
-        {"robot": "hand", "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers]},
+        {"robot": "hand",
+         "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers]},
         source="from-posture")
 
 

@@ -63,7 +63,8 @@ def test_shipped_task_is_reachable(hand, task):
     ({"robot": "robonaut"}, r"robot: unknown robot 'robonaut'"),
     ({"robot": 3}, r"'robot' must name a robot"),
     ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}]}, r"need 2 to 5 contacts.*got 1"),
-    ({"contacts": [{"finger": f, "position": [0, 0, 0]} for f in ("thumb", "index", "middle", "ring", "pinky", "thumb")]},
+    ({"contacts": [{"finger": f, "position": [0, 0, 0]}
+                   for f in ("thumb", "index", "middle", "ring", "pinky", "thumb")]},
      r"need 2 to 5 contacts.*got 6"),
     ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}, {"finger": "little", "position": [0, 0, 0]}]},
      r"contacts\[1\].finger: unknown finger 'little' for robot 'hand' \(fingers: thumb, index, middle, ring, pinky\)"),
