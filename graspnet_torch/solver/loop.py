@@ -48,7 +48,9 @@ class Environment(Protocol):
 
 @dataclass
 class LoopOutcome:
-    """Per-trial results (leading dimension T) and optional per-iteration history (K, T[, F]).
+    """Per-trial results (leading dimension T) and optional per-iteration history (K, T[, F]):
+    'reinforcement' (noise-free), 'observed' (with sensor noise), 'expected' and 'sigma' (means
+    over the SRV units), 'total' and 'errors' (metres), 'time' (K,) seconds since the start.
 
     Attributes:
         config, joints, errors, total, reinforcement: at each trial's reported iteration (the
@@ -84,7 +86,8 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     threshold = solver.threshold if solver.threshold is not None and solver.threshold <= 1 else None
     if solver.report not in ("best", "final"):
         raise ValueError(f"solver.report must be 'best' or 'final', got '{solver.report}'")
-    hist: dict[str, list] = {k: [] for k in ("reinforcement", "expected", "sigma", "total", "errors", "time")}
+    hist: dict[str, list] = {k: [] for k in ("reinforcement", "observed", "expected", "sigma", "total", "errors",
+                                             "time")}
     with torch.inference_mode(not net.autograd):  # ~30 % less overhead per op; results are cloned out below
         t0 = time.perf_counter()
         state = _iterate(env, net, solver, reward, noise, gen, o_prev, threshold, hist, t0)
@@ -145,6 +148,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             best_joints = torch.where(better.view(-1, 1, 1), joints, best_joints)
         if solver.history:
             hist["reinforcement"].append(r)
+            hist["observed"].append(observed)
             hist["expected"].append(step.r_hat)
             hist["sigma"].append(step.sigma)
             hist["total"].append(total)

@@ -1,0 +1,46 @@
+"""Speed of the closed loop: iterations per second of one trial, and trial-iterations per second
+with T = 1, 30, 1000 trials batched, with the ratio to the single-trial loop (glass3, default
+settings, fixed budgets, no early stop).
+
+    python benchmarks/bench_solver.py [--threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.solver import SolverCfg
+from graspnet_torch.table import format_table
+
+
+def rate(trials: int, iterations: int, repeats: int) -> float:
+    """Best of ``repeats`` runs: trial-iterations per second of the loop (setup excluded)."""
+    best = 0.0
+    for seed in range(repeats):
+        res = gt.solve("glass3", trials=trials, seed=seed, solver=SolverCfg(threshold=None, max_iterations=iterations))
+        best = max(best, trials * iterations / res.outcome.wall_time_s)
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    rate(1, 100, 1)  # warm-up
+    single = rate(1, 2000, 3)
+    rows = [[1, single, single, 1.0]]
+    for T, iterations in ((30, 1000), (1000, 200)):
+        r = rate(T, iterations, 2)
+        rows.append([T, r / T, r, r / single])
+    print(f"glass3 (3 fingers), {args.threads} threads; paper: ~108 iterations/s (MATLAB, one trial)")
+    print(format_table(["trials T", "iterations/s", "trial-iterations/s", "ratio to one trial"], rows, floatfmt=".4g"))
+    print(f"\none trial: {single:.0f} iterations/s (target >= 2,000); T = 1000: {rows[-1][2]:.0f} "
+          f"trial-iterations/s (target >= 50,000)")
+
+
+if __name__ == "__main__":
+    main()
