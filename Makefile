@@ -41,6 +41,9 @@ bench-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverse
 bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from scratch
 	$(PY) benchmarks/bench_fcnn_training.py
 
+bench-solver: $(STAMP)  ## iterations per second of the closed loop, 1 to 1000 trials
+	$(PY) benchmarks/bench_solver.py
+
 fcnn: $(STAMP)  ## retrain the shipped FCNN checkpoint checkpoints/hand/fcnn.pt (fixed seed)
 	$(PY) scripts/train_fcnn.py robot=hand export=true hydra.run.dir=outputs/train_fcnn/hand-export
 

@@ -66,9 +66,10 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     gt.solve("glass3", trials=1, max_iterations=50)  # warm-up (loading, first compilations)
     lines = ["# HCNN: the paper's Table 2 protocol", "",
-             f"`python benchmarks/hcnn_table2.py` ({args.trials} single-trial runs per column, seeds 0..{args.trials - 1}, "
-             f"no noise, {args.threads} CPU threads, default settings: sigma scale 3, a = 1, FCNN competition in the loop, "
-             "3 refinement iterations of the reported fingers). Errors in mm, mean +- std; ours / paper.", ""]
+             f"`python benchmarks/hcnn_table2.py` ({args.trials} single-trial runs per column, seeds "
+             f"0..{args.trials - 1}, no noise, {args.threads} CPU threads, default settings: sigma scale 3, a = 1, "
+             "FCNN competition in the loop, 3 refinement iterations of the reported fingers). Errors in mm, "
+             "mean +- std; ours / paper.", ""]
     summary = []
     started = time.perf_counter()
     for task, label, budgets, iterations in TASKS:
@@ -93,8 +94,8 @@ def main() -> None:
         lines.append("")
         mean_it = float(np.mean(results[-1]["total"]))
         summary.append((task, mean_it, paper["total"][-1][0]))
-        print(f"{task}: mean total error after {iterations} iterations {mean_it:.3f} mm (paper {paper['total'][-1][0]})",
-              flush=True)
+        print(f"{task}: mean total error after {iterations} iterations {mean_it:.3f} mm "
+              f"(paper {paper['total'][-1][0]})", flush=True)
     lines += ["## Larger budget: run to r > 0.999", "",
               "20 trials per task batched, threshold 0.999 (E < 1 mm before the final refinement), budget 20,000 "
               "iterations.", "", "| task | median total error mm | mean | trials reaching r > 0.999 | "
