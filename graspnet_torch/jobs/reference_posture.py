@@ -1,0 +1,28 @@
+"""Is a problem reachable? Fit a reference posture and print it (problem-file format)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from graspnet_torch.jobs.solve_grasp import resolve_problem
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.tasks.reference import ReferenceFit, find_reference_posture
+
+__all__ = ["reference_posture"]
+
+
+def reference_posture(cfg: Mapping[str, Any]) -> ReferenceFit:
+    problem = resolve_problem(cfg.get("problem"), cfg.get("task"), None)
+    robot = Robot(problem.robot_cfg)
+    fit = find_reference_posture(robot, problem, restarts=int(cfg.get("restarts", 24)), seed=int(cfg.get("seed", 0)))
+    pose = [round(float(v), 5) for v in fit.palm_pose[:3]] + [round(math.degrees(v), 3) for v in fit.palm_pose[3:]]
+    print(f"{problem.name or problem.source}: total error {fit.total * 1000:.4f} mm "
+          f"({', '.join(f'{f} {e * 1000:.4f}' for f, e in fit.errors.items())})")
+    print("reference:")
+    print(f"  palm_pose: {pose}")
+    print("  joints:")
+    for f, q in fit.joints.items():
+        print(f"    {f}: {[round(math.degrees(v), 3) for v in q]}")
+    return fit
