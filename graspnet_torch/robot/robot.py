@@ -208,13 +208,6 @@ class Robot:
             self._consts[key] = c
         return c
 
-    def finger_bounds(
-        self, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"
-    ) -> tuple[Tensor, Tensor]:
-        """(F, n) lower and upper finger joint limits as tensors."""
-        c = self._const(dtype, torch.device(device))
-        return c["finger_lower"], c["finger_upper"]
-
     # ------------------------------------------------------------------ checks
     def _check_fingers(self, q: Tensor) -> None:
         if self.finger_kernel is None:

@@ -83,6 +83,14 @@ def test_contacts_object_to_finger_bases_round_trip(hand, gen):
     assert (hand.palm_to_base(hand.base_to_palm(world)) - world).abs().max() < 1e-12
 
 
+def test_arm_contacts_to_finger_bases_round_trip(robots, gen):
+    robot = robots["arm_hand"]
+    qb = uniform(*robot.body_limits, 40, gen)
+    q = uniform(*robot.finger_limits, 40, gen)
+    world = robot.fingertips_world_from_body(qb, q)
+    assert (robot.world_to_bases_from_body(world, qb) - robot.fingertips_base(q)).abs().max() < 1e-12
+
+
 def test_link_frames_agree_with_kernel(robots):
     for robot in robots.values():
         home = robot.home_posture()
