@@ -200,11 +200,8 @@ class Robot:
         c = self._consts.get(key)
         if c is None:
             base = np.stack([f.base_in_palm for f in self.fingers.values()]) if self.fingers else np.zeros((0, 4, 4))
-            lo, hi = self.finger_limits if self.fingers else (np.zeros((0, 0)), np.zeros((0, 0)))
             c = {"base_R": torch.as_tensor(base[:, :3, :3], dtype=dtype, device=device),
-                 "base_t": torch.as_tensor(base[:, :3, 3], dtype=dtype, device=device),
-                 "finger_lower": torch.as_tensor(lo, dtype=dtype, device=device),
-                 "finger_upper": torch.as_tensor(hi, dtype=dtype, device=device)}
+                 "base_t": torch.as_tensor(base[:, :3, 3], dtype=dtype, device=device)}
             self._consts[key] = c
         return c
 
