@@ -6,7 +6,10 @@ block5 (Table 1 bounds), sensor noise sigma_n in {0, 0.05, 0.1, 0.2} (eq. 15), 2
 each step, and reports the final error (mean over the last 100 steps, median over trials) and the
 error of the configuration each trial reports.
 
-    python benchmarks/hcnn_noise_study.py [--trials 20] [--out reports]
+    python benchmarks/hcnn_noise_study.py [--trials 20] [--out reports] [--a 1] [--s linear] [--scale 3]
+
+``--a``, ``--s`` and ``--scale`` replace the defaults of the reinforcement's slope (eq. 14) and of
+s(r_hat) (eq. 11); ``benchmarks/hcnn_noise_tradeoff.py`` sweeps them.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.solver import SolverCfg
+from graspnet_torch.solver.config import RewardCfg
+from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 from graspnet_torch.viz import plot_noise_study
 
 LEVELS = (0.0, 0.05, 0.1, 0.2)
@@ -30,12 +35,19 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--out", default="reports")
+    ap.add_argument("--a", type=float, default=RewardCfg.a, help="slope of r = 1 - tanh(a E)")
+    ap.add_argument("--s", default=SigmaCfg.kind, choices=["linear", "quadratic"], help="form of s(r_hat)")
+    ap.add_argument("--scale", type=float, default=SigmaCfg.scale, help="scale of s(r_hat)")
     args = ap.parse_args()
+    srv, reward = SRVNetCfg(sigma=SigmaCfg(kind=args.s, scale=args.scale)), RewardCfg(a=args.a)
+    default = args.a == RewardCfg.a and args.s == SigmaCfg.kind and args.scale == SigmaCfg.scale
+    setting = "default settings" if default else f"a = {args.a:g}, s(r_hat) {args.s} with scale {args.scale:g}"
+    flags = "" if default else f" --a {args.a:g} --s {args.s} --scale {args.scale:g}"
     torch.set_num_threads(2)
     out = Path(args.out)
     curves, rows = {}, []
     for sigma in LEVELS:
-        res = gt.solve("block5", trials=args.trials, seed=0, noise=sigma,
+        res = gt.solve("block5", trials=args.trials, seed=0, noise=sigma, srv=srv, reward=reward,
                        solver=SolverCfg(threshold=None, max_iterations=args.steps))
         h = res.outcome.history
         total = h["total"].double().numpy()  # (K, T), metres
@@ -53,8 +65,8 @@ def main() -> None:
                            f"block5, {args.trials} trials per level: medians over trials (paper Fig. 3)")
     base = rows[0][2]
     lines = ["# HCNN noise study (paper Fig. 3)", "",
-             f"`python benchmarks/hcnn_noise_study.py`: block5, {args.steps} steps, {args.trials} trials per noise "
-             "level, no early stop, default settings. Deterministic error = the noise-free total error E of the "
+             f"`python benchmarks/hcnn_noise_study.py{flags}`: block5, {args.steps} steps, {args.trials} trials "
+             f"per noise level, no early stop, {setting}. Deterministic error = the noise-free total error E of the "
              "configuration tried at a step; final = mean over the last 100 steps, median over trials.",
              "", "![noise study](fig3_noise_study.png)", "",
              "| sigma_n | E, first 20 steps (mm) | final E (mm) | mean over trials | reduction | E 500 steps "
