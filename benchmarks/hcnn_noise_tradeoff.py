@@ -30,7 +30,8 @@ from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 # quadratic s with a large scale).
 SETTINGS = [(1.0, "linear", 3.0), (1.0, "linear", 1.0), (1.0, "linear", 1.5), (2.0, "linear", 1.0),
             (3.0, "linear", 2.0), (10.0, "linear", 0.5), (20.0, "linear", 0.5), (2.0, "quadratic", 8.0),
-            (2.0, "quadratic", 10.0), (3.0, "quadratic", 7.0), (4.0, "quadratic", 5.0), (5.0, "quadratic", 5.0)]
+            (1.0, "quadratic", 30.0), (2.0, "quadratic", 10.0), (3.0, "quadratic", 7.0), (4.0, "quadratic", 5.0),
+            (5.0, "quadratic", 5.0)]
 TABLE2 = (("glass3", 2000, 3.1), ("glass4", 1000, 5.1), ("videotape5", 1000, 6.9))
 
 
