@@ -26,6 +26,7 @@ def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
     assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
     assert "trial" in res.stdout and "glass3" in res.stdout
+    assert "trials reached r > 0.99" in res.stdout
 
 
 def test_problem_file_with_out_and_noise(tmp_path):
@@ -38,6 +39,7 @@ def test_problem_file_with_out_and_noise(tmp_path):
     data = json.loads(out.read_text())
     assert data["settings"]["noise_sigma"] == 0.1 and data["settings"]["threshold"] is None
     assert all(t["iterations"] == 30 for t in data["trials"])
+    assert "no stopping threshold: 2 trials ran their whole budget" in res.stdout
 
 
 @pytest.mark.parametrize(("args", "message"), [
