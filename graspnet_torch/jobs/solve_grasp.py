@@ -128,8 +128,8 @@ def solve_grasp(cfg: Mapping[str, Any], run_dir: str | Path) -> GraspResult:
     n_ok = sum(t.success for t in result.trials)
     errors = np.array([t.total_error_mm for t in result.trials])
     per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
-    if solver.threshold is not None and solver.threshold <= 1:
-        stops = f"{n_ok}/{trials} trials reached r > {solver.threshold:g}"
+    if solver.stop_threshold is not None:
+        stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
     else:  # noise presets: a noisy signal crosses any threshold by chance
         stops = f"no stopping threshold: {trials} trials ran their whole budget"
     print(f"\n{problem.name or problem.source}: {stops}; best total "

@@ -97,7 +97,7 @@ def _report(robot: Robot, problem: GraspProblem, outcome: LoopOutcome, reward: R
     err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
     total = err.sum(1)
     r = r1(total, reward.a)
-    threshold = solver.threshold if solver.threshold is not None and solver.threshold <= 1 else math.inf
+    threshold = math.inf if solver.stop_threshold is None else solver.stop_threshold
     deg = 180.0 / math.pi
     results = []
     for t in range(T):

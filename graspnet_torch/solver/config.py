@@ -58,3 +58,8 @@ class SolverCfg:
     report: str = "best"
     history: bool = True
     dtype: str = "float32"
+
+    @property
+    def stop_threshold(self) -> float | None:
+        """The threshold a trial stops at, or ``None`` when runs use their whole budget."""
+        return self.threshold if self.threshold is not None and self.threshold <= 1 else None

@@ -83,7 +83,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     gen = torch.Generator(device=device).manual_seed(seed)
     net = ConfigurationNetwork(n, T, srv, gen, dtype=dtype, device=device)
     o_prev = torch.rand(T, n, generator=gen, dtype=dtype, device=device)  # random start within the bounds
-    threshold = solver.threshold if solver.threshold is not None and solver.threshold <= 1 else None
+    threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
         raise ValueError(f"solver.report must be 'best' or 'final', got '{solver.report}'")
     hist: dict[str, list] = {k: [] for k in ("reinforcement", "observed", "expected", "sigma", "total", "errors",

@@ -92,3 +92,9 @@ def test_noise_and_fixed_budget(hand):
 def test_bad_settings():
     with pytest.raises(ValueError, match="report"):
         gt.solve("glass3", trials=1, max_iterations=2, solver=SolverCfg(report="worst"))
+
+
+def test_stop_threshold_is_none_when_runs_use_the_whole_budget():
+    assert SolverCfg().stop_threshold == 0.99
+    assert SolverCfg(threshold=None).stop_threshold is None
+    assert SolverCfg(threshold=1.5).stop_threshold is None  # unreachable: r <= 1 without noise
