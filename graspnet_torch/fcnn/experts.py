@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
+from graspnet_torch.settings import setting
+
 __all__ = ["ExpertSet", "ExpertSetCfg"]
 
 
@@ -31,8 +33,8 @@ class ExpertSetCfg:
         max_experts: most experts a finger may create (paper: 4 to 6 emerged).
     """
 
-    hidden: int = 35
-    max_experts: int = 6
+    hidden: int = setting(35, lo=1, hi=4096)
+    max_experts: int = setting(6, lo=1, hi=256)
 
 
 class ExpertSet(nn.Module):

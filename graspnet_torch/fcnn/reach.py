@@ -25,6 +25,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.robot.ik import damped_pinv_step
+from graspnet_torch.settings import setting
 
 __all__ = ["ReachCfg", "ReachResult", "min_singular_value", "reach_motion", "reach_steps"]
 
@@ -43,12 +44,12 @@ class ReachCfg:
         damping: lambda of the damped pseudo-inverse (m); tiny, for numerical safety only.
     """
 
-    r_st: float = 0.005
-    r_e: float = 1e-4
-    max_improve: int = 10
-    singular_tol: float = 0.001
-    limit_tol: float = 1e-6
-    damping: float = 1e-5
+    r_st: float = setting(0.005, lo=0.0, lo_open=True, hi=1.0)
+    r_e: float = setting(1e-4, lo=0.0, lo_open=True, hi=1.0)
+    max_improve: int = setting(10, lo=0, hi=10_000)
+    singular_tol: float = setting(0.001, lo=0.0, hi=1.0)
+    limit_tol: float = setting(1e-6, lo=0.0, hi=1.0)
+    damping: float = setting(1e-5, lo=0.0, hi=1.0)
 
 
 @dataclass

@@ -22,7 +22,7 @@ training take minutes. Within an epoch the order of the steps is the paper's.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -32,6 +32,7 @@ from graspnet_torch.fcnn.experts import ExpertSet, ExpertSetCfg
 from graspnet_torch.fcnn.reach import ReachCfg, ReachResult, reach_motion
 from graspnet_torch.robot.chain import ChainSpec
 from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.settings import build, setting
 
 __all__ = ["FCNNTrainCfg", "FingerTrainer", "sample_reachable"]
 
@@ -55,27 +56,25 @@ class FCNNTrainCfg:
         val_targets: held-out targets for validation; val_every: epochs between validations.
     """
 
-    experts: ExpertSetCfg = field(default_factory=ExpertSetCfg)
-    reach: ReachCfg = field(default_factory=ReachCfg)
-    epochs: int = 400
-    targets_per_epoch: int = 256
-    train_steps: int = 40
-    batch_size: int = 256
-    lr: float = 3e-3
-    optimizer: str = "adam"
-    reassign_every: int = 5
-    random_restarts: int = 8
-    random_rounds: int = 3
-    new_experts_per_epoch: int = 1
-    val_targets: int = 10_000
-    val_every: int = 20
+    experts: ExpertSetCfg = setting(factory=ExpertSetCfg)
+    reach: ReachCfg = setting(factory=ReachCfg)
+    epochs: int = setting(400, lo=1, hi=10_000_000)
+    targets_per_epoch: int = setting(256, lo=1, hi=1_000_000)
+    train_steps: int = setting(40, lo=0, hi=1_000_000)
+    batch_size: int = setting(256, lo=1, hi=1_000_000)
+    lr: float = setting(3e-3, lo=0.0, hi=10.0)
+    optimizer: str = setting("adam", choices=("adam", "sgd"))
+    reassign_every: int = setting(5, lo=1, hi=1_000_000)
+    random_restarts: int = setting(8, lo=0, hi=10_000)
+    random_rounds: int = setting(3, lo=0, hi=1000)
+    new_experts_per_epoch: int = setting(1, lo=0, hi=1000)
+    val_targets: int = setting(10_000, lo=1, hi=10_000_000)
+    val_every: int = setting(20, lo=1, hi=10_000_000)
 
     @classmethod
-    def from_mapping(cls, d: dict) -> FCNNTrainCfg:
-        d = dict(d)
-        experts = ExpertSetCfg(**d.pop("experts", {}))
-        reach = ReachCfg(**d.pop("reach", {}))
-        return cls(experts=experts, reach=reach, **d)
+    def from_mapping(cls, d: dict | None, where: str = "fcnn") -> FCNNTrainCfg:
+        """Checked against the ranges above (:func:`graspnet_torch.settings.build`)."""
+        return build(cls, d, where)
 
 
 def sample_reachable(kernel: ChainKernel, lower: Tensor, upper: Tensor, n: int,

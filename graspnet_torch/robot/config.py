@@ -14,10 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.paths import configs_dir, resolve_repo_path
+from graspnet_torch.files import confined_file, read_document
+from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg"]
 
@@ -48,15 +49,11 @@ class PoseBounds:
             raise ConfigError(f"{where}: expected a mapping with keys 'min' and 'max'")
         arrays = []
         for key in ("min", "max"):
-            value = bounds[key]
-            try:
-                arr = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ConfigError(f"{where}.{key}: expected 6 numbers, got {value!r}") from None
-            if arr.shape != (6,):
-                raise ConfigError(f"{where}.{key}: expected 6 numbers (x, y, z, rx, ry, rz), got {value!r}")
-            if not np.all(np.isfinite(arr)):
-                raise ConfigError(f"{where}.{key}: numbers must be finite, got {value!r}")
+            xyz = number_list(bounds[key], 6, f"{where}.{key}", ConfigError, -MAX_ANGLE_DEG, MAX_ANGLE_DEG,
+                              "numbers (x, y, z in m, rx, ry, rz in degrees)")
+            arr = np.asarray(xyz, dtype=np.float64)
+            if np.any(np.abs(arr[:3]) > MAX_LENGTH_M):
+                raise ConfigError(f"{where}.{key}: x, y, z must lie within +-{MAX_LENGTH_M:g} m, got {short(xyz)}")
             arrays.append(np.concatenate([arr[:3], np.radians(arr[3:])]))
         lower, upper = arrays
         bad = np.nonzero(lower > upper)[0]
@@ -100,15 +97,22 @@ class RobotCfg:
     source: str = "<memory>"
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any], source: str = "<memory>") -> RobotCfg:
-        """Validate a parsed robot config (YAML mapping, Hydra ``DictConfig`` as a container)."""
+    def from_mapping(cls, data: Mapping[str, Any], source: str = "<memory>", folder: Path | None = None,
+                     allow_outside_paths: bool = False) -> RobotCfg:
+        """Validate a parsed robot config (YAML mapping, Hydra ``DictConfig`` as a container).
+
+        ``urdf`` is looked up in ``folder`` (the config file's folder, when it has one) and then the
+        repository root; it must stay within those, or an installed Python package, unless
+        ``allow_outside_paths``.
+        """
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
                  "gripper_points", "home", "description"}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
-            raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown)}")
+            raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
+                              f"(expected {', '.join(sorted(known))})")
         for key in ("name", "urdf", "palm_link"):
             if not isinstance(data.get(key), str) or not data[key]:
                 raise ConfigError(f"{source}: '{key}' must be a non-empty string")
@@ -117,7 +121,9 @@ class RobotCfg:
         if not isinstance(raw_fingers, Mapping):
             raise ConfigError(f"{source}: 'fingers' must map finger names to {{base, tip}}")
         for fname, chain in raw_fingers.items():
-            fingers[str(fname)] = _chain(chain, f"{source}: fingers.{fname}")
+            if not isinstance(fname, str) or not fname:
+                raise ConfigError(f"{source}: fingers: a finger name must be a string, got {short(fname)}")
+            fingers[fname] = _chain(chain, f"{source}: fingers.{clip(fname, 40)}")
         bounds = data.get("palm_bounds")
         palm_bounds = PoseBounds.from_degrees(bounds, f"{source}: palm_bounds") if bounds is not None else None
         arm = _chain(data["arm"], f"{source}: arm") if data.get("arm") is not None else None
@@ -131,13 +137,14 @@ class RobotCfg:
         if arm is None and palm_bounds is None:
             raise ConfigError(f"{source}: a robot without an 'arm' needs 'palm_bounds'")
         home = {}
-        for joint, value in (data.get("home") or {}).items():
-            if not isinstance(value, int | float) or not math.isfinite(value):
-                raise ConfigError(f"{source}: home.{joint} must be a finite number, got {value!r}")
-            home[str(joint)] = float(value)
-        urdf = resolve_repo_path(data["urdf"])
-        if not urdf.is_file():
-            raise ConfigError(f"{source}: URDF file not found: {data['urdf']} (looked at {urdf})")
+        raw_home = data.get("home") or {}
+        if not isinstance(raw_home, Mapping):
+            raise ConfigError(f"{source}: 'home' must map joint names to numbers")
+        for joint, value in raw_home.items():
+            home[clip(joint, 80)] = number_list([value], 1, f"{source}: home.{clip(joint, 40)}", ConfigError,
+                                                -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
+        bases = (Path(folder), repo_root()) if folder is not None else (repo_root(),)
+        urdf = confined_file(data["urdf"], f"{source}: urdf", bases, ConfigError, allow_outside_paths)
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
                    home=home, source=source)
@@ -145,7 +152,7 @@ class RobotCfg:
 
 def _chain(value: Any, where: str) -> ChainCfg:
     if not isinstance(value, Mapping) or set(value) != {"base", "tip"}:
-        raise ConfigError(f"{where}: expected {{base: <link>, tip: <link>}}, got {value!r}")
+        raise ConfigError(f"{where}: expected {{base: <link>, tip: <link>}}, got {short(value)}")
     if not all(isinstance(value[k], str) and value[k] for k in ("base", "tip")):
         raise ConfigError(f"{where}: base and tip must be link names")
     return ChainCfg(value["base"], value["tip"])
@@ -163,14 +170,10 @@ def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
     if not (text.endswith((".yaml", ".yml")) or path.is_file()):
         path = configs_dir() / "robot" / f"{text}.yaml"
         if not path.is_file():
-            raise ConfigError(f"unknown robot '{text}': expected one of {', '.join(available_robots())} "
+            raise ConfigError(f"unknown robot '{clip(text, 80)}': expected one of {', '.join(available_robots())} "
                               f"(configs/robot/) or a path to a robot YAML file")
     elif not path.is_file():
-        raise ConfigError(f"robot config file not found: {path}")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ConfigError(f"{path}: malformed YAML{where}") from None
-    return RobotCfg.from_mapping(data, source=str(path))
+        raise ConfigError(f"robot config file not found: {clip(str(path))}")
+    data = read_document(path, "robot config", ConfigError)
+    shipped = path.resolve().parent == (configs_dir() / "robot").resolve()
+    return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent)

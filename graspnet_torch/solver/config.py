@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from graspnet_torch.settings import build, setting
+
 __all__ = ["NoiseCfg", "RewardCfg", "SolverCfg"]
 
 
@@ -17,15 +19,23 @@ class RewardCfg:
             a = 1 the default threshold r > 0.99 means E < 10 mm).
     """
 
-    kind: str = "r1"
-    a: float = 1.0
+    kind: str = setting("r1", choices=("r1",))
+    a: float = setting(1.0, lo=0.0, lo_open=True, hi=1e4)
+
+    @classmethod
+    def from_mapping(cls, d: dict | None, where: str = "reward") -> RewardCfg:
+        return build(cls, d, where)
 
 
 @dataclass(frozen=True)
 class NoiseCfg:
     """Sensor noise on the reinforcement: r + N(0, sigma) (eq. 15)."""
 
-    sigma: float = 0.0
+    sigma: float = setting(0.0, lo=0.0, hi=100.0)
+
+    @classmethod
+    def from_mapping(cls, d: dict | None, where: str = "noise") -> NoiseCfg:
+        return build(cls, d, where)
 
 
 @dataclass(frozen=True)
@@ -35,7 +45,7 @@ class SolverCfg:
     Attributes:
         max_iterations: iteration budget per trial.
         threshold: a trial stops once its (noise-free) reinforcement exceeds this (paper: 0.99);
-            ``None`` or > 1 never stops early (fixed-length runs such as the noise study).
+            ``None`` or > 1 (at most 2) never stops early (fixed-length runs such as the noise study).
         refine: FCNN refinement iterations (eq. 5) inside the loop, per evaluation (0: the
             paper's FCNN, competition among experts only).
         final_refine: refinement iterations applied after the loop to the reported configuration's
@@ -49,15 +59,19 @@ class SolverCfg:
         dtype: 'float32' (hot path) or 'float64'.
     """
 
-    max_iterations: int = 2000
-    threshold: float | None = 0.99
-    time_budget: float | None = None
-    refine: int = 0
-    final_refine: int = 3
-    candidates: int = 1
-    report: str = "best"
+    max_iterations: int = setting(2000, lo=1, hi=10_000_000)
+    threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
+    time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
+    refine: int = setting(0, lo=0, hi=1000)
+    final_refine: int = setting(3, lo=0, hi=1000)
+    candidates: int = setting(1, lo=1, hi=64)
+    report: str = setting("best", choices=("best", "final"))
     history: bool = True
-    dtype: str = "float32"
+    dtype: str = setting("float32", choices=("float32", "float64"))
+
+    @classmethod
+    def from_mapping(cls, d: dict | None, where: str = "solver") -> SolverCfg:
+        return build(cls, d, where)
 
     @property
     def stop_threshold(self) -> float | None:

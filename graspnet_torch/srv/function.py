@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from graspnet_torch.settings import setting
+
 __all__ = ["SRVFunction", "SigmaCfg", "sigma_of", "srv_errors", "srv_forward"]
 
 
@@ -52,9 +54,9 @@ class SigmaCfg:
         floor: lower bound on sigma (0: none, so s(1) = 0 as in the paper).
     """
 
-    kind: str = "linear"
-    scale: float = 3.0
-    floor: float = 0.0
+    kind: str = setting("linear", choices=("linear", "quadratic"))
+    scale: float = setting(3.0, lo=0.0, lo_open=True, hi=1000.0)
+    floor: float = setting(0.0, lo=0.0, hi=1000.0)
 
     def __post_init__(self):
         if self.kind not in ("linear", "quadratic"):

@@ -20,11 +20,12 @@ fused step is about 4x faster for one trial, where framework overhead dominates 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 
+from graspnet_torch.settings import build, setting
 from graspnet_torch.srv.function import SigmaCfg, SRVFunction, srv_errors, srv_forward
 
 __all__ = ["ConfigurationNetwork", "SRVNetCfg", "SRVStep"]
@@ -43,20 +44,17 @@ class SRVNetCfg:
         sigma: the standard-deviation function s(r_hat) of eq. 11 (left open by the paper).
     """
 
-    hidden: tuple[int, int] = (20, 20)
-    init_range: float = 0.5
-    lr_bp: float = 0.01
-    lr_srv: float = 0.01
-    lr_lms: float = 0.01
-    sigma: SigmaCfg = field(default_factory=SigmaCfg)
+    hidden: tuple[int, int] = setting((20, 20), lo=1, hi=4096)
+    init_range: float = setting(0.5, lo=0.0, lo_open=True, hi=100.0)
+    lr_bp: float = setting(0.01, lo=0.0, hi=100.0)
+    lr_srv: float = setting(0.01, lo=0.0, hi=100.0)
+    lr_lms: float = setting(0.01, lo=0.0, hi=100.0)
+    sigma: SigmaCfg = setting(factory=SigmaCfg)
 
     @classmethod
-    def from_mapping(cls, d: dict) -> SRVNetCfg:
-        d = dict(d)
-        sigma = SigmaCfg(**d.pop("sigma", {}))
-        if "hidden" in d:
-            d["hidden"] = tuple(d["hidden"])
-        return cls(sigma=sigma, **d)
+    def from_mapping(cls, d: dict | None, where: str = "srv") -> SRVNetCfg:
+        """Checked against the ranges above (:func:`graspnet_torch.settings.build`)."""
+        return build(cls, d, where)
 
 
 @dataclass

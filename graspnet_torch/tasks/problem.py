@@ -8,41 +8,44 @@ metres and radians.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from graspnet_torch.errors import ConfigError, ProblemError
-from graspnet_torch.paths import configs_dir, resolve_repo_path
+from graspnet_torch.files import confined_file, read_document
+from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
+from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
+MAX_OBSTACLES = 1000
 KNOWN_KEYS = {"robot", "object", "contacts", "palm_bounds", "obstacles", "name", "description", "reference", "notes"}
 
 
-def _numbers(value: Any, n: int, where: str, what: str = "numbers") -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ProblemError(f"{where}: expected {n} {what}, got {value!r}") from None
-    if arr.shape != (n,):
-        raise ProblemError(f"{where}: expected {n} {what}, got {value!r}")
-    if not np.all(np.isfinite(arr)):
-        raise ProblemError(f"{where}: numbers must be finite, got {value!r}")
-    return arr
+def _numbers(value: Any, n: int, where: str, what: str = "numbers", lo: float = -MAX_LENGTH_M,
+             hi: float = MAX_LENGTH_M) -> np.ndarray:
+    """n strict numbers (no bools, no strings), finite and within [lo, hi] (default: +-10 m)."""
+    return np.asarray(number_list(value, n, where, ProblemError, lo, hi, what), dtype=np.float64)
 
 
 def _pose(value: Any, where: str) -> np.ndarray:
     """(x, y, z, rx, ry, rz) in metres and degrees -> metres and radians."""
-    p = _numbers(value, 6, where, "numbers (x, y, z in m, rx, ry, rz in degrees)")
+    what = "numbers (x, y, z in m, rx, ry, rz in degrees)"
+    p = _numbers(value, 6, where, what, -MAX_ANGLE_DEG, MAX_ANGLE_DEG)
+    if np.any(np.abs(p[:3]) > MAX_LENGTH_M):
+        raise ProblemError(f"{where}: x, y, z must lie within +-{MAX_LENGTH_M:g} m, got {short(value)}")
     return np.concatenate([p[:3], np.radians(p[3:])])
+
+
+def _keys(data: Mapping, allowed: set[str]) -> list[str]:
+    """The keys of ``data`` not in ``allowed``, as short strings (keys may be numbers in YAML)."""
+    return sorted(clip(k, 40) for k in data if not isinstance(k, str) or k not in allowed)
 
 
 @dataclass(frozen=True)
@@ -62,28 +65,31 @@ class Shape:
     mesh: Path | None = None
 
     @classmethod
-    def from_mapping(cls, data: Any, where: str) -> Shape:
+    def from_mapping(cls, data: Any, where: str, folder: Path | None = None,
+                     allow_outside_paths: bool = False) -> Shape:
+        """Validate a shape; a mesh path is looked up in ``folder`` (the problem file's), then the
+        repository, and must stay within those or an installed package unless ``allow_outside_paths``."""
         if not isinstance(data, Mapping):
             raise ProblemError(f"{where}: expected a mapping with shape, size and pose")
-        unknown = sorted(set(data) - {"shape", "size", "pose", "name"})
+        unknown = _keys(data, {"shape", "size", "pose", "name"})
         if unknown:
             raise ProblemError(f"{where}: unknown key(s) {', '.join(unknown)}")
         kind = data.get("shape")
         if kind not in (*SHAPES, "mesh"):
-            raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {kind!r}")
+            raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {short(kind)}")
         pose = _pose(data.get("pose", [0, 0, 0, 0, 0, 0]), f"{where}.pose")
         if kind == "mesh":
             size = data.get("size")
             paths = size if isinstance(size, list) else [size]
             if len(paths) != 1 or not isinstance(paths[0], str):
                 raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
-            path = resolve_repo_path(paths[0])
-            if not path.is_file():
-                raise ProblemError(f"{where}.size: mesh file not found: {paths[0]}")
+            bases = (folder, repo_root()) if folder is not None else (repo_root(),)
+            path = confined_file(paths[0], f"{where}.size", bases, ProblemError, allow_outside_paths)
+            _check_mesh(path, f"{where}.size")
             return cls(kind, (), pose, path)
         size = _numbers(data.get("size"), SHAPES[kind], f"{where}.size")
         if np.any(size <= 0):
-            raise ProblemError(f"{where}.size: dimensions must be positive, got {data.get('size')!r}")
+            raise ProblemError(f"{where}.size: dimensions must be positive, got {short(data.get('size'))}")
         return cls(kind, tuple(float(s) for s in size), pose)
 
     def to_mapping(self) -> dict:
@@ -109,6 +115,24 @@ class Shape:
         T[:3, :3] = rpy_matrix_np(self.pose[3:])
         T[:3, 3] = self.pose[:3]
         return mesh.apply_transform(T)
+
+
+def _check_mesh(path: Path, where: str) -> None:
+    """The file must load as a triangle mesh with finite vertices within +-10 m."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh")
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = len(mesh.faces)
+    except Exception as exc:  # trimesh raises assorted errors on files it cannot read
+        raise ProblemError(f"{where}: {clip(path.name, 80)} is not a mesh trimesh can read "
+                           f"({type(exc).__name__})") from None
+    if faces == 0 or vertices.size == 0:
+        raise ProblemError(f"{where}: {clip(path.name, 80)} holds no triangles")
+    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > MAX_LENGTH_M:
+        raise ProblemError(f"{where}: {clip(path.name, 80)} has vertices that are not finite or beyond "
+                           f"+-{MAX_LENGTH_M:g} m (metres expected)")
 
 
 @dataclass(frozen=True)
@@ -157,17 +181,23 @@ class GraspProblem:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_mapping(cls, data: Any, source: str = "<memory>", robot_cfg: RobotCfg | None = None) -> GraspProblem:
-        """Validate a parsed problem; ``robot_cfg`` overrides loading ``configs/robot/<robot>.yaml``."""
+    def from_mapping(cls, data: Any, source: str = "<memory>", robot_cfg: RobotCfg | None = None,
+                     folder: Path | None = None, allow_outside_paths: bool = False) -> GraspProblem:
+        """Validate a parsed problem; ``robot_cfg`` overrides loading ``configs/robot/<robot>.yaml``.
+
+        ``folder`` is the problem file's folder: mesh paths are looked up there first. Every number
+        must be finite and within the physical ranges of :mod:`graspnet_torch.settings` (10 m,
+        360 degrees).
+        """
         if not isinstance(data, Mapping):
             raise ProblemError(f"{source}: a problem must be a mapping with robot and contacts, got "
                                f"{type(data).__name__}")
-        unknown = sorted(set(data) - KNOWN_KEYS)
+        unknown = _keys(data, KNOWN_KEYS)
         if unknown:
-            raise ProblemError(f"{source}: unknown key(s) {', '.join(unknown)} "
+            raise ProblemError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
                                f"(expected {', '.join(sorted(KNOWN_KEYS))})")
         robot = data.get("robot")
-        if not isinstance(robot, str) or not robot:
+        if not isinstance(robot, str) or not robot or len(robot) > 4096:
             raise ProblemError(f"{source}: 'robot' must name a robot ({', '.join(available_robots())})")
         if robot_cfg is None:
             try:
@@ -186,11 +216,11 @@ class GraspProblem:
         contacts, seen = [], {}
         for k, entry in enumerate(raw):
             where = f"{source}: contacts[{k}]"
-            if not isinstance(entry, Mapping) or set(entry) - {"finger", "position"} or "finger" not in entry:
-                raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {entry!r}")
+            if not isinstance(entry, Mapping) or _keys(entry, {"finger", "position"}) or "finger" not in entry:
+                raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {short(entry)}")
             finger = entry["finger"]
-            if finger not in fingers:
-                raise ProblemError(f"{where}.finger: unknown finger {finger!r} for robot '{robot}' (fingers: "
+            if not isinstance(finger, str) or finger not in fingers:
+                raise ProblemError(f"{where}.finger: unknown finger {short(finger)} for robot '{robot}' (fingers: "
                                    f"{', '.join(fingers)})")
             if finger in seen:
                 raise ProblemError(f"{where}.finger: finger '{finger}' appears twice (contacts[{seen[finger]}] "
@@ -198,7 +228,10 @@ class GraspProblem:
             seen[finger] = k
             contacts.append(Contact(finger, _numbers(entry.get("position"), 3, f"{where}.position",
                                                      "numbers (x, y, z in metres)")))
-        obj = Shape.from_mapping(data["object"], f"{source}: object") if data.get("object") is not None else None
+        shape = {"folder": folder, "allow_outside_paths": allow_outside_paths}
+        obj = None
+        if data.get("object") is not None:
+            obj = Shape.from_mapping(data["object"], f"{source}: object", **shape)
         bounds = None
         if data.get("palm_bounds") is not None:
             try:
@@ -208,11 +241,13 @@ class GraspProblem:
         obstacles = data.get("obstacles") or []
         if not isinstance(obstacles, list):
             raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
-        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]") for k, o in enumerate(obstacles))
+        if len(obstacles) > MAX_OBSTACLES:
+            raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
+        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
         reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
         for key in ("name", "description"):
-            if data.get(key) is not None and not isinstance(data[key], str):
-                raise ProblemError(f"{source}: '{key}' must be a string")
+            if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
+                raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
                    source=source, robot_cfg=robot_cfg)
@@ -222,37 +257,34 @@ class GraspProblem:
         if data is None:
             return None
         where = f"{source}: reference"
-        if not isinstance(data, Mapping) or set(data) != {"palm_pose", "joints"}:
+        if not isinstance(data, Mapping) or _keys(data, {"palm_pose", "joints"}) or len(data) != 2:
             raise ProblemError(f"{where}: expected {{palm_pose: [...], joints: {{finger: [...]}}}}")
+        if not isinstance(data["joints"], Mapping):
+            raise ProblemError(f"{where}.joints: expected a mapping finger -> joint angles (degrees), got "
+                               f"{short(data['joints'])}")
         joints = {}
-        for finger, values in (data["joints"] or {}).items():
-            if finger not in robot_cfg.fingers:
-                raise ProblemError(f"{where}.joints: unknown finger {finger!r}")
-            arr = np.asarray(values, dtype=np.float64)
-            if arr.ndim != 1 or not np.all(np.isfinite(arr)):
-                raise ProblemError(f"{where}.joints.{finger}: expected finite numbers (degrees)")
-            joints[finger] = np.radians(arr)
+        for finger, values in data["joints"].items():
+            if not isinstance(finger, str) or finger not in robot_cfg.fingers:
+                raise ProblemError(f"{where}.joints: unknown finger {short(finger)}")
+            angles = number_list(values, None, f"{where}.joints.{finger}", ProblemError, -MAX_ANGLE_DEG,
+                                 MAX_ANGLE_DEG, "joint angles (degrees)")
+            if not angles:
+                raise ProblemError(f"{where}.joints.{finger}: expected joint angles (degrees), got []")
+            joints[finger] = np.radians(np.asarray(angles, dtype=np.float64))
         missing = [c.finger for c in contacts if c.finger not in joints]
         if missing:
             raise ProblemError(f"{where}.joints: missing finger(s) {', '.join(missing)}")
         return ReferencePosture(_pose(data["palm_pose"], f"{where}.palm_pose"), joints)
 
     @classmethod
-    def from_file(cls, path: str | Path, robot_cfg: RobotCfg | None = None) -> GraspProblem:
-        """Read and validate a problem file (``.json``, else YAML)."""
+    def from_file(cls, path: str | Path, robot_cfg: RobotCfg | None = None,
+                  allow_outside_paths: bool = False) -> GraspProblem:
+        """Read and validate a problem file (``.json``, else YAML; at most 1 MiB, UTF-8, no YAML
+        aliases); mesh paths in it are relative to its folder (see :meth:`from_mapping`)."""
+        data = read_document(path, "problem file", ProblemError)
         path = Path(path)
-        if not path.is_file():
-            raise ProblemError(f"problem file not found: {path}")
-        text = path.read_text()
-        try:
-            data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-        except json.JSONDecodeError as exc:
-            raise ProblemError(f"{path}: malformed JSON (line {exc.lineno}: {exc.msg})") from None
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f" (line {mark.line + 1})" if mark is not None else ""
-            raise ProblemError(f"{path}: malformed YAML{where}") from None
-        return cls.from_mapping(data, source=str(path), robot_cfg=robot_cfg)
+        return cls.from_mapping(data, source=clip(str(path), 200), robot_cfg=robot_cfg, folder=path.resolve().parent,
+                                allow_outside_paths=allow_outside_paths)
 
     @classmethod
     def from_task(cls, name: str) -> GraspProblem:

@@ -49,7 +49,7 @@ def test_unknown_robot_name():
 
 
 def test_missing_urdf_file(tmp_path):
-    with pytest.raises(gt.ConfigError, match=r"URDF file not found: urdf/nope.urdf"):
+    with pytest.raises(gt.ConfigError, match=r"urdf: file not found: urdf/nope.urdf"):
         gt.load_robot(_hand_yaml(tmp_path, urdf="urdf/nope.urdf"))
 
 
@@ -82,7 +82,7 @@ def test_finger_base_must_be_rigid_on_palm(tmp_path):
     ("bounds", "message"),
     [({"min": [0, 0, 0, 0, 0, 0], "max": [1, 1, 1, 1, 1, -1]}, "min > max for rz"),
      ({"min": [0, 0, 0, 0, 0], "max": [1, 1, 1, 1, 1, 1]}, r"palm_bounds.min: expected 6 numbers"),
-     ({"min": [0, 0, 0, 0, 0, ".nan"], "max": [1, 1, 1, 1, 1, 1]}, "must be finite"),
+     ({"min": [0, 0, 0, 0, 0, ".nan"], "max": [1, 1, 1, 1, 1, 1]}, "nan is not a finite number"),
      ({"low": [0] * 6, "max": [1] * 6}, "keys 'min' and 'max'")],
 )
 def test_bad_palm_bounds(tmp_path, bounds, message):
