@@ -8,7 +8,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
     robot = gt.load_robot("hand")
 """
 
-from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, ProblemError
+from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
 from graspnet_torch.robot import (
     ChainKernel,
@@ -41,6 +41,7 @@ __all__ = [
     "GraspProblem",
     "GraspResult",
     "GraspnetError",
+    "InternalError",
     "NoiseCfg",
     "PoseBounds",
     "Posture",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "ProblemError"]
+__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "InternalError", "ProblemError"]
 
 
 class GraspnetError(Exception):
@@ -23,3 +23,8 @@ class ProblemError(GraspnetError, ValueError):
 
 class CheckpointError(GraspnetError, ValueError):
     """A checkpoint file is missing, corrupted or does not match the robot it is loaded for."""
+
+
+class InternalError(RuntimeError):
+    """A failure that is not the user's input but is still reported in one line: a result that is
+    not finite (NaN or infinity) is never written. Command-line entry points exit 1 on it."""

@@ -78,7 +78,9 @@ def _fields(cls: type) -> dict[str, tuple[Any, Mapping[str, Any]]]:
 
 
 def _num(v: float) -> str:
-    return str(int(v)) if float(v).is_integer() and abs(v) < 1e16 else f"{v:g}"
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e16):
+        return str(int(v))
+    return f"{v:g}"
 
 
 def _describe(tp: Any, meta: Mapping[str, Any]) -> str:

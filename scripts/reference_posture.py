@@ -6,21 +6,19 @@
 
 from __future__ import annotations
 
-import sys
-
 import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-from graspnet_torch.jobs.cli import check_group_overrides, user_errors_exit_2
-from graspnet_torch.jobs.reference_posture import reference_posture
+from graspnet_torch.jobs.cli import container, run_cli, user_errors_exit_2
+from graspnet_torch.jobs.configs import ReferencePostureJobCfg
+from graspnet_torch.jobs.reference_posture import prepare_reference, reference_posture
 
 
 @hydra.main(config_path="../configs", config_name="reference_posture", version_base="1.3")
 @user_errors_exit_2
 def main(cfg: DictConfig) -> None:
-    reference_posture(OmegaConf.to_container(cfg, resolve=True))
+    reference_posture(container(cfg))
 
 
 if __name__ == "__main__":
-    check_group_overrides(sys.argv[1:], ("task",))
-    main()
+    run_cli(main, ReferencePostureJobCfg, config_name="reference_posture", prepare=prepare_reference)

@@ -10,24 +10,20 @@ Exit status: 0 when it ran (solved or not: the result says which), 2 when the in
 
 from __future__ import annotations
 
-import sys
-
 import hydra
-import torch
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-from graspnet_torch.jobs.cli import check_group_overrides, user_errors_exit_2
-from graspnet_torch.jobs.solve_grasp import solve_grasp
+from graspnet_torch.jobs.cli import container, run_cli, user_errors_exit_2
+from graspnet_torch.jobs.configs import SolveGraspJobCfg
+from graspnet_torch.jobs.solve_grasp import prepare_solve, solve_grasp
 
 
 @hydra.main(config_path="../configs", config_name="solve_grasp", version_base="1.3")
 @user_errors_exit_2
 def main(cfg: DictConfig) -> None:
-    torch.set_num_threads(cfg.threads)
-    solve_grasp(OmegaConf.to_container(cfg, resolve=True), HydraConfig.get().runtime.output_dir)
+    solve_grasp(container(cfg), HydraConfig.get().runtime.output_dir)
 
 
 if __name__ == "__main__":
-    check_group_overrides(sys.argv[1:], ("task", "robot", "noise", "srv", "reward", "solver"))
-    main()
+    run_cli(main, SolveGraspJobCfg, config_name="solve_grasp", prepare=prepare_solve)

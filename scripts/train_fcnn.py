@@ -3,33 +3,26 @@
     python scripts/train_fcnn.py robot=hand
     python scripts/train_fcnn.py robot=hand fcnn.epochs=500 resume=true
     tensorboard --logdir outputs/train_fcnn/hand/tb
+
+Exit status: 0 when it trained, 2 when the input was refused (one line on stderr), 1 otherwise.
 """
 
 from __future__ import annotations
 
-import sys
-
 import hydra
-import torch
-from omegaconf import DictConfig, OmegaConf
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
 
-from graspnet_torch.fcnn.train import FCNNTrainCfg
-from graspnet_torch.jobs.cli import check_group_overrides, user_errors_exit_2
-from graspnet_torch.jobs.train_fcnn import train_fcnn
-from graspnet_torch.robot import Robot, RobotCfg
+from graspnet_torch.jobs.cli import container, run_cli, user_errors_exit_2
+from graspnet_torch.jobs.configs import TrainFCNNJobCfg
+from graspnet_torch.jobs.train_fcnn import prepare_train, train_fcnn_job
 
 
 @hydra.main(config_path="../configs", config_name="train_fcnn", version_base="1.3")
 @user_errors_exit_2
 def main(cfg: DictConfig) -> None:
-    torch.set_num_threads(cfg.threads)
-    robot = Robot(RobotCfg.from_mapping(OmegaConf.to_container(cfg.robot), source=f"robot={cfg.robot.name}"))
-    fcnn = FCNNTrainCfg.from_mapping(OmegaConf.to_container(cfg.fcnn))
-    train_fcnn(robot, fcnn, hydra.core.hydra_config.HydraConfig.get().runtime.output_dir, seed=cfg.seed,
-               fingers=cfg.fingers, resume=cfg.resume, export=cfg.export, checkpoint_every=cfg.checkpoint_every,
-               progress=cfg.progress, eval_targets=cfg.eval_targets)
+    train_fcnn_job(container(cfg), HydraConfig.get().runtime.output_dir)
 
 
 if __name__ == "__main__":
-    check_group_overrides(sys.argv[1:], ("robot", "fcnn"))
-    main()
+    run_cli(main, TrainFCNNJobCfg, config_name="train_fcnn", prepare=prepare_train)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -22,7 +23,8 @@ from graspnet_torch.paths import checkpoints_dir
 from graspnet_torch.robot.chain import ChainSpec
 from graspnet_torch.robot.robot import Robot, load_robot
 
-__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "save_finger_ik"]
+__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "non_finite_tensors",
+           "save_finger_ik"]
 
 FORMAT = "graspnet_torch.fcnn/1"
 
@@ -35,6 +37,17 @@ def chain_fingerprint(chain: ChainSpec) -> str:
     for arr in (chain.axes, chain.offsets, chain.lower, chain.upper):
         h.update(np.round(np.asarray(arr, dtype=np.float64), 9).tobytes())
     return h.hexdigest()[:16]
+
+
+def non_finite_tensors(obj: Any, prefix: str = "") -> list[str]:
+    """Dotted paths of the floating tensors in a nested dict/list that hold NaN or infinity."""
+    if isinstance(obj, torch.Tensor):
+        return [prefix] if obj.is_floating_point() and not bool(torch.isfinite(obj).all()) else []
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in non_finite_tensors(v, f"{prefix}.{k}" if prefix else str(k))]
+    if isinstance(obj, list | tuple):
+        return [p for i, v in enumerate(obj) for p in non_finite_tensors(v, f"{prefix}[{i}]")]
+    return []
 
 
 def default_checkpoint(robot_name: str) -> Path:
@@ -66,6 +79,13 @@ def _experts_from(entry: dict, robot: Robot, finger: str, where: str) -> ExpertS
                               f"`python scripts/train_fcnn.py robot={robot.name}`")
     E, n = int(entry["n_experts"]), chain.n_joints
     state = entry["state"]
+    bad = non_finite_tensors(state)
+    if bad:
+        raise CheckpointError(f"{where}: finger '{finger}': non-finite values (NaN or infinity) in "
+                              f"{', '.join(bad[:3])}; retrain with `python scripts/train_fcnn.py robot={robot.name}`")
+    if not bool((state["x_scale"] > 0).all()) or not bool((state["q_upper"] >= state["q_lower"]).all()):
+        raise CheckpointError(f"{where}: finger '{finger}': input scales must be positive and joint ranges "
+                              f"non-empty; the file is corrupted")
     cfg = ExpertSetCfg(hidden=int(entry["hidden"]), max_experts=max(int(entry["max_experts"]), E))
     experts = ExpertSet(n, state["x_center"], state["x_scale"], state["q_lower"], state["q_upper"], cfg)
     full = experts.state_dict()

@@ -1,44 +1,202 @@
-"""Shared behaviour of the command-line entry points: user errors are one line and exit 2."""
+"""Shared behaviour of the command-line entry points: every user error is one line and exit 2.
+
+An entry script is::
+
+    @hydra.main(config_path="../configs", config_name="solve_grasp", version_base="1.3")
+    @user_errors_exit_2
+    def main(cfg): ...
+
+    if __name__ == "__main__":
+        run_cli(main, SolveGraspJobCfg)
+
+:func:`run_cli` checks the command line before Hydra composes anything: the override syntax
+(Hydra's own parser), group options (a file under ``configs/<group>/``), unknown keys, and the
+type and range of every value, each element of a sweep included (``seed=0,1,2``), against the
+job's settings dataclass. Anything Hydra still refuses before the job starts (a run folder that
+cannot be made, say) is turned into one line and exit 2 as well. Inside the job,
+:func:`user_errors_exit_2` turns a :class:`GraspnetError` into one line and exit 2, and an
+:class:`InternalError` (a non-finite result) into one line and exit 1; any other exception is a
+bug and keeps its traceback (exit 1).
+"""
 
 from __future__ import annotations
 
 import functools
+import itertools
+import os
 import sys
-from collections.abc import Callable
-from typing import TypeVar
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
 
-from graspnet_torch.errors import GraspnetError
+from graspnet_torch.errors import ConfigError, GraspnetError, InternalError
+from graspnet_torch.settings import Free, check_value, clip, lookup
 
-__all__ = ["check_group_overrides", "user_errors_exit_2"]
+__all__ = ["check_overrides", "compose_for_check", "container", "run_cli", "user_errors_exit_2"]
 
 T = TypeVar("T")
 
+_job_started = False  # set once Hydra hands over to the job: errors after that are the job's
+
 
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
-    """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2."""
+    """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2, an
+    :class:`InternalError` prints ``internal error: <message>`` and exits 1."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
+        global _job_started
+        _job_started = True
         try:
             return fn(*args, **kwargs)
         except GraspnetError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {_one_line(exc)}", file=sys.stderr)
             sys.exit(2)
+        except InternalError as exc:
+            print(f"internal error: {_one_line(exc)}", file=sys.stderr)
+            sys.exit(1)
 
     return wrapper
 
 
-def check_group_overrides(argv: list[str], groups: tuple[str, ...]) -> None:
-    """Refuse ``group=option`` arguments naming no file under ``configs/<group>/``: one line on
-    stderr and exit 2, before Hydra composes anything (Hydra itself would exit 1)."""
+def container(cfg: Any) -> dict:
+    """A composed Hydra config as a plain dict, interpolations resolved; a bad interpolation is a
+    :class:`ConfigError`."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        return OmegaConf.to_container(cfg, resolve=True)
+    except OmegaConfBaseException as exc:
+        raise ConfigError(f"cannot resolve the settings: {_one_line(exc)}") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return clip(text, 400) if text else type(exc).__name__
+
+
+def _group_options(group: str) -> list[str] | None:
     from graspnet_torch.paths import configs_dir
 
-    for arg in argv:
-        key, sep, value = arg.lstrip("+~").partition("=")
-        if not sep or key not in groups or value in ("null", ""):
+    folder = configs_dir() / group
+    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else None
+
+
+def _values(override) -> Iterable[Any]:
+    """The values of an override: one, or each element of a sweep (the first 10,000 of a range)."""
+    from hydra.core.override_parser.types import ChoiceSweep, IntervalSweep, RangeSweep
+
+    value = override.value()
+    if isinstance(value, ChoiceSweep):
+        return value.list
+    if isinstance(value, RangeSweep):
+        return itertools.islice(override.sweep_iterator(), 10_000)
+    if isinstance(value, IntervalSweep):  # only for optimising sweepers: check the bounds
+        return [value.start, value.end]
+    return [value]
+
+
+def _has_interpolation(value: Any) -> bool:
+    return isinstance(value, str) and "${" in value
+
+
+def check_overrides(argv: list[str], schema: type) -> None:
+    """Refuse, with one :class:`ConfigError` line, a command line that Hydra would refuse or
+    that sets a key the job does not have or a value outside its type and range."""
+    from hydra._internal.utils import get_args_parser
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    args, _ = get_args_parser().parse_known_args(argv)
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    try:
+        overrides = OverridesParser.create().parse_overrides(args.overrides)
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise ConfigError(f"cannot parse the command line: {_one_line(exc)}") from None
+    for o in overrides:
+        key = o.key_or_group
+        if key == "hydra" or key.startswith(("hydra.", "hydra/")) or o.is_delete():
             continue
-        options = sorted(p.stem for p in (configs_dir() / key).glob("*.yaml"))
-        if value not in options:
-            print(f"error: unknown {key} '{value}': expected one of {', '.join(options)} (configs/{key}/)",
-                  file=sys.stderr)
-            sys.exit(2)
+        options = _group_options(key) if "." not in key else None
+        if options is not None:
+            for v in _values(o):
+                if v is not None and v != "null" and str(v) not in options:
+                    raise ConfigError(f"unknown {key} '{clip(str(v), 80)}': expected one of {', '.join(options)} "
+                                      f"(configs/{key}/)")
+            continue
+        found = lookup(schema, key)
+        if found is None:
+            parent, _, _ = key.rpartition(".")
+            scope = lookup(schema, parent) if parent else (schema, {})
+            names = sorted(scope[0].__dataclass_fields__) if scope and hasattr(scope[0], "__dataclass_fields__") else []
+            listed = f"settings{' of ' + parent if parent else ''}: {', '.join(names)}" if names else "see --cfg job"
+            raise ConfigError(f"unknown setting '{clip(key, 80)}' ({listed})")
+        tp, meta = found
+        if tp is Free:
+            continue
+        for v in _values(o):
+            if not _has_interpolation(v):
+                check_value(tp, meta, v, key)
+
+
+def compose_for_check(config_name: str, argv: list[str]) -> tuple[dict, str] | None:
+    """The config Hydra will compose for a single run, as a plain dict, and its run folder; ``None``
+    where there is nothing single to check (``-m`` sweeps, ``--cfg``, ``--help``, another config)."""
+    from hydra import compose, initialize_config_dir
+    from hydra._internal.utils import get_args_parser
+    from omegaconf import OmegaConf
+
+    from graspnet_torch.paths import configs_dir
+
+    args, _ = get_args_parser().parse_known_args(argv)
+    if (args.multirun or args.cfg or args.help or args.hydra_help or args.info or args.shell_completion
+            or args.config_name or args.config_path or args.config_dir or args.experimental_rerun):
+        return None
+    with initialize_config_dir(config_dir=str(configs_dir()), version_base="1.3", job_name=config_name):
+        cfg = compose(config_name=config_name, overrides=args.overrides, return_hydra_config=True)
+    run_dir = str(OmegaConf.select(cfg, "hydra.run.dir"))
+    return container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])), run_dir
+
+
+def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = None, config_name: str | None = None,
+            prepare: Callable[[dict, str], Any] | None = None) -> None:
+    """Check the command line, then run the Hydra ``main``; a refusal before the job starts is one
+    line on stderr, exit 2, and nothing written.
+
+    Args:
+        main: the ``@hydra.main`` function.
+        schema: the job's settings dataclass (:mod:`graspnet_torch.jobs.configs`).
+        config_name, prepare: for a single run, the config is composed once here and handed to
+            ``prepare(cfg, run_dir)``, the job's own checks (problem, output path, memory...), so
+            that a refusal happens before Hydra makes the run folder.
+    """
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        check_overrides(argv, schema)
+        if prepare is not None and config_name is not None:
+            composed = compose_for_check(config_name, argv)
+            if composed is not None:
+                prepare(*composed)
+    except GraspnetError as exc:
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        sys.exit(2)
+    except (HydraException, OmegaConfBaseException) as exc:
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        sys.exit(2)
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
+    try:
+        main()
+    except OSError as exc:
+        if _job_started:
+            raise
+        print(f"error: cannot create {clip(str(exc.filename or ''), 200)}: {exc.strerror}", file=sys.stderr)
+        sys.exit(2)
+    except (HydraException, OmegaConfBaseException) as exc:
+        if _job_started:
+            raise
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        sys.exit(2)

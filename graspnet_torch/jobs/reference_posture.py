@@ -6,17 +6,27 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from graspnet_torch.jobs.configs import ReferencePostureJobCfg
 from graspnet_torch.jobs.solve_grasp import resolve_problem
 from graspnet_torch.robot.robot import Robot
+from graspnet_torch.settings import build
+from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import ReferenceFit, find_reference_posture
 
-__all__ = ["reference_posture"]
+__all__ = ["prepare_reference", "reference_posture"]
 
 
-def reference_posture(cfg: Mapping[str, Any]) -> ReferenceFit:
-    problem = resolve_problem(cfg.get("problem"), cfg.get("task"), None)
+def prepare_reference(cfg: Mapping[str, Any] | ReferencePostureJobCfg,
+                      run_dir: str | None = None) -> tuple[ReferencePostureJobCfg, GraspProblem]:
+    """The checks of the job (settings, problem) before any work."""
+    job = build(ReferencePostureJobCfg, cfg)
+    return job, resolve_problem(job.problem, job.task, None, job.allow_outside_paths)
+
+
+def reference_posture(cfg: Mapping[str, Any] | ReferencePostureJobCfg) -> ReferenceFit:
+    job, problem = prepare_reference(cfg)
     robot = Robot(problem.robot_cfg)
-    fit = find_reference_posture(robot, problem, restarts=int(cfg.get("restarts", 24)), seed=int(cfg.get("seed", 0)))
+    fit = find_reference_posture(robot, problem, restarts=job.restarts, seed=job.seed)
     pose = [round(float(v), 5) for v in fit.palm_pose[:3]] + [round(math.degrees(v), 3) for v in fit.palm_pose[3:]]
     print(f"{problem.name or problem.source}: total error {fit.total * 1000:.4f} mm "
           f"({', '.join(f'{f} {e * 1000:.4f}' for f, e in fit.errors.items())})")

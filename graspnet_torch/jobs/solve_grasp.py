@@ -9,52 +9,47 @@ curves (like the paper's Fig. 3).
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from graspnet_torch.errors import ProblemError
+from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.files import check_output_path
+from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
+from graspnet_torch.paths import configs_dir
+from graspnet_torch.settings import build, clip
 from graspnet_torch.solver.api import robot_and_ik, solve
-from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.result import GraspResult, TrialResult
-from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["log_tensorboard", "posture_of", "resolve_problem", "solve_grasp"]
+__all__ = ["log_tensorboard", "posture_of", "prepare_solve", "resolve_problem", "solve_grasp"]
 
 
-def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | None) -> GraspProblem:
+def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | None,
+                    allow_outside_paths: bool = False) -> GraspProblem:
     """The problem file if given, else the task (a task name, or a task config as composed by
     Hydra from ``configs/task/``); checks that an explicit robot agrees."""
     if problem:
-        result = GraspProblem.from_file(problem)
+        result = GraspProblem.from_file(problem, allow_outside_paths=allow_outside_paths)
     elif isinstance(task, str):
         result = GraspProblem.from_task(task)
     elif isinstance(task, Mapping):
         name = task.get("name", "task")
-        result = GraspProblem.from_mapping(task, source=f"configs/task/{name}.yaml")
+        result = GraspProblem.from_mapping(task, source=f"configs/task/{clip(str(name), 80)}.yaml",
+                                           folder=configs_dir() / "task", allow_outside_paths=allow_outside_paths)
     else:
         raise ProblemError("nothing to solve: give problem=PATH or task=NAME")
     if robot and robot != result.robot:
-        raise ProblemError(f"{result.source}: the problem is for robot '{result.robot}', but robot={robot} was given")
+        raise ProblemError(f"{result.source}: the problem is for robot '{result.robot}', but robot={clip(robot, 80)} "
+                           f"was given")
     return result
-
-
-def _positive_int(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ProblemError(f"{name} must be a positive integer, got {value!r}")
-    return value
-
-
-def _out_path(out: str | None, run_dir: Path) -> Path:
-    path = Path(out) if out else run_dir / "result.json"
-    if path.is_dir():
-        raise ProblemError(f"out={path} is a directory; give a file path for the result JSON")
-    return path
 
 
 def posture_of(robot, trial: TrialResult):
@@ -95,33 +90,42 @@ def _trial_table(result: GraspResult, fingers: tuple[str, ...]) -> str:
     return format_table(headers, rows, floatfmt=".3g")
 
 
-def solve_grasp(cfg: Mapping[str, Any], run_dir: str | Path) -> GraspResult:
-    """The job behind ``scripts/solve_grasp.py``; ``cfg`` is the composed Hydra config as a dict."""
+def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
+                  ) -> tuple[SolveGraspJobCfg, GraspProblem, torch.device, Path, SolverCfg]:
+    """Every check of the job, before any work and without writing anything: the settings, the
+    device, the problem, the output path and the memory the solve needs.
+
+    Returns:
+        the settings, the problem, the device, the result path and the solver settings (with
+        ``max_iterations`` applied).
+    """
+    job = build(SolveGraspJobCfg, cfg)
+    device = check_device(job.device)
+    robot_name = job.robot.get("name") if isinstance(job.robot, Mapping) else job.robot
+    problem = resolve_problem(job.problem, job.task, robot_name, job.allow_outside_paths)
+    out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
+    solver = job.solver
+    if job.max_iterations is not None:
+        solver = replace(solver, max_iterations=job.max_iterations)
+    check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
+                       4 if solver.dtype == "float32" else 8, device)
+    return job, problem, device, out, solver
+
+
+def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> GraspResult:
+    """The job behind ``scripts/solve_grasp.py``; ``cfg`` is the composed Hydra config as a dict.
+
+    Everything is checked before any work (settings, device, problem, output path, memory); a
+    refusal is a :class:`~graspnet_torch.errors.GraspnetError` and writes nothing. The result is
+    written only if finite; pictures and TensorBoard come after it and only warn if they fail.
+    """
+    job, problem, device, out, solver = prepare_solve(cfg, run_dir)
     run_dir = Path(run_dir)
-    robot_cfg = cfg.get("robot")
-    robot_name = robot_cfg.get("name") if isinstance(robot_cfg, Mapping) else robot_cfg
-    problem = resolve_problem(cfg.get("problem"), cfg.get("task"), robot_name)
-    trials = _positive_int(cfg.get("trials", 20), "trials")
-    seed = cfg.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise ProblemError(f"seed must be an integer, got {seed!r}")
-    max_iterations = cfg.get("max_iterations")
-    if max_iterations is not None:
-        max_iterations = _positive_int(max_iterations, "max_iterations")
-    out = _out_path(cfg.get("out"), run_dir)
-    try:
-        solver = SolverCfg(**{**dict(cfg.get("solver") or {}),
-                              **({"max_iterations": max_iterations} if max_iterations else {})})
-        srv = SRVNetCfg.from_mapping(dict(cfg.get("srv") or {}))
-        reward = RewardCfg(**dict(cfg.get("reward") or {}))
-        noise = NoiseCfg(**dict(cfg.get("noise") or {}))
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"invalid settings: {exc}") from None
-    if not math.isfinite(noise.sigma) or noise.sigma < 0:
-        raise ProblemError(f"noise.sigma must be a finite number >= 0, got {noise.sigma}")
+    torch.set_num_threads(job.threads)
     robot, ik = robot_and_ik(problem.robot)
-    result = solve(problem, trials=trials, seed=seed, solver=solver, srv=srv, reward=reward, noise=noise,
-                   robot=robot, finger_ik=ik, device=cfg.get("device", "cpu"))
+    trials = job.trials
+    result = solve(problem, trials=trials, seed=job.seed, solver=solver, srv=job.srv, reward=job.reward,
+                   noise=job.noise, robot=robot, finger_ik=ik, device=device)
     fingers = problem.fingers
     best = result.best
     print(_trial_table(result, fingers))
@@ -135,13 +139,23 @@ def solve_grasp(cfg: Mapping[str, Any], run_dir: str | Path) -> GraspResult:
     print(f"\n{problem.name or problem.source}: {stops}; best total "
           f"error {best.total_error_mm:.3f} mm ({per_finger}); median {np.median(errors):.3f} mm; "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
-    result.save(out)
+    result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
-    if cfg.get("tensorboard", True):
-        log_tensorboard(run_dir / "tb", result, fingers, every=int(cfg.get("log_every", 10)))
-    if cfg.get("pictures", True):
-        _pictures(robot, problem, result, run_dir)
+    if job.tensorboard:
+        _warn_on_failure("TensorBoard logs", log_tensorboard, run_dir / "tb", result, fingers, every=job.log_every)
+    if job.pictures:
+        _warn_on_failure("pictures", _pictures, robot, problem, result, run_dir)
     return result
+
+
+def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:
+    """Run an output step that comes after the result is written: a failure is a one-line warning
+    on stderr, never a changed exit status."""
+    try:
+        fn(*args, **kwargs)
+    except Exception as exc:  # a picture or a log must not turn a written result into a failure
+        print(f"\nwarning: {what} not written: {type(exc).__name__}: {clip(' '.join(str(exc).split()), 200)}",
+              file=sys.stderr)
 
 
 def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:

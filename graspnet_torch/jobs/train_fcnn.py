@@ -6,20 +6,26 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import torch
 
 from graspnet_torch.errors import CheckpointError, ConfigError
-from graspnet_torch.fcnn.checkpoint import chain_fingerprint, default_checkpoint, save_finger_ik
+from graspnet_torch.fcnn.checkpoint import chain_fingerprint, default_checkpoint, non_finite_tensors, save_finger_ik
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
+from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
+from graspnet_torch.jobs.configs import TrainFCNNJobCfg
+from graspnet_torch.robot.config import RobotCfg, load_robot_cfg
 from graspnet_torch.robot.robot import Robot
+from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
 
-__all__ = ["evaluate_ik", "train_fcnn"]
+__all__ = ["evaluate_ik", "prepare_train", "train_fcnn", "train_fcnn_job"]
 
 STATE_FORMAT = "graspnet_torch.fcnn-train-state/1"
 
@@ -70,6 +76,9 @@ def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
         raise CheckpointError(f"{path}: cannot resume, not a readable training state ({type(exc).__name__})") from None
     if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
         raise CheckpointError(f"{path}: cannot resume, not an FCNN training state")
+    bad = non_finite_tensors(state.get("fingers"))
+    if bad:
+        raise CheckpointError(f"{path}: cannot resume, non-finite values (NaN or infinity) in {', '.join(bad[:3])}")
     if state["robot"] != robot.name or state["seed"] != seed:
         raise ConfigError(f"{path}: cannot resume, it trains robot '{state['robot']}' with seed {state['seed']}, "
                           f"not '{robot.name}' with seed {seed}")
@@ -109,6 +118,8 @@ def train_fcnn(
     fingers = list(fingers) if fingers else list(robot.finger_names)
     for f in fingers:
         robot.finger_index(f)  # clear error for unknown names
+    if export:
+        check_output_path(str(default_checkpoint(robot.name) if export is True else export), "export", ConfigError)
     state_path = run_dir / "state.pt"
     state = None
     if resume:
@@ -171,3 +182,35 @@ def train_fcnn(
     print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
     print(_closing_table(rows, points))
     return ik, rows
+
+
+def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
+                  run_dir: str | Path = ".") -> tuple[TrainFCNNJobCfg, RobotCfg]:
+    """Every check of the training job before any work, writing nothing: the settings, the robot
+    config and the export path (``run_dir`` is unused: the run folder is the job's own)."""
+    job = build(TrainFCNNJobCfg, cfg)
+    robot = job.robot
+    if isinstance(robot, Mapping):
+        robot_cfg = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")
+    elif isinstance(robot, str):
+        robot_cfg = load_robot_cfg(robot)
+    else:
+        raise ConfigError("robot: give robot=NAME (configs/robot/) to train its fingers")
+    if job.fingers:
+        unknown = [f for f in job.fingers if f not in robot_cfg.fingers]
+        if unknown:
+            raise ConfigError(f"robot '{robot_cfg.name}' has no finger '{clip(unknown[0], 40)}' (fingers: "
+                              f"{', '.join(robot_cfg.fingers)})")
+    if job.export:
+        target = default_checkpoint(robot_cfg.name) if job.export is True else job.export
+        check_output_path(str(target), "export", ConfigError)
+    return job, robot_cfg
+
+
+def train_fcnn_job(cfg: Mapping[str, Any] | TrainFCNNJobCfg, run_dir: str | Path) -> tuple[FingerIK, list[dict]]:
+    """The job behind ``scripts/train_fcnn.py``; ``cfg`` is the composed Hydra config as a dict."""
+    job, robot_cfg = prepare_train(cfg, run_dir)
+    torch.set_num_threads(job.threads)
+    return train_fcnn(Robot(robot_cfg), job.fcnn, run_dir, seed=job.seed, fingers=job.fingers, resume=job.resume,
+                      export=job.export, checkpoint_every=job.checkpoint_every, progress=job.progress,
+                      eval_targets=job.eval_targets)

@@ -8,9 +8,11 @@ so a result can be checked from the URDF alone.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from graspnet_torch.errors import InternalError
 from graspnet_torch.io import atomic_write_text
 
 __all__ = ["GraspResult", "TrialResult"]
@@ -94,8 +96,25 @@ class GraspResult:
         return out
 
     def to_json(self, indent: int | None = 2) -> str:
-        return json.dumps(self.to_dict(), indent=indent)
+        """Strict JSON; a non-finite number anywhere is an :class:`InternalError` (NaN and
+        infinity are not JSON, and no result with them is ever written)."""
+        try:
+            return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+        except ValueError:
+            raise InternalError(f"the result of {self.problem or 'the problem'} is not finite (NaN or infinity "
+                                f"in {', '.join(_non_finite(self.to_dict())[:3])}); nothing was written") from None
 
     def save(self, path: str | Path) -> Path:
-        """Write the JSON atomically (never a half-written file)."""
+        """Write the JSON atomically (never a half-written file; never a non-finite one)."""
         return atomic_write_text(path, self.to_json() + "\n")
+
+
+def _non_finite(obj, prefix: str = "") -> list[str]:
+    """Dotted paths of the non-finite floats in a JSON-like object."""
+    if isinstance(obj, float):
+        return [] if math.isfinite(obj) else [prefix or "<root>"]
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in _non_finite(v, f"{prefix}.{k}" if prefix else str(k))]
+    if isinstance(obj, list | tuple):
+        return [p for i, v in enumerate(obj) for p in _non_finite(v, f"{prefix}[{i}]")]
+    return []
