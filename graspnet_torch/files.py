@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import site
 import stat
 import sysconfig
@@ -48,6 +49,15 @@ class _NoAliasLoader(yaml.SafeLoader):
         if self.check_event(yaml.AliasEvent):
             raise _AliasRefused(self.peek_event().start_mark.line + 1)
         return super().compose_node(parent, index)
+
+
+# YAML 1.1 (PyYAML) reads 1e3 and 1.0e308 as strings (its floats need a '.' and a signed exponent);
+# read them as numbers, as YAML 1.2 and JSON do. Integers still match the int resolver first.
+_NoAliasLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|\.[0-9_]+(?:[eE][-+]?[0-9]+)?)$"),
+    list("-+0123456789."),
+)
 
 
 def _path_text(path: Any, what: str, error: type[GraspnetError]) -> str:

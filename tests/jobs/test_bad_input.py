@@ -1,0 +1,206 @@
+"""Bad and hostile input through the command line: each kind of mistake is refused with exit 2,
+one line on stderr, no traceback and no file written (not even Hydra's run folder)."""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from graspnet_torch.paths import repo_root
+
+GLASS3 = (repo_root() / "configs" / "task" / "glass3.yaml").read_text()
+INDEX = "  - {finger: index, position: [0, 0, 0]}\n"
+
+
+def _run(script: str, *args: str, timeout: float = 120) -> tuple[subprocess.CompletedProcess, float]:
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, str(repo_root() / "scripts" / script), *args], capture_output=True,
+                         text=True, cwd=repo_root(), timeout=timeout)
+    return res, time.perf_counter() - t0
+
+
+def _refused(tmp_path: Path, script: str, *args: str, message: str) -> str:
+    """Run ``script`` with its outputs under tmp_path/run; assert a clean refusal; return the line."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    res, seconds = _run(script, *args, f"hydra.run.dir={tmp_path / 'run'}")
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert message in lines[0], lines[0]
+    assert not (tmp_path / "run").exists(), "a refused run wrote its run folder"
+    assert seconds < 30
+    peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    assert peak_kb < (1 << 20) or peak_kb == before  # under 1 GB (ru_maxrss is the largest child so far)
+    return lines[0]
+
+
+def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+# ------------------------------------------------------------------ settings and overrides
+@pytest.mark.parametrize(("args", "message"), [
+    (["foo=1"], "unknown setting 'foo'"),
+    (["+foo=1"], "unknown setting 'foo'"),
+    (["solver.tolerance=1"], "unknown setting 'solver.tolerance' (settings of solver:"),
+    (["noise.sigma=abc"], "noise.sigma='abc': expected a number in [0, 100]"),
+    (["noise.sigma=-0.1"], "noise.sigma=-0.1: expected a number in [0, 100]"),
+    (["solver.dtype=float7"], "solver.dtype='float7': expected one of float32, float64"),
+    (["solver.report=worst"], "solver.report='worst': expected one of best, final"),
+    (["solver.threshold=abc"], "solver.threshold='abc': expected a number in [-1, 2] or null"),
+    (["threads=0"], "threads=0: expected an integer in [1, 1024]"),
+    (["device=tpu9"], "device=tpu9: not a device"),
+    (["seed=123456789012345678901234567890"], "seed=1234567890"),
+    (["trials=abc"], "trials='abc': expected an integer"),
+    (["trials=2.5"], "trials=2.5: expected an integer"),
+    (["max_iterations=true"], "max_iterations=True: expected an integer"),
+    (["srv.hidden=[20]"], "srv.hidden=[20]: expected a list of 2 values"),
+    (["srv.lr_srv=1e308"], "srv.lr_srv=1e+308: expected a number in [0, 100]"),
+    (["reward.a=0"], "reward.a=0: expected a number in (0, 10000]"),
+    (["-m", "seed=0,1,abc"], "seed='abc'"),
+    (["-m", "task=glass3,bottle"], "unknown task 'bottle'"),
+    (["seed=${nope}"], "cannot resolve the settings"),
+    (["trials=[1,"], "cannot parse the command line"),
+])
+def test_bad_settings_are_refused_before_any_work(tmp_path, args, message):
+    _refused(tmp_path, "solve_grasp.py", *args, message=message)
+
+
+def test_device_cuda_is_checked_for_availability(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    _refused(tmp_path, "solve_grasp.py", "device=cuda", message="device=cuda: CUDA is not available")
+
+
+def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path):
+    line = _refused(tmp_path, "solve_grasp.py", "trials=200000000", message="trials=200000000 x max_iterations=2000")
+    assert "GiB of memory but" in line and "solver.history=false" in line
+
+
+# ------------------------------------------------------------------ problem files
+@pytest.mark.parametrize(("text", "message"), [
+    # an alias bomb in each checked field: refused before anything expands
+    ("a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\nrobot: hand\ncontacts:\n"
+     "  - {finger: *b, position: [0, 0, 0]}\n", "YAML aliases (*name) are not allowed (line 2)"),
+    ("robot: hand\npalm_bounds: &p {min: [0, 0, 0, 0, 0, 0], max: [1, 1, 1, 1, 1, 1]}\nobstacles: [*p]\n"
+     "contacts: []\n", "YAML aliases"),
+    ("robot: hand\ncontacts:\n  - {finger: thumb, position: [1.0e308, 0, 0]}\n" + INDEX,
+     "contacts[0].position[0]: 1e+308 is not a finite number within [-10, 10]"),
+    ("robot: hand\ncontacts:\n  - {finger: thumb, position: ['0.03', 0, 0]}\n" + INDEX,
+     "contacts[0].position[0]: expected a number, got '0.03'"),
+    ("robot: hand\ncontacts:\n  - {finger: thumb, position: [true, 0, 0]}\n" + INDEX,
+     "contacts[0].position[0]: expected a number, got True"),
+    ("robot: hand\nobject: {shape: box, size: [0.1, 0.1, 20], pose: [0, 0, 0, 0, 0, 0]}\ncontacts:\n"
+     "  - {finger: thumb, position: [0, 0, 0]}\n  - {finger: index, position: [0, 0, 0]}\n",
+     "object.size[2]: 20 is not a finite number within [-10, 10]"),
+    (GLASS3.replace("reference:", "reference: 3\nignored:"), "unknown key(s) ignored"),
+    (GLASS3.split("reference:")[0] + "reference: {palm_pose: [0, 0, 0, 0, 0, 0], joints: 3}\n",
+     "reference.joints: expected a mapping finger -> joint angles"),
+    ("robot: hand\ncontacts:\n  - {finger: [" + "x, " * 5000 + "x], position: [0, 0, 0]}\n"
+     "  - {finger: index, position: [0, 0, 0]}\n", "unknown finger ['x', 'x', 'x', 'x', ...]"),
+])
+def test_bad_problem_files_are_refused_with_a_short_line(tmp_path, text, message):
+    path = _problem(tmp_path, text)
+    line = _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+    assert len(line) < 600
+
+
+def test_oversized_non_utf8_and_special_problem_files(tmp_path):
+    big = tmp_path / "big.yaml"
+    with open(big, "w") as fh:
+        fh.write("robot: hand\ncontacts: [")
+        fh.write("0, " * 600_000)
+        fh.write("0]\n")
+    _refused(tmp_path, "solve_grasp.py", f"problem={big}", message="a problem file may have at most 1048576 bytes")
+    latin = tmp_path / "latin.yaml"
+    latin.write_bytes(GLASS3.replace("Drinking glass", "Verre à boire").encode("latin-1"))
+    _refused(tmp_path, "solve_grasp.py", f"problem={latin}", message="not UTF-8 text")
+    _refused(tmp_path, "solve_grasp.py", "problem=/dev/zero", message="the problem file is not a regular file")
+    _refused(tmp_path, "solve_grasp.py", f"problem={tmp_path}", message="the problem file is not a regular file")
+
+
+# ------------------------------------------------------------------ paths
+def test_mesh_paths_outside_the_allowed_folders_get_one_message_whether_or_not_they_exist(tmp_path):
+    lines = []
+    for mesh in ("/etc/passwd", "/etc/no-such-file.stl", "../../../../../../etc/passwd"):
+        text = GLASS3.replace("shape: cylinder\n  size: [0.0325, 0.12]", f"shape: mesh\n  size: {mesh}")
+        path = _problem(tmp_path, text)
+        line = _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="is outside the file's folder")
+        lines.append(line.replace(mesh, "<mesh>"))
+    assert len(set(lines)) == 1, lines
+
+
+def test_a_file_inside_the_folder_must_be_a_real_mesh(tmp_path):
+    (tmp_path / "cup.stl").write_text("this is not a mesh\n")
+    text = GLASS3.replace("shape: cylinder\n  size: [0.0325, 0.12]", "shape: mesh\n  size: cup.stl")
+    path = _problem(tmp_path, text)
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="cup.stl")
+
+
+@pytest.mark.parametrize(("out", "message"), [
+    ("/dev/null", "out=/dev/null: exists and is not a regular file"),
+    ("{tmp}", "is a directory"),
+    ("{tmp}/afile/result.json", "is not a folder"),
+    ("/proc/graspnet-test/result.json", "cannot write in /proc"),
+])
+def test_out_must_be_a_regular_file_in_a_writable_folder(tmp_path, out, message):
+    (tmp_path / "afile").write_text("x")
+    out = out.format(tmp=tmp_path)
+    _refused(tmp_path, "solve_grasp.py", f"out={out}", message=message)
+    assert (tmp_path / "afile").read_text() == "x"
+
+
+# ------------------------------------------------------------------ training
+@pytest.mark.parametrize(("args", "message"), [
+    (["fcnn.epochs=-1"], "fcnn.epochs=-1: expected an integer in [1, "),
+    (["fcnn.epochs=abc"], "fcnn.epochs='abc'"),
+    (["fcnn.lr=abc"], "fcnn.lr='abc': expected a number in [0, 10]"),
+    (["fcnn.optimizer=newton"], "fcnn.optimizer='newton': expected one of adam, sgd"),
+    (["checkpoint_every=0"], "checkpoint_every=0: expected an integer"),
+    (["fcnn.experts.hidden=0"], "fcnn.experts.hidden=0"),
+    (["fingers=[little]"], "robot 'hand' has no finger 'little'"),
+    (["export=/dev/null"], "export=/dev/null: exists and is not a regular file"),
+    (["robot=octopus"], "unknown robot 'octopus'"),
+])
+def test_training_settings_are_refused_and_nothing_is_written(tmp_path, args, message):
+    _refused(tmp_path, "train_fcnn.py", *args, message=message)
+
+
+def test_resume_from_a_non_finite_state_is_refused(tmp_path):
+    import torch
+
+    from graspnet_torch.jobs.train_fcnn import STATE_FORMAT
+
+    run = tmp_path / "run"
+    run.mkdir()
+    state = {"format": STATE_FORMAT, "robot": "hand", "seed": 0, "cfg": {}, "fingerprints": {},
+             "fingers": {"thumb": {"experts": {"W1": torch.full((2, 3), float("nan"))}}}, "finished": []}
+    torch.save(state, run / "state.pt")
+    res, _ = _run("train_fcnn.py", "resume=true", f"hydra.run.dir={run}")
+    assert res.returncode == 2 and res.stderr.strip().splitlines() == [
+        f"error: {run / 'state.pt'}: cannot resume, non-finite values (NaN or infinity) in thumb.experts.W1"]
+    assert not (run / "fcnn.pt").exists()
+
+
+def test_valid_odd_input_runs(tmp_path):
+    """What looks odd but is valid runs: a sweep of good values, ints for floats, a JSON problem."""
+    problem = tmp_path / "p.json"
+    import yaml
+
+    problem.write_text(json.dumps(yaml.safe_load(GLASS3)))
+    res, _ = _run("solve_grasp.py", f"problem={problem}", "trials=2", "max_iterations=5", "noise.sigma=0",
+                  "reward.a=2", "pictures=false", "tensorboard=false", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((tmp_path / "run" / "result.json").read_text())["settings"]["reward_a"] == 2.0
+    assert os.listdir(tmp_path / "run")
