@@ -138,3 +138,17 @@ def test_candidates_and_fallback_never_worsen_and_rescue_poor_answers(hand, inde
     assert float((e3 < 1e-3).float().mean()) > 0.95
     again = untrained.solve("index", x, refine=1, fallback_restarts=10)[1]
     assert torch.equal(again, e3)  # deterministic
+
+
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("W2", float("nan"), r"finger 'index': non-finite values \(NaN or infinity\) in W2"),
+    ("b3", float("inf"), r"non-finite values \(NaN or infinity\) in b3"),
+    ("x_scale", 0.0, r"input scales must be positive"),
+])
+def test_checkpoint_with_non_finite_weights_or_zero_scale_is_refused(ik, hand, tmp_path, key, value, message):
+    path = save_finger_ik(ik, tmp_path / "fcnn.pt")
+    payload = torch.load(path, weights_only=True)
+    payload["fingers"]["index"]["state"][key].view(-1)[0] = value
+    torch.save(payload, path)
+    with pytest.raises(gt.CheckpointError, match=message):
+        gt.load_finger_ik(hand, path)

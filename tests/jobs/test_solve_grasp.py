@@ -68,3 +68,47 @@ def test_bad_problem_file_exits_2(tmp_path):
     assert res.stderr.strip().splitlines() == [
         f"error: {bad}: contacts[1].finger: finger 'index' appears twice (contacts[0] and contacts[1])"]
     assert not (tmp_path / "r.json").exists()
+
+
+def _job_cfg(out, **extra):
+    return {"task": "glass3", "trials": 2, "max_iterations": 5, "out": str(out), "tensorboard": False,
+            "pictures": False, "threads": 1, **extra}
+
+
+def test_a_non_finite_result_is_an_internal_error_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    import graspnet_torch as gt
+    from graspnet_torch.jobs import solve_grasp as job
+    from graspnet_torch.jobs.cli import user_errors_exit_2
+
+    real_solve = job.solve
+
+    def nan_solve(*args, **kwargs):
+        result = real_solve(*args, **kwargs)
+        result.trials[0].palm_pose[0] = float("nan")
+        result.trials[1].palm_pose[0] = float("nan")
+        return result
+
+    monkeypatch.setattr(job, "solve", nan_solve)
+    out = tmp_path / "r.json"
+    with pytest.raises(gt.InternalError, match=r"not finite .* in palm_pose\[0\]"):
+        job.solve_grasp(_job_cfg(out), tmp_path)
+    assert not out.exists() and not list(tmp_path.glob(".r.json*"))
+    with pytest.raises(SystemExit) as info:
+        user_errors_exit_2(lambda: job.solve_grasp(_job_cfg(out), tmp_path))()
+    assert info.value.code == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("internal error: ") and not out.exists()
+
+
+def test_a_picture_failure_after_the_result_is_a_warning(tmp_path, monkeypatch, capsys):
+    from graspnet_torch.jobs import solve_grasp as job
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no display\nsecond line")
+
+    monkeypatch.setattr(job, "_pictures", broken)
+    out = tmp_path / "r.json"
+    job.solve_grasp(_job_cfg(out, pictures=True), tmp_path)
+    assert json.loads(out.read_text())["robot"] == "hand"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["warning: pictures not written: RuntimeError: no display second line"]
