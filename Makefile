@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -43,6 +43,9 @@ bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from s
 
 bench-solver: $(STAMP)  ## iterations per second of the closed loop, 1 to 1000 trials
 	$(PY) benchmarks/bench_solver.py
+
+bench-validation: $(STAMP)  ## start-up time the input checks add to a solve (target < 0.2 s)
+	$(PY) benchmarks/bench_validation.py --check
 
 fcnn: $(STAMP)  ## retrain the shipped FCNN checkpoint checkpoints/hand/fcnn.pt (fixed seed)
 	$(PY) scripts/train_fcnn.py robot=hand export=true hydra.run.dir=outputs/train_fcnn/hand-export

@@ -176,27 +176,33 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
 
     argv = sys.argv[1:] if argv is None else argv
     try:
+        if os.environ.get("GRASPNET_TORCH_NO_PRECHECK") == "1":  # benchmarks/bench_validation.py only
+            raise _SkipChecks
         check_overrides(argv, schema)
         if prepare is not None and config_name is not None:
             composed = compose_for_check(config_name, argv)
             if composed is not None:
                 prepare(*composed)
-    except GraspnetError as exc:
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
-        sys.exit(2)
-    except (HydraException, OmegaConfBaseException) as exc:
+    except _SkipChecks:
+        pass
+    except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
     try:
         main()
-    except OSError as exc:
-        if _job_started:
-            raise
-        print(f"error: cannot create {clip(str(exc.filename or ''), 200)}: {exc.strerror}", file=sys.stderr)
-        sys.exit(2)
     except (HydraException, OmegaConfBaseException) as exc:
         if _job_started:
             raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
+    except OSError as exc:  # e.g. a run folder Hydra cannot make
+        if _job_started:
+            raise
+        what = f"{clip(str(exc.filename), 200)}: " if exc.filename else ""
+        print(f"error: {what}{exc.strerror or _one_line(exc)}", file=sys.stderr)
+        sys.exit(2)
+
+
+class _SkipChecks(Exception):
+    pass
