@@ -93,7 +93,8 @@ def _trial_table(result: GraspResult, fingers: tuple[str, ...]) -> str:
 def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
                   ) -> tuple[SolveGraspJobCfg, GraspProblem, torch.device, Path, SolverCfg]:
     """Every check of the job, before any work and without writing anything: the settings, the
-    device, the problem, the output path and the memory the solve needs.
+    device, the problem, the output path, the memory the solve needs, and the robot's URDF and
+    FCNN checkpoint (loaded once per process, so the job reuses them).
 
     Returns:
         the settings, the problem, the device, the result path and the solver settings (with
@@ -109,6 +110,7 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
                        4 if solver.dtype == "float32" else 8, device)
+    robot_and_ik(problem.robot)  # the robot and its FCNN checkpoint (refused if corrupted); cached for the job
     return job, problem, device, out, solver
 
 
