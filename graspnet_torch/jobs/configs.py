@@ -72,7 +72,7 @@ class InspectRobotsJobCfg:
     """``scripts/inspect_robots.py`` (configs/inspect_robots.yaml)."""
 
     robots: list[str] = setting(factory=lambda: ["hand", "arm_hand", "manus"])
-    out_dir: str = "outputs/robots"
+    out_dir: str | None = None  # None: the run folder
 
 
 @dataclass(frozen=True)

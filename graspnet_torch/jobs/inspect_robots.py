@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import torch
 
-from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot
+from graspnet_torch.jobs.configs import InspectRobotsJobCfg
+from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot, load_robot_cfg
 from graspnet_torch.robot.ik import refine
+from graspnet_torch.settings import build
 from graspnet_torch.table import format_table
 
-__all__ = ["inspect_robots", "pinch_posture", "robot_summary"]
+__all__ = ["inspect_robots", "pinch_posture", "prepare_inspect", "robot_summary"]
 
 # a tip-to-tip pinch: the finger's abduction, MCP, PIP, DIP (degrees)
 PINCH_FLEXION_DEG = (0.0, 55.0, 60.0, 25.0)
@@ -45,6 +48,15 @@ def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, f
     best = int(torch.argmin(err))
     q[thumb] = qt[best]
     return replace(start, fingers=q), float(err[best])
+
+
+def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str | Path) -> tuple[list[str], Path]:
+    """The checks of the job before any work: the settings and every robot's config; returns the
+    robot names and the output folder (``out_dir``, else the run folder)."""
+    job = build(InspectRobotsJobCfg, cfg)
+    for name in job.robots:
+        load_robot_cfg(name)
+    return job.robots, Path(job.out_dir) if job.out_dir else Path(run_dir)
 
 
 def inspect_robots(names: Sequence[str] | None = None, out_dir: str | Path = "outputs/robots") -> list[dict]:

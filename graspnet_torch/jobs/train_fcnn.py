@@ -185,9 +185,9 @@ def train_fcnn(
 
 
 def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
-                  run_dir: str | Path = ".") -> tuple[TrainFCNNJobCfg, RobotCfg]:
+                  run_dir: str | Path) -> tuple[TrainFCNNJobCfg, RobotCfg]:
     """Every check of the training job before any work, writing nothing: the settings, the robot
-    config and the export path (``run_dir`` is unused: the run folder is the job's own)."""
+    config, the export path and, with ``resume``, the training state in ``run_dir``."""
     job = build(TrainFCNNJobCfg, cfg)
     robot = job.robot
     if isinstance(robot, Mapping):
@@ -204,6 +204,9 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
     if job.export:
         target = default_checkpoint(robot_cfg.name) if job.export is True else job.export
         check_output_path(str(target), "export", ConfigError)
+    state_path = Path(run_dir) / "state.pt"
+    if job.resume and state_path.is_file():
+        _load_state(state_path, Robot(robot_cfg), job.fcnn, job.seed)
     return job, robot_cfg
 
 

@@ -8,6 +8,7 @@ commented example.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -163,17 +164,25 @@ def available_robots() -> list[str]:
     return sorted(p.stem for p in (configs_dir() / "robot").glob("*.yaml"))
 
 
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except OSError:  # a name too long for the file system
+        return False
+
+
 def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
     """A robot config by name (``configs/robot/<name>.yaml``) or by path to a YAML file."""
     text = str(name_or_path)
+    if not text or len(text) > 4096 or "\x00" in text:
+        raise ConfigError(f"unknown robot '{clip(text, 80)}': expected one of {', '.join(available_robots())}")
     path = Path(text)
-    if not (text.endswith((".yaml", ".yml")) or path.is_file()):
+    by_path = text.endswith((".yaml", ".yml")) or os.sep in text
+    if not by_path:
         path = configs_dir() / "robot" / f"{text}.yaml"
-        if not path.is_file():
+        if not _is_file(path):
             raise ConfigError(f"unknown robot '{clip(text, 80)}': expected one of {', '.join(available_robots())} "
                               f"(configs/robot/) or a path to a robot YAML file")
-    elif not path.is_file():
-        raise ConfigError(f"robot config file not found: {clip(str(path))}")
     data = read_document(path, "robot config", ConfigError)
     shipped = path.resolve().parent == (configs_dir() / "robot").resolve()
     return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent)
