@@ -111,7 +111,7 @@ def check_device(device: str):
 # (80 B of data, the rest the stacking into curves and allocator fragmentation).
 WORK_BYTES_PER_FINGER = 5_000
 HISTORY_FACTOR = 6  # history bytes = HISTORY_FACTOR x itemsize x (3 + 2 n + F) per iteration
-BASE_BYTES = 400 << 20  # torch, the robot, the FCNN
+BASE_BYTES = 768 << 20  # torch, the robot, the FCNN (measured: 300-530 MB)
 
 
 def estimate_solve_memory(trials: int, iterations: int, fingers: int, n: int = 6, history: bool = True,

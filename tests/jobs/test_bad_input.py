@@ -207,19 +207,16 @@ def test_valid_odd_input_runs(tmp_path):
 
 
 def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
-    """Peak memory of a real solve (4000 trials x 60 iterations with history) stays under the
-    estimate the refusal uses, and the estimate is not wildly above it (< 4x the measured growth)."""
-    from graspnet_torch.jobs.configs import BASE_BYTES, estimate_solve_memory
+    """The peak memory of a real solve (4000 trials x 60 iterations with history, in a fresh
+    process) stays under the estimate the refusal uses, and the estimate is not wildly above it."""
+    from graspnet_torch.jobs.configs import estimate_solve_memory
 
     code = ("import resource, torch, graspnet_torch as gt\n"
             "from graspnet_torch.solver.config import SolverCfg\n"
             "torch.set_num_threads(1)\n"
-            "gt.solve('block5', trials=2, max_iterations=2)\n"
-            "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
             "gt.solve('block5', trials=4000, solver=SolverCfg(max_iterations=60, threshold=None))\n"
-            "print(r0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n")
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    r0, r1 = (int(v) * 1024 for v in res.stdout.split())
-    grown = r1 - r0
-    estimate = estimate_solve_memory(4000, 60, 5) - BASE_BYTES
-    assert r0 < BASE_BYTES and grown <= estimate < 4 * grown, (r0, grown, estimate)
+    peak = int(res.stdout) * 1024
+    estimate = estimate_solve_memory(4000, 60, 5)
+    assert peak <= estimate < 3 * peak, (peak, estimate)
