@@ -98,3 +98,19 @@ def test_stop_threshold_is_none_when_runs_use_the_whole_budget():
     assert SolverCfg().stop_threshold == 0.99
     assert SolverCfg(threshold=None).stop_threshold is None
     assert SolverCfg(threshold=1.5).stop_threshold is None  # unreachable: r <= 1 without noise
+
+
+def test_fixed_seed_glass3_matches_the_recorded_result():
+    """A fixed-seed glass3 solve gives the result recorded before the loop was made generic
+    (tests/solver/data/): same iterations, same configuration and errors (to float32 rounding)."""
+    from pathlib import Path
+
+    recorded = json.loads((Path(__file__).parent / "data" / "glass3_seed0_T6_K300.json").read_text())
+    result = gt.solve("glass3", trials=6, seed=0, max_iterations=300).to_dict()
+    assert [t["iterations"] for t in result["trials"]] == [t["iterations"] for t in recorded["trials"]]
+    for got, want in zip(result["trials"], recorded["trials"], strict=True):
+        assert got["success"] == want["success"]
+        assert got["palm_pose"] == pytest.approx(want["palm_pose"], abs=1e-5)
+        assert got["total_error_mm"] == pytest.approx(want["total_error_mm"], abs=1e-3)
+        for f, q in want["joints"].items():
+            assert got["joints"][f] == pytest.approx(q, abs=1e-3)
