@@ -5,10 +5,17 @@ All functions are elementwise over leading batch dimensions; errors and distance
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import torch
 from torch import Tensor
 
+if TYPE_CHECKING:
+    from graspnet_torch.solver.config import RewardCfg
+    from graspnet_torch.solver.environment import Evaluation
+
 __all__ = [
+    "Reward",
     "add_noise",
     "manus_reward",
     "r1",
@@ -67,3 +74,32 @@ def add_noise(reward: Tensor, sigma: float, generator: torch.Generator | None = 
     if sigma <= 0:
         return reward
     return reward + sigma * torch.randn(reward.shape, generator=generator, dtype=reward.dtype, device=reward.device)
+
+
+class Reward:
+    """The reinforcement of the ``reward`` group, as a function of an evaluation, the iteration i
+    (1-based) and the budget p: R_1 (eq. 20), or R_2, R_3, R_4 (eq. 21-23) from its collision
+    count. An evaluation without a collision component counts no collision.
+
+    Args:
+        cfg: kind, a, beta and p (``None``: p = ``budget``).
+        budget: the loop's iteration budget.
+    """
+
+    def __init__(self, cfg: RewardCfg, budget: int):
+        self.cfg = cfg
+        self.p = cfg.p if cfg.p is not None else budget
+
+    def __call__(self, evaluation: Evaluation, iteration: int | Tensor) -> Tensor:
+        """(T,) reinforcement, noise-free; ``iteration`` an int or (T,) per trial."""
+        r = r1(evaluation.error, self.cfg.a)
+        if self.cfg.kind == "r1" or evaluation.collisions is None:
+            return r
+        c = evaluation.collisions
+        if self.cfg.kind == "r2":
+            return r2(r, c)
+        if isinstance(iteration, Tensor):
+            iteration = iteration.to(r.dtype)
+        if self.cfg.kind == "r3":
+            return r3(r, c, iteration, self.p)
+        return r4(r, c, iteration, self.p, self.cfg.beta)

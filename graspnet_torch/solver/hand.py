@@ -7,6 +7,8 @@ forward kinematics gives each fingertip's error (eq. 3, computed in the finger f
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -15,6 +17,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.transforms import pose_to_rt, untransform_points
+from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["HandEnvironment"]
@@ -57,7 +60,7 @@ class HandEnvironment:
         in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self.contacts)
         return untransform_points(self.base_R, self.base_t, in_palm)
 
-    def evaluate(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
+    def finger_joints(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
         """Finger joints and fingertip errors for palm poses.
 
         palm_pose: (T, 6) -> q: (T, F, n) within limits, error: (T, F) metres.
@@ -69,3 +72,49 @@ class HandEnvironment:
             return self.ik.compete(targets, self.fingers)
         q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
         return self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
+
+    def evaluate(self, palm_pose: Tensor) -> Evaluation:
+        """palm_pose: (T, 6) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, n)."""
+        q, errors = self.finger_joints(palm_pose)
+        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q)
+
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:
+        """Refine the finger joints of the reported configurations (palm poses kept); never worse."""
+        if iterations <= 0:
+            return evaluation
+        with torch.inference_mode():
+            targets = self.targets(config)
+            q, err = self.ik.refine(evaluation.joints, targets, self.fingers, iterations)
+        return Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
+                          collisions=evaluation.collisions)
+
+    def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
+        """Per trial, the result fields of the reported configuration, errors recomputed in float64
+        by FK against the contacts.
+
+        The loop runs in float32, whose rounded limits can exceed the exact ones by ~1e-7 rad; the
+        configuration is clamped to the exact (float64) bounds and limits first.
+        """
+        robot, problem = self.robot, self.problem
+        bounds = problem.bounds()
+        palm = config.detach().to(torch.float64).cpu()
+        palm = torch.clamp(palm, torch.as_tensor(bounds.lower), torch.as_tensor(bounds.upper))
+        T = palm.shape[0]
+        idx = [robot.finger_index(f) for f in problem.fingers]
+        flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+        q = robot.home_posture(torch.float64).fingers.expand(T, -1, -1).clone()
+        q[:, idx] = torch.clamp(evaluation.joints.detach().to(torch.float64).cpu(), flo[idx], fhi[idx])
+        tips = robot.fingertips_world(palm, q)[:, idx]
+        contacts = torch.as_tensor(problem.contacts_world(), dtype=torch.float64)
+        err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
+        deg = 180.0 / math.pi
+        out = []
+        for t in range(T):
+            pose = palm[t].tolist()
+            out.append({
+                "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
+                "joints": {f: [v * deg for v in q[t, k].tolist()] for k, f in enumerate(robot.finger_names)},
+                "fingertip_error_mm": {f: float(err[t, k]) * 1000 for k, f in enumerate(problem.fingers)},
+                "error": float(err[t].sum()),
+            })
+        return out

@@ -4,8 +4,8 @@ One iteration, for every trial at once:
 
     x = (c_k, c_k - c_{k-1})  ->  configuration network (BP, BP, SRV)  ->  o in [0, 1]^n
     c_{k+1} = c_min + (c_max - c_min) o                                              (13)
-    environment: finger joints by FCNN, fingertip errors, E (eq. 3)
-    r = 1 - tanh(a E)  (14),  r + N(0, sigma_n)  (15)  ->  SRV / BP updates  (16-19)
+    environment: E (eq. 3), for the hand and the arm by the FCNN's finger joints, + collisions
+    r = R_1..R_4 (eq. 14, 20-23),  r + N(0, sigma_n)  (15)  ->  SRV / BP updates  (16-19)
 
 The configuration fed back (c_k, in normalised units) is the network's output o. The loop sees
 only the observed reinforcement (noisy when sigma_n > 0): a trial stops once it exceeds the
@@ -22,62 +22,64 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Protocol
 
 import torch
 from torch import Tensor
 
-from graspnet_torch.rewards import add_noise, r1
+from graspnet_torch.rewards import Reward, add_noise
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
-__all__ = ["Environment", "LoopOutcome", "run_loop"]
-
-
-class Environment(Protocol):
-    """What the loop needs from a robot-specific environment."""
-
-    n: int
-    lower: Tensor  # (n,)
-    upper: Tensor  # (n,)
-
-    def evaluate(self, config: Tensor) -> tuple[Tensor, Tensor]:
-        """(T, n) configurations -> (finger joints (T, F, j), fingertip errors (T, F) in metres)."""
-        ...
+__all__ = ["LoopOutcome", "run_loop"]
 
 
 @dataclass
 class LoopOutcome:
-    """Per-trial results (leading dimension T) and optional per-iteration history (K, T[, F]):
+    """Per-trial results (leading dimension T) and optional per-iteration history (K, T[, ...]):
     'reinforcement' (noise-free), 'observed' (with sensor noise), 'expected' and 'sigma' (means
-    over the SRV units), 'total' and 'errors' (metres), 'time' (K,) seconds since the start.
+    over the SRV units), 'total' (the evaluation's error, metres), 'errors' (per finger, when the
+    environment gives them), 'collisions' (when it counts them), 'time' (K,) seconds since the start.
 
     Attributes:
-        config, joints, errors, total, reinforcement: at each trial's reported iteration (the
-            reinforcement there is the noise-free one).
+        config: (T, n) the reported configuration of each trial.
+        evaluation: the environment's evaluation of it.
+        reinforcement: (T,) noise-free reinforcement there.
         iterations: iterations each trial ran (its stop, or the budget).
         success: reinforcement exceeded the threshold.
         wall_time_s: the whole loop; per-iteration wall times are ``history['time']``.
     """
 
     config: Tensor
-    joints: Tensor
-    errors: Tensor
-    total: Tensor
+    evaluation: Evaluation
     reinforcement: Tensor
     iterations: Tensor
     success: Tensor
     wall_time_s: float
     history: dict[str, Tensor] | None
 
+    @property
+    def joints(self) -> Tensor | None:
+        """(T, F, j) finger joints of the reported configurations (hand and arm environments)."""
+        return self.evaluation.joints
+
+    @property
+    def errors(self) -> Tensor | None:
+        """(T, F) per-finger errors, metres."""
+        return self.evaluation.finger_errors
+
+    @property
+    def total(self) -> Tensor:
+        """(T,) the evaluation's error, metres (E of eq. 3)."""
+        return self.evaluation.error
+
 
 def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
              reward: RewardCfg | None = None, noise: NoiseCfg | None = None) -> LoopOutcome:
     """Run T trials of the closed loop on one environment (settings default to the paper's)."""
     solver, srv = solver or SolverCfg(), srv or SRVNetCfg()
-    reward, noise = reward or RewardCfg(), noise or NoiseCfg()
-    if reward.kind != "r1":
-        raise ValueError(f"reward.kind '{reward.kind}' needs collisions; the hand loop uses 'r1'")
+    noise = noise or NoiseCfg()
+    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations)
     dtype, device = env.lower.dtype, env.lower.device
     T, n = trials, env.n
     gen = torch.Generator(device=device).manual_seed(seed)
@@ -86,15 +88,15 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
         raise ValueError(f"solver.report must be 'best' or 'final', got '{solver.report}'")
-    hist: dict[str, list] = {k: [] for k in ("reinforcement", "observed", "expected", "sigma", "total", "errors",
-                                             "time")}
+    hist: dict[str, list] = {}
     with torch.inference_mode(not net.autograd):  # ~30 % less overhead per op; results are cloned out below
         t0 = time.perf_counter()
-        state = _iterate(env, net, solver, reward, noise, gen, o_prev, threshold, hist, t0)
+        best_config, best_ev, best_r, iterations = _iterate(env, net, solver, reward_fn, noise, gen, o_prev,
+                                                            threshold, hist, t0)
         wall = time.perf_counter() - t0
-    best_config, best_joints, best_errors, best_r, best_total, iterations = (t.clone() for t in state)
+    best_config, best_r, iterations, best_ev = best_config.clone(), best_r.clone(), iterations.clone(), best_ev.clone()
     history = None
-    if solver.history and hist["time"]:
+    if solver.history and hist.get("time"):
         history = {key: torch.stack(v).clone() for key, v in hist.items() if key != "time"}
         history["expected"] = history["expected"].mean(-1)  # mean over the SRV units
         history["sigma"] = history["sigma"].mean(-1)
@@ -106,16 +108,15 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
             history[key] = torch.where(after.view(K, -1, *([1] * (v.dim() - 2))), held, v)
         history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
     success = best_r > threshold if threshold is not None else torch.zeros(T, dtype=torch.bool, device=device)
-    return LoopOutcome(config=best_config, joints=best_joints, errors=best_errors, total=best_total,
-                       reinforcement=best_r, iterations=iterations, success=success, wall_time_s=wall,
-                       history=history)
+    return LoopOutcome(config=best_config, evaluation=best_ev, reinforcement=best_r, iterations=iterations,
+                       success=success, wall_time_s=wall, history=history)
 
 
-def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg,
+def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
              gen: torch.Generator, o_prev: Tensor, threshold: float | None, hist: dict[str, list],
-             t0: float) -> tuple[Tensor, ...]:
-    """The iterations; returns the reported configuration, joints, errors, reinforcement, total
-    error and iteration count of every trial."""
+             t0: float) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
+    """The iterations; returns the reported configuration, its evaluation, its (noise-free)
+    reinforcement and the iteration count of every trial."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
@@ -123,37 +124,32 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     active = torch.ones(T, dtype=torch.bool, device=device)
     all_active = True
     iterations = torch.full((T,), solver.max_iterations, dtype=torch.long, device=device)
-    best_config = best_joints = best_errors = best_r = best_total = best_obs = None
+    best_config = best_ev = best_r = best_obs = None
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
         step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
         config = torch.addcmul(env.lower, span, step.o)  # (13)
-        joints, errors = env.evaluate(config)
-        total = errors.sum(dim=1)  # (3)
-        r = r1(total, reward.a)  # (14)
+        ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
+        r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
         net.reinforce(observed, None if all_active else active)  # (16)-(19)
         if best_config is None:
-            best_config, best_joints, best_errors, best_r, best_total = config, joints, errors, r, total
-            best_obs = observed
+            best_config, best_ev, best_r, best_obs = config, ev, r, observed
         else:
             better = (observed > best_obs) if solver.report == "best" else torch.ones_like(active)
             if not all_active:
                 better &= active
             best_obs = torch.where(better, observed, best_obs)
-            best_total = torch.where(better, total, best_total)
             best_r = torch.where(better, r, best_r)
             best_config = torch.where(better.unsqueeze(1), config, best_config)
-            best_errors = torch.where(better.unsqueeze(1), errors, best_errors)
-            best_joints = torch.where(better.view(-1, 1, 1), joints, best_joints)
+            best_ev = ev.where(better, best_ev)
         if solver.history:
-            hist["reinforcement"].append(r)
-            hist["observed"].append(observed)
-            hist["expected"].append(step.r_hat)
-            hist["sigma"].append(step.sigma)
-            hist["total"].append(total)
-            hist["errors"].append(errors)
-            hist["time"].append(time.perf_counter() - t0)
+            for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
+                               ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
+                               ("collisions", ev.collisions)):
+                if value is not None:
+                    hist.setdefault(key, []).append(value)
+            hist.setdefault("time", []).append(time.perf_counter() - t0)
         o_new = step.o if all_active else torch.where(active.unsqueeze(1), step.o, o_prev)
         o_prev2, o_prev = o_prev, o_new
         if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
@@ -167,4 +163,4 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 all_active = False
                 if not bool(active.any()):
                     break
-    return best_config, best_joints, best_errors, best_r, best_total, iterations
+    return best_config, best_ev, best_r, iterations
