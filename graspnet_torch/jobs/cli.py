@@ -100,14 +100,32 @@ def _has_interpolation(value: Any) -> bool:
     return isinstance(value, str) and "${" in value
 
 
+def _hydra_args(argv: list[str]):
+    """Hydra's own command-line parser, refusing unknown options (``--foo``) in one line instead of
+    argparse's usage text."""
+    from hydra._internal.utils import get_args_parser
+
+    parser = get_args_parser()
+
+    def refuse(message: str):
+        raise ConfigError(f"{clip(message, 200)} (see --help)")
+
+    parser.error = refuse  # argparse calls this for every mistake
+    args, unknown = parser.parse_known_args(argv)
+    options = [a for a in unknown if a.startswith("-")]
+    if options:
+        raise ConfigError(f"unknown option '{clip(options[0], 60)}': settings are key=value; options are "
+                          f"--help, --cfg job, -m (see --help)")
+    return args
+
+
 def check_overrides(argv: list[str], schema: type) -> None:
     """Refuse, with one :class:`ConfigError` line, a command line that Hydra would refuse or
     that sets a key the job does not have or a value outside its type and range."""
-    from hydra._internal.utils import get_args_parser
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    args, _ = get_args_parser().parse_known_args(argv)
+    args = _hydra_args(argv)
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     try:
@@ -121,7 +139,9 @@ def check_overrides(argv: list[str], schema: type) -> None:
         options = _group_options(key) if "." not in key else None
         if options is not None:
             for v in _values(o):
-                if v is not None and v != "null" and str(v) not in options:
+                if v is None:
+                    raise ConfigError(f"{key}=null: expected one of {', '.join(options)} (configs/{key}/)")
+                if str(v) not in options:
                     raise ConfigError(f"unknown {key} '{clip(str(v), 80)}': expected one of {', '.join(options)} "
                                       f"(configs/{key}/)")
             continue
@@ -144,17 +164,19 @@ def compose_for_check(config_name: str, argv: list[str]) -> tuple[dict, str] | N
     """The config Hydra will compose for a single run, as a plain dict, and its run folder; ``None``
     where there is nothing single to check (``-m`` sweeps, ``--cfg``, ``--help``, another config)."""
     from hydra import compose, initialize_config_dir
-    from hydra._internal.utils import get_args_parser
     from omegaconf import OmegaConf
 
     from graspnet_torch.paths import configs_dir
 
-    args, _ = get_args_parser().parse_known_args(argv)
+    args = _hydra_args(argv)
     if (args.multirun or args.cfg or args.help or args.hydra_help or args.info or args.shell_completion
             or args.config_name or args.config_path or args.config_dir or args.experimental_rerun):
         return None
-    with initialize_config_dir(config_dir=str(configs_dir()), version_base="1.3", job_name=config_name):
-        cfg = compose(config_name=config_name, overrides=args.overrides, return_hydra_config=True)
+    try:
+        with initialize_config_dir(config_dir=str(configs_dir()), version_base="1.3", job_name=config_name):
+            cfg = compose(config_name=config_name, overrides=args.overrides, return_hydra_config=True)
+    except (ValueError, TypeError, KeyError) as exc:  # Hydra raises these for some malformed overrides
+        raise ConfigError(f"cannot compose the settings: {_one_line(exc)}") from None
     run_dir = str(OmegaConf.select(cfg, "hydra.run.dir"))
     return container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])), run_dir
 

@@ -70,6 +70,9 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["-m", "task=glass3,bottle"], "unknown task 'bottle'"),
     (["seed=${nope}"], "cannot resolve the settings"),
     (["trials=[1,"], "cannot parse the command line"),
+    (["task=null"], "task=null: expected one of block5, glass3"),
+    (["--foo"], "unknown option '--foo'"),
+    (["--cfg", "nonsense"], "argument --cfg/-c: invalid choice"),
 ])
 def test_bad_settings_are_refused_before_any_work(tmp_path, args, message):
     _refused(tmp_path, "solve_grasp.py", *args, message=message)
