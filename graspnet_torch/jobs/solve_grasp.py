@@ -22,6 +22,7 @@ from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.settings import build, clip
 from graspnet_torch.solver.api import robot_and_ik, solve
 from graspnet_torch.solver.config import SolverCfg
@@ -32,23 +33,29 @@ from graspnet_torch.tasks.problem import GraspProblem
 __all__ = ["log_tensorboard", "posture_of", "prepare_solve", "resolve_problem", "solve_grasp"]
 
 
-def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | None,
+def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | RobotCfg | None,
                     allow_outside_paths: bool = False) -> GraspProblem:
     """The problem file if given, else the task (a task name, or a task config as composed by
-    Hydra from ``configs/task/``); checks that an explicit robot agrees."""
+    Hydra from ``configs/task/``); checks that an explicit robot agrees. A robot config (the
+    ``robot`` group as composed, overrides included) replaces the shipped one of its name: an
+    override of ``robot.palm_bounds`` changes the search space."""
+    robot_cfg = robot if isinstance(robot, RobotCfg) else None
+    name = robot_cfg.name if robot_cfg is not None else robot
     if problem:
         result = GraspProblem.from_file(problem, allow_outside_paths=allow_outside_paths)
     elif isinstance(task, str):
         result = GraspProblem.from_task(task)
     elif isinstance(task, Mapping):
-        name = task.get("name", "task")
-        result = GraspProblem.from_mapping(task, source=f"configs/task/{clip(str(name), 80)}.yaml",
+        task_name = task.get("name", "task")
+        result = GraspProblem.from_mapping(task, source=f"configs/task/{clip(str(task_name), 80)}.yaml",
                                            folder=configs_dir() / "task", allow_outside_paths=allow_outside_paths)
     else:
         raise ProblemError("nothing to solve: give problem=PATH or task=NAME")
-    if robot and robot != result.robot:
-        raise ProblemError(f"{result.source}: the problem is for robot '{result.robot}', but robot={clip(robot, 80)} "
+    if name and name != result.robot:
+        raise ProblemError(f"{result.source}: the problem is for robot '{result.robot}', but robot={clip(name, 80)} "
                            f"was given")
+    if robot_cfg is not None:
+        result = replace(result, robot_cfg=robot_cfg)
     return result
 
 
@@ -102,15 +109,17 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     """
     job = build(SolveGraspJobCfg, cfg)
     device = check_device(job.device)
-    robot_name = job.robot.get("name") if isinstance(job.robot, Mapping) else job.robot
-    problem = resolve_problem(job.problem, job.task, robot_name, job.allow_outside_paths)
+    robot = job.robot
+    if isinstance(robot, Mapping):  # the robot group, as composed (overrides included)
+        robot = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")
+    problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     solver = job.solver
     if job.max_iterations is not None:
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
                        4 if solver.dtype == "float32" else 8, device)
-    robot_and_ik(problem.robot)  # the robot and its FCNN checkpoint (refused if corrupted); cached for the job
+    robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     return job, problem, device, out, solver
 
 
@@ -124,7 +133,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     job, problem, device, out, solver = prepare_solve(cfg, run_dir)
     run_dir = Path(run_dir)
     torch.set_num_threads(job.threads)
-    robot, ik = robot_and_ik(problem.robot)
+    robot, ik = robot_and_ik(problem.robot_cfg)
     trials = job.trials
     result = solve(problem, trials=trials, seed=job.seed, solver=solver, srv=job.srv, reward=job.reward,
                    noise=job.noise, robot=robot, finger_ik=ik, device=device)

@@ -11,6 +11,7 @@ import torch
 from graspnet_torch.fcnn.checkpoint import load_finger_ik
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
+from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
@@ -26,10 +27,26 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
 
 @lru_cache(maxsize=8)
-def robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK]:
-    """The shipped robot and its trained FCNN (cached per process)."""
+def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK]:
     robot = Robot.from_config(robot_name)
     return robot, load_finger_ik(robot)
+
+
+def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK]:
+    """A robot and its trained FCNN: a shipped robot by name (cached per process), or a robot
+    config; a config that differs from the shipped one of its name only in its search space,
+    home posture or description reuses the shipped kinematics and FCNN."""
+    if isinstance(robot, str):
+        return _shipped_robot_and_ik(robot)
+    if robot.name in available_robots():
+        shipped = load_robot_cfg(robot.name)
+        if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
+            return _shipped_robot_and_ik(robot.name)
+    built = Robot(robot)
+    return built, load_finger_ik(built)
+
+
+KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points")
 
 
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,

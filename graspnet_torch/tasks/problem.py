@@ -287,12 +287,12 @@ class GraspProblem:
                                 allow_outside_paths=allow_outside_paths)
 
     @classmethod
-    def from_task(cls, name: str) -> GraspProblem:
+    def from_task(cls, name: str, robot_cfg: RobotCfg | None = None) -> GraspProblem:
         """A task shipped under ``configs/task/<name>.yaml``."""
         path = configs_dir() / "task" / f"{name}.yaml"
         if not path.is_file():
             raise ProblemError(f"unknown task '{name}': expected one of {', '.join(available_tasks())} (configs/task/)")
-        problem = cls.from_file(path)
+        problem = cls.from_file(path, robot_cfg=robot_cfg)
         return problem if problem.name else cls(**{**problem.__dict__, "name": name})
 
     # ------------------------------------------------------------------ views

@@ -112,3 +112,32 @@ def test_a_picture_failure_after_the_result_is_a_warning(tmp_path, monkeypatch, 
     assert json.loads(out.read_text())["robot"] == "hand"
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["warning: pictures not written: RuntimeError: no display second line"]
+
+
+def test_the_robot_group_is_honoured(tmp_path):
+    """An override of robot.palm_bounds changes the search space: every trial's palm pose lies in
+    the narrowed bounds (a box around glass3's reference posture)."""
+    from graspnet_torch.jobs import solve_grasp as job
+
+    ref = [-0.0209, -0.0002, 0.2011, -19.43, 3.52, -80.42]
+    lo = [v - d for v, d in zip(ref, (0.01, 0.01, 0.01, 5, 5, 5), strict=True)]
+    hi = [v + d for v, d in zip(ref, (0.01, 0.01, 0.01, 5, 5, 5), strict=True)]
+    import yaml
+
+    from graspnet_torch.paths import configs_dir
+
+    robot = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    robot["palm_bounds"] = {"min": lo, "max": hi}
+    result = job.solve_grasp({**_job_cfg(tmp_path / "r.json"), "robot": robot, "max_iterations": 20}, tmp_path)
+    for t in result.trials:
+        assert all(a - 1e-6 <= v <= b + 1e-6 for v, a, b in zip(t.palm_pose, lo, hi, strict=True)), t.palm_pose
+    wide = job.solve_grasp({**_job_cfg(tmp_path / "w.json"), "max_iterations": 20}, tmp_path)
+    assert any(not all(a <= v <= b for v, a, b in zip(t.palm_pose, lo, hi, strict=True)) for t in wide.trials)
+
+
+def test_group_sweeps_run_every_job(tmp_path):
+    res = _run("-m", "task=glass3,glass4", "trials=2", "max_iterations=5", "pictures=false", "tensorboard=false",
+               f"hydra.sweep.dir={tmp_path}")
+    assert res.returncode == 0, res.stderr
+    robots = [json.loads((tmp_path / str(k) / "result.json").read_text())["problem"] for k in (0, 1)]
+    assert robots == ["glass3", "glass4"]
