@@ -112,6 +112,9 @@ def _hydra_args(argv: list[str]):
 
     parser.error = refuse  # argparse calls this for every mistake
     args, unknown = parser.parse_known_args(argv)
+    if args.config_name or args.config_path or args.config_dir:
+        raise ConfigError("--config-name, --config-path and --config-dir are not supported: this script's settings "
+                          "are configs/ with key=value overrides; your own problems go in problem=PATH")
     options = [a for a in unknown if a.startswith("-")]
     if options:
         raise ConfigError(f"unknown option '{clip(options[0], 60)}': settings are key=value; options are "
@@ -160,25 +163,40 @@ def check_overrides(argv: list[str], schema: type) -> None:
                 check_value(tp, meta, v, key)
 
 
-def compose_for_check(config_name: str, argv: list[str]) -> tuple[dict, str] | None:
-    """The config Hydra will compose for a single run, as a plain dict, and its run folder; ``None``
-    where there is nothing single to check (``-m`` sweeps, ``--cfg``, ``--help``, another config)."""
+MAX_CHECKED_JOBS = 256  # a sweep's first jobs composed and checked before it starts
+
+
+def compose_for_check(config_name: str, argv: list[str]) -> list[tuple[dict, str]]:
+    """The configs Hydra will compose, as plain dicts, each with its run folder: one for a single
+    run, one per job of a ``-m`` sweep (its first :data:`MAX_CHECKED_JOBS`); none for ``--cfg``,
+    ``--help`` and the like."""
     from hydra import compose, initialize_config_dir
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
     from graspnet_torch.paths import configs_dir
 
     args = _hydra_args(argv)
-    if (args.multirun or args.cfg or args.help or args.hydra_help or args.info or args.shell_completion
-            or args.config_name or args.config_path or args.config_dir or args.experimental_rerun):
-        return None
+    if args.cfg or args.help or args.hydra_help or args.info or args.shell_completion or args.experimental_rerun:
+        return []
+    if args.multirun:
+        parsed = OverridesParser.create().parse_overrides(args.overrides)
+        jobs = [job for batch in BasicSweeper.split_arguments(parsed, MAX_CHECKED_JOBS) for job in batch]
+        jobs = jobs[:MAX_CHECKED_JOBS]
+    else:
+        jobs = [args.overrides]
+    out = []
     try:
         with initialize_config_dir(config_dir=str(configs_dir()), version_base="1.3", job_name=config_name):
-            cfg = compose(config_name=config_name, overrides=args.overrides, return_hydra_config=True)
+            for overrides in jobs:
+                cfg = compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
+                key = "hydra.sweep.dir" if args.multirun else "hydra.run.dir"
+                out.append((container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])),
+                            str(OmegaConf.select(cfg, key))))
     except (ValueError, TypeError, KeyError) as exc:  # Hydra raises these for some malformed overrides
         raise ConfigError(f"cannot compose the settings: {_one_line(exc)}") from None
-    run_dir = str(OmegaConf.select(cfg, "hydra.run.dir"))
-    return container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])), run_dir
+    return out
 
 
 def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = None, config_name: str | None = None,
@@ -189,9 +207,9 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     Args:
         main: the ``@hydra.main`` function.
         schema: the job's settings dataclass (:mod:`graspnet_torch.jobs.configs`).
-        config_name, prepare: for a single run, the config is composed once here and handed to
-            ``prepare(cfg, run_dir)``, the job's own checks (problem, output path, memory...), so
-            that a refusal happens before Hydra makes the run folder.
+        config_name, prepare: the config of a single run (or of each job of a sweep) is composed
+            once here and handed to ``prepare(cfg, run_dir)``, the job's own checks (problem,
+            output path, memory...), so that a refusal happens before Hydra makes any folder.
     """
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
@@ -202,9 +220,8 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
             raise _SkipChecks
         check_overrides(argv, schema)
         if prepare is not None and config_name is not None:
-            composed = compose_for_check(config_name, argv)
-            if composed is not None:
-                prepare(*composed)
+            for cfg, run_dir in compose_for_check(config_name, argv):
+                prepare(cfg, run_dir)
     except _SkipChecks:
         pass
     except (GraspnetError, HydraException, OmegaConfBaseException) as exc:

@@ -115,9 +115,12 @@ BASE_BYTES = 768 << 20  # torch, the robot, the FCNN (measured: 300-530 MB)
 
 
 def estimate_solve_memory(trials: int, iterations: int, fingers: int, n: int = 6, history: bool = True,
-                          itemsize: int = 4) -> int:
-    """Peak bytes of a solve of ``trials`` x ``iterations`` (an upper estimate; see the constants)."""
+                          itemsize: int = 4, hidden: tuple[int, int] = (20, 20)) -> int:
+    """Peak bytes of a solve of ``trials`` x ``iterations`` (an upper estimate; see the constants);
+    each trial's network (weights, their updates and the layers' activations) counts 4 times."""
+    h1, h2 = hidden
     per_trial = WORK_BYTES_PER_FINGER * fingers * itemsize // 4
+    per_trial += 4 * itemsize * (2 * n * h1 + h1 * h2 + h2 * n + h1 + h2 + n)
     if history:
         per_trial += iterations * HISTORY_FACTOR * itemsize * (3 + 2 * n + fingers)
     return BASE_BYTES + trials * per_trial
@@ -136,9 +139,9 @@ def available_memory() -> int:
 
 
 def check_solve_memory(trials: int, iterations: int, fingers: int, history: bool, itemsize: int,
-                       device=None) -> int:
+                       device=None, hidden: tuple[int, int] = (20, 20)) -> int:
     """Refuse a solve that cannot fit in memory, naming the estimate; returns the estimate."""
-    need = estimate_solve_memory(trials, iterations, fingers, history=history, itemsize=itemsize)
+    need = estimate_solve_memory(trials, iterations, fingers, history=history, itemsize=itemsize, hidden=hidden)
     if device is not None and getattr(device, "type", "cpu") == "cuda":
         import torch
 

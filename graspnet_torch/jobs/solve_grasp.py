@@ -89,12 +89,14 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
                     writer.add_scalar(f"{tag}/error_mm/{finger}", float(history["errors"][k, t, f]) * 1000, k + 1)
 
 
-def _trial_table(result: GraspResult, fingers: tuple[str, ...]) -> str:
+def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
+    """One row per trial (the first ``max_rows``; the result JSON has them all)."""
     headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "reinforcement"]
     rows = [[k, "yes" if t.success else "no", t.iterations, t.total_error_mm,
              *[t.fingertip_error_mm[f] for f in fingers], round(t.reinforcement, 5)]
-            for k, t in enumerate(result.trials)]
-    return format_table(headers, rows, floatfmt=".3g")
+            for k, t in enumerate(result.trials[:max_rows])]
+    more = len(result.trials) - max_rows
+    return format_table(headers, rows, floatfmt=".3g") + (f"\n... {more} more trials in the result" if more > 0 else "")
 
 
 def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
@@ -118,7 +120,7 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     if job.max_iterations is not None:
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
-                       4 if solver.dtype == "float32" else 8, device)
+                       4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
     robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     return job, problem, device, out, solver
 

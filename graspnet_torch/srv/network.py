@@ -44,7 +44,7 @@ class SRVNetCfg:
         sigma: the standard-deviation function s(r_hat) of eq. 11 (left open by the paper).
     """
 
-    hidden: tuple[int, int] = setting((20, 20), lo=1, hi=4096)
+    hidden: tuple[int, int] = setting((20, 20), lo=1, hi=1024)
     init_range: float = setting(0.5, lo=0.0, lo_open=True, hi=100.0)
     lr_bp: float = setting(0.01, lo=0.0, hi=100.0)
     lr_srv: float = setting(0.01, lo=0.0, hi=100.0)

@@ -29,7 +29,7 @@ def _run(script: str, *args: str, timeout: float = 120) -> tuple[subprocess.Comp
 def _refused(tmp_path: Path, script: str, *args: str, message: str) -> str:
     """Run ``script`` with its outputs under tmp_path/run; assert a clean refusal; return the line."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    res, seconds = _run(script, *args, f"hydra.run.dir={tmp_path / 'run'}")
+    res, seconds = _run(script, *args, f"hydra.run.dir={tmp_path / 'run'}", f"hydra.sweep.dir={tmp_path / 'run'}")
     lines = res.stderr.strip().splitlines()
     assert res.returncode == 2, res.stderr[-2000:]
     assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.stderr, res.stderr[-2000:]
@@ -73,6 +73,10 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["task=null"], "task=null: expected one of block5, glass3"),
     (["--foo"], "unknown option '--foo'"),
     (["--cfg", "nonsense"], "argument --cfg/-c: invalid choice"),
+    (["--config-name=train_fcnn"], "--config-name, --config-path and --config-dir are not supported"),
+    (["-m", "seed=0,1", "problem=/dev/zero"], "/dev/zero: the problem file is not a regular file"),
+    (["-m", "seed=0,1", "trials=200000000"], "trials=200000000 x max_iterations=2000 needs about"),
+    (["srv.hidden=[4096,4096]"], "srv.hidden[0]=4096: expected an integer in [1, 1024]"),
 ])
 def test_bad_settings_are_refused_before_any_work(tmp_path, args, message):
     _refused(tmp_path, "solve_grasp.py", *args, message=message)
