@@ -1,7 +1,8 @@
 """The files a user names, read and written safely.
 
-- :func:`read_document`: a problem or config file (YAML or JSON) with a size cap, UTF-8 only, no
-  YAML aliases (a "billion laughs" file cannot expand), bounded nesting.
+- :func:`read_document`: a problem or config file (YAML or JSON) with a size cap, UTF-8 only, a
+  bounded expansion of YAML aliases (a "billion laughs" file is refused before it expands),
+  bounded nesting.
 - :func:`confined_file`: a path written *inside* such a file (a mesh, a URDF) must stay within the
   file's folder, the repository or an installed Python package, unless the user allows any path;
   a path outside gets the same message whether or not a file is there.
@@ -28,32 +29,54 @@ from graspnet_torch.errors import GraspnetError
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import clip, short
 
-__all__ = ["MAX_DOCUMENT_BYTES", "MAX_MESH_BYTES", "allowed_roots", "check_output_path", "confined_file",
+__all__ = ["MAX_DOCUMENT_BYTES", "MAX_EXPANDED_VALUES", "MAX_MESH_BYTES", "allowed_roots", "check_output_path",
+           "confined_file",
            "parse_document", "read_document"]
 
 MAX_DOCUMENT_BYTES = 1 << 20  # a problem or config file: 1 MiB (the shipped ones are about 1 KiB)
 MAX_MESH_BYTES = 64 << 20  # a mesh file named by a problem or URDF: 64 MiB
 
 
-class _AliasRefused(yaml.YAMLError):
-    def __init__(self, line: int):
-        super().__init__(f"line {line}")
-        self.line = line
+MAX_EXPANDED_VALUES = 100_000  # a problem file has about 100; an alias bomb has billions
 
 
-class _NoAliasLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing aliases (``*name``): plain data needs none, and an alias bomb
-    would expand into gigabytes once converted."""
+class _TooLarge(yaml.YAMLError):
+    def __init__(self, size: int):
+        super().__init__(f"{size} values")
+        self.size = size
 
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            raise _AliasRefused(self.peek_event().start_mark.line + 1)
-        return super().compose_node(parent, index)
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """Values the document holds once every alias is expanded (counted, not expanded: each
+    distinct node is visited once)."""
+    key = id(node)
+    if key not in memo:
+        if isinstance(node, yaml.SequenceNode):
+            memo[key] = 1 + sum(_expanded_size(n, memo) for n in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            memo[key] = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+        else:
+            memo[key] = 1
+    return memo[key]
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with a bounded expansion of aliases (``*name``): a document whose
+    expanded size exceeds :data:`MAX_EXPANDED_VALUES` is refused before anything is built, so an
+    alias bomb ("billion laughs") cannot grow into gigabytes, while the aliases ``yaml.safe_dump``
+    writes for repeated values still load."""
+
+    def compose_document(self):
+        node = super().compose_document()
+        size = _expanded_size(node, {})
+        if size > MAX_EXPANDED_VALUES:
+            raise _TooLarge(size)
+        return node
 
 
 # YAML 1.1 (PyYAML) reads 1e3 and 1.0e308 as strings (its floats need a '.' and a signed exponent);
 # read them as numbers, as YAML 1.2 and JSON do. Integers still match the int resolver first.
-_NoAliasLoader.add_implicit_resolver(
+_BoundedLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|\.[0-9_]+(?:[eE][-+]?[0-9]+)?)$"),
     list("-+0123456789."),
@@ -98,7 +121,7 @@ def read_document(path: str | os.PathLike, what: str, error: type[GraspnetError]
 
 
 def parse_document(raw: bytes, where: str, json_: bool, error: type[GraspnetError]) -> Any:
-    """Decode UTF-8 bytes and parse JSON or YAML (no aliases), refusing with one line."""
+    """Decode UTF-8 bytes and parse JSON or YAML (aliases bounded), refusing with one line."""
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -106,9 +129,10 @@ def parse_document(raw: bytes, where: str, json_: bool, error: type[GraspnetErro
     try:
         if json_:
             return json.loads(text)
-        return yaml.load(text, Loader=_NoAliasLoader)  # a SafeLoader subclass
-    except _AliasRefused as exc:
-        raise error(f"{where}: YAML aliases (*name) are not allowed (line {exc.line}); write the values out") from None
+        return yaml.load(text, Loader=_BoundedLoader)  # a SafeLoader subclass
+    except _TooLarge as exc:
+        raise error(f"{where}: expands to {exc.size} values through YAML aliases (*name); at most "
+                    f"{MAX_EXPANDED_VALUES} are allowed") from None
     except json.JSONDecodeError as exc:
         raise error(f"{where}: malformed JSON (line {exc.lineno}: {exc.msg})") from None
     except yaml.YAMLError as exc:
@@ -176,6 +200,13 @@ def confined_file(raw: Any, where: str, bases: tuple[Path, ...], error: type[Gra
     raise error(f"{where}: file not found: {clip(text, 120)}")
 
 
+def _name_max(folder: Path) -> int:
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
 def check_output_path(path: Any, what: str, error: type[GraspnetError]) -> Path:
     """A path a result will be written to, checked before any work: a regular file or nothing yet,
     below folders that exist or can be made, the nearest existing one writable (probed with a
@@ -192,8 +223,15 @@ def check_output_path(path: Any, what: str, error: type[GraspnetError]) -> Path:
         if not stat.S_ISREG(st.st_mode):
             raise error(f"{what}={clip(text, 120)}: exists and is not a regular file; it will not be replaced")
     folder = p.absolute().parent
+    created = [p.name]
     while not os.path.lexists(folder) and folder != folder.parent:
+        created.append(folder.name)
         folder = folder.parent
+    limit = _name_max(folder)
+    for k, name in enumerate(created):  # the file itself also gets a temporary name 16 bytes longer
+        if len(name.encode()) + (16 if k == 0 else 0) > limit:
+            raise error(f"{what}={clip(text, 120)}: the name {clip(name, 40)} is too long for the file system "
+                        f"(at most {limit - (16 if k == 0 else 0)} bytes)")
     if not folder.is_dir():
         raise error(f"{what}={clip(text, 120)}: {clip(str(folder), 120)} is not a folder")
     try:

@@ -21,8 +21,11 @@ def test_plain_yaml_and_json_parse_and_yaml12_floats_are_numbers():
 
 
 def test_aliases_deep_nesting_and_bad_bytes_are_refused():
-    with pytest.raises(gt.ProblemError, match=r"YAML aliases \(\*name\) are not allowed \(line 2\)"):
-        _doc("a: &x [1, 2]\nb: *x\n")
+    assert _doc("a: &x [1, 2]\nb: *x\n") == {"a": [1, 2], "b": [1, 2]}  # what yaml.safe_dump writes
+    bomb = "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 10)}]\n" for k in range(1, 9))
+    with pytest.raises(gt.ProblemError, match=r"expands to 12\d{8} values through YAML aliases"):
+        _doc(bomb)
     with pytest.raises(gt.ProblemError, match="nested too deeply"):
         _doc("[" * 100_000 + "]" * 100_000, json_=True)
     with pytest.raises(gt.ProblemError, match=r"not UTF-8 text \(invalid byte at offset 3\)"):
@@ -92,3 +95,11 @@ def test_read_only_mount_is_refused_even_for_root():
         pytest.skip("no /proc")
     with pytest.raises(gt.ConfigError, match="cannot write in /proc"):
         check_output_path("/proc/graspnet-test/r.json", "out", gt.ConfigError)
+
+
+def test_names_too_long_for_the_file_system_are_refused(tmp_path):
+    with pytest.raises(gt.ConfigError, match="is too long for the file system"):
+        check_output_path(str(tmp_path / ("a" * 250)), "out", gt.ConfigError)
+    with pytest.raises(gt.ConfigError, match="is too long for the file system"):
+        check_output_path(str(tmp_path / ("b" * 300) / "r.json"), "out", gt.ConfigError)
+    assert check_output_path(str(tmp_path / ("c" * 200)), "out", gt.ConfigError)

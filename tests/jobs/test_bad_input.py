@@ -99,9 +99,15 @@ def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path)
 @pytest.mark.parametrize(("text", "message"), [
     # an alias bomb in each checked field: refused before anything expands
     ("a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\nrobot: hand\ncontacts:\n"
-     "  - {finger: *b, position: [0, 0, 0]}\n", "YAML aliases (*name) are not allowed (line 2)"),
+     "  - {finger: *b, position: [0, 0, 0]}\n", "unknown key(s) a, b"),
+    ("a: &a [x, x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+     "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]\n"
+     "e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]\nf: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]\n"
+     "g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]\nh: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]\n"
+     "i: &i [*h, *h, *h, *h, *h, *h, *h, *h, *h, *h]\nrobot: hand\ncontacts:\n  - {finger: *i, position: [0, 0, 0]}\n",
+     "values through YAML aliases (*name); at most 100000 are allowed"),
     ("robot: hand\npalm_bounds: &p {min: [0, 0, 0, 0, 0, 0], max: [1, 1, 1, 1, 1, 1]}\nobstacles: [*p]\n"
-     "contacts: []\n", "YAML aliases"),
+     "contacts: []\n", "need 2 to 5 contacts"),
     ("robot: hand\ncontacts:\n  - {finger: thumb, position: [1.0e308, 0, 0]}\n" + INDEX,
      "contacts[0].position[0]: 1e+308 is not a finite number within [-10, 10]"),
     ("robot: hand\ncontacts:\n  - {finger: thumb, position: ['0.03', 0, 0]}\n" + INDEX,
