@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.settings import clip
 
 if TYPE_CHECKING:  # pragma: no cover
     import pytorch_kinematics as pk
@@ -86,6 +87,9 @@ class ChainSpec:
         return T
 
 
+MAX_URDF_BYTES = 32 << 20
+
+
 class UrdfModel:
     """A URDF file parsed by pytorch-kinematics, with its serial chains on demand."""
 
@@ -93,13 +97,15 @@ class UrdfModel:
         self.path = Path(path)
         if not self.path.is_file():
             raise ConfigError(f"URDF file not found: {self.path}")
-        self.xml = self.path.read_text()
+        if self.path.stat().st_size > MAX_URDF_BYTES:
+            raise ConfigError(f"{self.path}: more than {MAX_URDF_BYTES} bytes; not a URDF this project reads")
+        self.xml = self.path.read_bytes()  # bytes: the XML parser honours an encoding declaration
         from pytorch_kinematics.urdf_parser_py.urdf import URDF
 
         try:
             self.robot = URDF.from_xml_string(self.xml)
         except Exception as exc:  # the parser raises assorted types on malformed XML
-            raise ConfigError(f"{self.path}: not a valid URDF ({exc})") from None
+            raise ConfigError(f"{self.path}: not a valid URDF ({clip(' '.join(str(exc).split()), 160)})") from None
         self.links: dict[str, object] = {link.name: link for link in self.robot.links}
         self.joints: dict[str, object] = {j.name: j for j in self.robot.joints}
         self.parent_joint: dict[str, object] = {j.child: j for j in self.robot.joints}

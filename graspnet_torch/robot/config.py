@@ -118,7 +118,7 @@ class RobotCfg:
             if not isinstance(data.get(key), str) or not data[key]:
                 raise ConfigError(f"{source}: '{key}' must be a non-empty string")
         fingers = {}
-        raw_fingers = data.get("fingers") or {}
+        raw_fingers = {} if data.get("fingers") is None else data["fingers"]
         if not isinstance(raw_fingers, Mapping):
             raise ConfigError(f"{source}: 'fingers' must map finger names to {{base, tip}}")
         for fname, chain in raw_fingers.items():
@@ -129,8 +129,8 @@ class RobotCfg:
         palm_bounds = PoseBounds.from_degrees(bounds, f"{source}: palm_bounds") if bounds is not None else None
         arm = _chain(data["arm"], f"{source}: arm") if data.get("arm") is not None else None
         base = _chain(data["mobile_base"], f"{source}: mobile_base") if data.get("mobile_base") is not None else None
-        points = data.get("gripper_points") or ()
-        if points and (not isinstance(points, list | tuple) or len(points) != 2
+        points = () if data.get("gripper_points") is None else data["gripper_points"]
+        if points != () and (not isinstance(points, list | tuple) or len(points) != 2
                        or not all(isinstance(p, str) for p in points)):
             raise ConfigError(f"{source}: 'gripper_points' must list two link names")
         if not fingers and not points:
@@ -138,7 +138,7 @@ class RobotCfg:
         if arm is None and palm_bounds is None:
             raise ConfigError(f"{source}: a robot without an 'arm' needs 'palm_bounds'")
         home = {}
-        raw_home = data.get("home") or {}
+        raw_home = {} if data.get("home") is None else data["home"]
         if not isinstance(raw_home, Mapping):
             raise ConfigError(f"{source}: 'home' must map joint names to numbers")
         for joint, value in raw_home.items():

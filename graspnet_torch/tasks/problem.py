@@ -238,7 +238,8 @@ class GraspProblem:
                 bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
             except ConfigError as exc:
                 raise ProblemError(str(exc)) from None
-        obstacles = data.get("obstacles") or []
+        obstacles = data.get("obstacles")
+        obstacles = [] if obstacles is None else obstacles
         if not isinstance(obstacles, list):
             raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
         if len(obstacles) > MAX_OBSTACLES:
