@@ -81,7 +81,7 @@ class ReferencePostureJobCfg:
 
     task: Free = None
     problem: str | None = None
-    restarts: int = setting(24, lo=1, hi=100_000)
+    restarts: int = setting(24, lo=1, hi=1000)
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     allow_outside_paths: bool = False
 

@@ -10,6 +10,8 @@ from typing import Any
 
 import torch
 
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
 from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot, load_robot_cfg
 from graspnet_torch.robot.ik import refine
@@ -54,9 +56,11 @@ def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str |
     """The checks of the job before any work: the settings and every robot's config; returns the
     robot names and the output folder (``out_dir``, else the run folder)."""
     job = build(InspectRobotsJobCfg, cfg)
+    out_dir = Path(job.out_dir) if job.out_dir else Path(run_dir)
     for name in job.robots:
-        load_robot_cfg(name)
-    return job.robots, Path(job.out_dir) if job.out_dir else Path(run_dir)
+        cfg = load_robot_cfg(name)
+        check_output_path(str(out_dir / f"{cfg.name}.png"), "out_dir", ConfigError)
+    return job.robots, out_dir
 
 
 def inspect_robots(names: Sequence[str] | None = None, out_dir: str | Path = "outputs/robots") -> list[dict]:

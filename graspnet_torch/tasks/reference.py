@@ -43,6 +43,7 @@ def find_reference_posture(robot: Robot, problem: GraspProblem, restarts: int = 
     flo, fhi = robot.finger_limits
     lo = np.concatenate([bounds.lower, flo[idx].ravel()])
     hi = np.concatenate([bounds.upper, fhi[idx].ravel()])
+    hi = np.maximum(hi, lo + 1e-9)  # a pinned coordinate (min = max): least squares needs lo < hi
     mid = (flo[idx] + fhi[idx]).ravel() / 2
     pose_mid, pose_half = (bounds.lower + bounds.upper) / 2, np.maximum((bounds.upper - bounds.lower) / 2, 1e-9)
     contacts = torch.as_tensor(problem.contacts_world(), dtype=torch.float64)

@@ -233,3 +233,14 @@ def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
     peak = int(res.stdout) * 1024
     estimate = estimate_solve_memory(4000, 60, 5)
     assert peak <= estimate < 3 * peak, (peak, estimate)
+
+
+@pytest.mark.parametrize(("script", "args", "message"), [
+    ("inspect_robots.py", ["robots=[octopus]"], "unknown robot 'octopus'"),
+    ("inspect_robots.py", ["robots=abc"], "robots='abc': expected a list"),
+    ("inspect_robots.py", ["out_dir=/dev/null"], "/dev/null is not a folder"),
+    ("reference_posture.py", ["restarts=0"], "restarts=0: expected an integer in [1, 1000]"),
+    ("reference_posture.py", ["task=bottle"], "unknown task 'bottle'"),
+])
+def test_the_other_scripts_refuse_bad_input_the_same_way(tmp_path, script, args, message):
+    _refused(tmp_path, script, *args, message=message)
