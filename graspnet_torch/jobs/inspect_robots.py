@@ -13,7 +13,7 @@ import torch
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
-from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot, load_robot_cfg
+from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot
 from graspnet_torch.robot.ik import refine
 from graspnet_torch.settings import build
 from graspnet_torch.table import format_table
@@ -53,13 +53,13 @@ def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, f
 
 
 def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str | Path) -> tuple[list[str], Path]:
-    """The checks of the job before any work: the settings and every robot's config; returns the
-    robot names and the output folder (``out_dir``, else the run folder)."""
+    """The checks of the job before any work: the settings, every robot (config and URDF) and the
+    output folder; returns the robot names and the folder (``out_dir``, else the run folder)."""
     job = build(InspectRobotsJobCfg, cfg)
     out_dir = Path(job.out_dir) if job.out_dir else Path(run_dir)
     for name in job.robots:
-        cfg = load_robot_cfg(name)
-        check_output_path(str(out_dir / f"{cfg.name}.png"), "out_dir", ConfigError)
+        robot = load_robot(name)  # the config and its URDF
+        check_output_path(str(out_dir / f"{robot.name}.png"), "out_dir", ConfigError)
     return job.robots, out_dir
 
 
