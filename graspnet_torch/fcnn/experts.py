@@ -33,8 +33,8 @@ class ExpertSetCfg:
         max_experts: most experts a finger may create (paper: 4 to 6 emerged).
     """
 
-    hidden: int = setting(35, lo=1, hi=4096)
-    max_experts: int = setting(6, lo=1, hi=256)
+    hidden: int = setting(35, lo=1, hi=1024)
+    max_experts: int = setting(6, lo=1, hi=64)
 
 
 class ExpertSet(nn.Module):

@@ -119,6 +119,9 @@ def _hydra_args(argv: list[str]):
     if options:
         raise ConfigError(f"unknown option '{clip(options[0], 60)}': settings are key=value; options are "
                           f"--help, --cfg job, -m (see --help)")
+    if unknown:  # settings after an option: argparse (and so Hydra) takes only one run of them
+        raise ConfigError(f"'{clip(unknown[0], 60)}' comes after an option: put options such as -m before the "
+                          f"key=value settings")
     return args
 
 

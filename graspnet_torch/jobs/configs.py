@@ -23,7 +23,8 @@ from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.srv.network import SRVNetCfg
 
 __all__ = ["InspectRobotsJobCfg", "ReferencePostureJobCfg", "SolveGraspJobCfg", "TrainFCNNJobCfg",
-           "available_memory", "check_device", "check_solve_memory", "estimate_solve_memory"]
+           "available_memory", "check_device", "check_solve_memory", "check_train_memory", "estimate_solve_memory",
+           "estimate_train_memory"]
 
 MAX_SEED = 2**63 - 1
 
@@ -64,7 +65,7 @@ class TrainFCNNJobCfg:
     checkpoint_every: int = setting(25, lo=1, hi=10_000_000)
     progress: bool = True
     threads: int = setting(2, lo=1, hi=1024)
-    eval_targets: int = setting(10_000, lo=1, hi=10_000_000)
+    eval_targets: int = setting(10_000, lo=1, hi=1_000_000)
 
 
 @dataclass(frozen=True)
@@ -124,6 +125,27 @@ def estimate_solve_memory(trials: int, iterations: int, fingers: int, n: int = 6
     if history:
         per_trial += iterations * HISTORY_FACTOR * itemsize * (3 + 2 * n + fingers)
     return BASE_BYTES + trials * per_trial
+
+
+def estimate_train_memory(cfg: FCNNTrainCfg, eval_targets: int, n: int = 4) -> int:
+    """Peak bytes of training one finger (an upper estimate, float32): the experts with their
+    gradients and Adam moments (x 4), the activations of the largest batch through every expert
+    (validation, evaluation, a training step: x 3), and the reaching motions of step 4 (every
+    unsolved target's random restarts, with their paths)."""
+    E, H = cfg.experts.max_experts, cfg.experts.hidden
+    params = E * (3 * H + H * H + H * n + 2 * H + n)
+    batch = max(cfg.val_targets, eval_targets, cfg.batch_size)
+    reach = cfg.targets_per_epoch * max(cfg.random_restarts, 1) * (64 * n + 32)
+    return BASE_BYTES + 4 * (4 * params + 3 * batch * E * (2 * H + n) + reach)
+
+
+def check_train_memory(cfg: FCNNTrainCfg, eval_targets: int) -> int:
+    """Refuse training settings that cannot fit in memory, naming the estimate."""
+    need, have = estimate_train_memory(cfg, eval_targets), available_memory()
+    if need > have:
+        raise ConfigError(f"these fcnn settings need about {need / 2**30:.1f} GiB of memory but {have / 2**30:.1f} GiB "
+                          f"are available: use fewer experts, hidden units, targets or restarts")
+    return need
 
 
 def available_memory() -> int:

@@ -19,7 +19,7 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
-from graspnet_torch.jobs.configs import TrainFCNNJobCfg
+from graspnet_torch.jobs.configs import TrainFCNNJobCfg, check_train_memory
 from graspnet_torch.robot.config import RobotCfg, load_robot_cfg
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build, clip
@@ -189,6 +189,7 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
     """Every check of the training job before any work, writing nothing: the settings, the robot
     config, the export path and, with ``resume``, the training state in ``run_dir``."""
     job = build(TrainFCNNJobCfg, cfg)
+    check_train_memory(job.fcnn, job.eval_targets)
     robot = job.robot
     if isinstance(robot, Mapping):
         robot_cfg = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")

@@ -244,3 +244,13 @@ def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
 ])
 def test_the_other_scripts_refuse_bad_input_the_same_way(tmp_path, script, args, message):
     _refused(tmp_path, script, *args, message=message)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["progress=false", "-m", "fcnn.epochs=1,2,abc"], "comes after an option: put options such as -m before"),
+    (["fcnn.experts.hidden=4096"], "fcnn.experts.hidden=4096: expected an integer in [1, 1024]"),
+    (["fcnn.val_targets=10000000"], "fcnn.val_targets=10000000: expected an integer in [1, 1000000]"),
+    (["fcnn.targets_per_epoch=100000", "fcnn.random_restarts=1000"], "GiB of memory but"),
+])
+def test_training_sizes_beyond_reason_or_memory_are_refused(tmp_path, args, message):
+    _refused(tmp_path, "train_fcnn.py", *args, message=message)
