@@ -212,6 +212,8 @@ def check_output_path(path: Any, what: str, error: type[GraspnetError]) -> Path:
     below folders that exist or can be made, the nearest existing one writable (probed with a
     temporary file, removed at once: permission bits alone mislead root and read-only mounts)."""
     text = _path_text(path, what, error)
+    if text.endswith(("/", os.sep)):
+        raise error(f"{what}={clip(text, 120)} ends with '/': give a file path, not a folder")
     p = Path(text).expanduser()
     if os.path.lexists(p):
         try:

@@ -136,7 +136,7 @@ def check_overrides(argv: list[str], schema: type) -> None:
 
     try:
         overrides = OverridesParser.create().parse_overrides(args.overrides)
-    except (HydraException, OmegaConfBaseException) as exc:
+    except (HydraException, OmegaConfBaseException, ValueError) as exc:  # ValueError: an int of 5000 digits
         raise ConfigError(f"cannot parse the command line: {_one_line(exc)}") from None
     for o in overrides:
         key = o.key_or_group

@@ -26,6 +26,7 @@ from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.settings import build, clip
 from graspnet_torch.solver.api import robot_and_ik, solve
 from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.hand import check_reach
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
@@ -121,7 +122,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
                        4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
-    robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
+    robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
+    check_reach(robot, problem)
     return job, problem, device, out, solver
 
 

@@ -4,6 +4,7 @@ closing accuracy table, and (``export``) the checkpoint that ``gt.load_finger_ik
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 import time
 from collections.abc import Mapping
@@ -76,6 +77,11 @@ def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
         raise CheckpointError(f"{path}: cannot resume, not a readable training state ({type(exc).__name__})") from None
     if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
         raise CheckpointError(f"{path}: cannot resume, not an FCNN training state")
+    shapes = {"robot": str, "seed": int, "cfg": dict, "fingerprints": dict, "fingers": dict, "finished": list}
+    wrong = [k for k, t in shapes.items() if not isinstance(state.get(k), t)]
+    if wrong or not all(isinstance(f, str) for f in [*state["finished"], *state["fingers"], *state["fingerprints"]]) \
+            or not all(isinstance(v, dict) for v in state["fingers"].values()):
+        raise CheckpointError(f"{path}: cannot resume, malformed training state ({', '.join(wrong) or 'fingers'})")
     bad = non_finite_tensors(state.get("fingers"))
     if bad:
         raise CheckpointError(f"{path}: cannot resume, non-finite values (NaN or infinity) in {', '.join(bad[:3])}")
@@ -123,11 +129,13 @@ def train_fcnn(
     state_path = run_dir / "state.pt"
     state = None
     if resume:
+        if os.path.lexists(state_path) and not state_path.is_file():
+            raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
         if state_path.is_file():
             state = _load_state(state_path, robot, cfg, seed)
-            print(f"resuming {state_path} (finished: {', '.join(state['finished']) or 'none'})", file=sys.stderr)
+            print(f"resuming {state_path} (finished: {', '.join(state['finished']) or 'none'})")
         else:
-            print(f"nothing to resume at {state_path}; starting a new run", file=sys.stderr)
+            print(f"nothing to resume at {state_path}; starting a new run")
     trainers: dict[str, FingerTrainer] = {}
     finished: list[str] = list(state["finished"]) if state else []
     points: dict[str, int] = {}
@@ -138,7 +146,11 @@ def train_fcnn(
             trainer = FingerTrainer(robot.fingers[finger].chain, cfg, seed=seed + 101 * robot.finger_index(finger),
                                     name=finger)
             if state and finger in state["fingers"]:
-                trainer.load_state_dict(state["fingers"][finger])
+                try:
+                    trainer.load_state_dict(state["fingers"][finger])
+                except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
+                    raise CheckpointError(f"{state_path}: cannot resume, the state of finger '{finger}' is malformed "
+                                          f"({type(exc).__name__})") from None
             trainers[finger] = trainer
             bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
                        disable=not progress, file=sys.stderr, dynamic_ncols=True, leave=True)
@@ -206,6 +218,8 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
         target = default_checkpoint(robot_cfg.name) if job.export is True else job.export
         check_output_path(str(target), "export", ConfigError)
     state_path = Path(run_dir) / "state.pt"
+    if job.resume and os.path.lexists(state_path) and not state_path.is_file():
+        raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
     if job.resume and state_path.is_file():
         _load_state(state_path, Robot(robot_cfg), job.fcnn, job.seed)
     return job, robot_cfg

@@ -20,7 +20,25 @@ from graspnet_torch.robot.transforms import pose_to_rt, untransform_points
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["HandEnvironment"]
+__all__ = ["HandEnvironment", "check_reach"]
+
+
+def check_reach(robot: Robot, problem: GraspProblem) -> None:
+    """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther from
+    the box of palm positions than the finger can reach (its base offset plus the lengths of its
+    links, an upper bound whatever the joints). Robots with an arm are left to their environment."""
+    if robot.has_body:
+        return
+    bounds = problem.bounds()
+    lo, hi = bounds.lower[:3], bounds.upper[:3]
+    for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
+        spec = robot.fingers[contact.finger]
+        offsets = spec.chain.offsets[:, :3, 3]
+        reach = float(np.linalg.norm(spec.base_in_palm[:3, 3]) + np.linalg.norm(offsets, axis=1).sum())
+        gap = float(np.linalg.norm(point - np.clip(point, lo, hi)))
+        if gap > reach:
+            raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the palm's "
+                               f"search space but the {contact.finger} reaches at most {reach:.3f} m from the palm")
 
 
 class HandEnvironment:

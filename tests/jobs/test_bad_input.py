@@ -70,6 +70,8 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["-m", "task=glass3,bottle"], "unknown task 'bottle'"),
     (["seed=${nope}"], "cannot resolve the settings"),
     (["trials=[1,"], "cannot parse the command line"),
+    (["seed=" + "9" * 5000], "cannot parse the command line: Exceeds the limit"),
+    (["out=/tmp/graspnet-no-such.d/"], "ends with '/': give a file path"),
     (["task=null"], "task=null: expected one of block5, glass3"),
     (["--foo"], "unknown option '--foo'"),
     (["--cfg", "nonsense"], "argument --cfg/-c: invalid choice"),
@@ -254,3 +256,9 @@ def test_the_other_scripts_refuse_bad_input_the_same_way(tmp_path, script, args,
 ])
 def test_training_sizes_beyond_reason_or_memory_are_refused(tmp_path, args, message):
     _refused(tmp_path, "train_fcnn.py", *args, message=message)
+
+
+def test_a_contact_out_of_reach_is_refused_before_the_solve(tmp_path):
+    text = "robot: hand\ncontacts:\n  - {finger: thumb, position: [9.9, 9.9, 9.9]}\n" + INDEX
+    path = _problem(tmp_path, text)
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="the thumb contact lies 16.888 m from the palm's")
