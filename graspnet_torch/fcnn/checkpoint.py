@@ -103,13 +103,16 @@ def _experts_from(entry: dict, robot: Robot, finger: str, where: str) -> ExpertS
 
 
 def load_finger_ik(robot: str | Robot = "hand", path: str | Path | None = None) -> FingerIK:
-    """Trained finger IK of a robot: ``checkpoints/<robot>/fcnn.pt`` unless ``path`` is given.
+    """Trained finger IK of a robot: ``path``, else the robot config's ``checkpoint`` (which may
+    be another robot's with the same finger chains: every finger's chain fingerprint must match),
+    else ``checkpoints/<robot>/fcnn.pt``.
 
     Raises:
         CheckpointError: missing, corrupted or mismatched checkpoint (the message names the file).
     """
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
-    path = Path(path) if path is not None else default_checkpoint(robot.name)
+    shared = path is None and robot.cfg.checkpoint is not None  # the robot config names another robot's file
+    path = Path(path) if path is not None else (robot.cfg.checkpoint or default_checkpoint(robot.name))
     where = str(path)
     if not path.is_file():
         raise CheckpointError(f"{where}: FCNN checkpoint not found; train one with "
@@ -121,7 +124,7 @@ def load_finger_ik(robot: str | Robot = "hand", path: str | Path | None = None) 
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
         raise CheckpointError(f"{where}: not an FCNN checkpoint (format {found!r}, expected {FORMAT!r})")
-    if payload.get("robot") != robot.name:
+    if payload.get("robot") != robot.name and not shared:
         raise CheckpointError(f"{where}: trained for robot '{payload.get('robot')}', not '{robot.name}'")
     try:
         fingers = payload["fingers"]

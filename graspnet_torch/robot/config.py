@@ -83,6 +83,8 @@ class RobotCfg:
         gripper_points: the two marked point links of a gripper (manus), or ().
         home: joint name -> home value as written in the file (degrees for revolute joints, metres
             for prismatic ones), for pictures; missing joints are 0.
+        checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
+            (``arm_hand`` reuses the hand's: same finger chains).
         source: the file this came from, for error messages.
     """
 
@@ -95,6 +97,7 @@ class RobotCfg:
     mobile_base: ChainCfg | None = None
     gripper_points: tuple[str, ...] = ()
     home: dict[str, float] = field(default_factory=dict)
+    checkpoint: Path | None = None
     source: str = "<memory>"
 
     @classmethod
@@ -109,7 +112,7 @@ class RobotCfg:
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
-                 "gripper_points", "home", "description"}
+                 "gripper_points", "home", "description", "checkpoint"}
         unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
@@ -146,9 +149,15 @@ class RobotCfg:
                                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
         bases = (Path(folder), repo_root()) if folder is not None else (repo_root(),)
         urdf = confined_file(data["urdf"], f"{source}: urdf", bases, ConfigError, allow_outside_paths)
+        checkpoint = None
+        if data.get("checkpoint") is not None:
+            raw = data["checkpoint"]
+            if not isinstance(raw, str) or not raw or len(raw) > 4096:
+                raise ConfigError(f"{source}: 'checkpoint' must be a file path, got {short(raw)}")
+            checkpoint = Path(raw) if Path(raw).is_absolute() else bases[0] / raw
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
-                   home=home, source=source)
+                   home=home, checkpoint=checkpoint, source=source)
 
 
 def _chain(value: Any, where: str) -> ChainCfg:

@@ -13,6 +13,7 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
 from graspnet_torch.robot.robot import Robot
+from graspnet_torch.solver.arm import ArmHandEnvironment
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.hand import HandEnvironment
@@ -89,7 +90,10 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
 
 def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, solver: SolverCfg,
                       dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu") -> Environment:
-    """The environment of a robot and a problem: a free palm (robots without an arm)."""
+    """The environment of a robot and a problem: a free palm (robots without an arm) or a palm
+    carried by an arm (an arm with fingers, any arm and any hand)."""
+    if robot.has_body:
+        return ArmHandEnvironment(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device)
     return HandEnvironment(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device)
 
 

@@ -31,7 +31,7 @@ class TrialResult:
     reinforcement: float  # noise-free, at the reported configuration
     wall_time_s: float
     collisions: int = 0
-    arm_joints: list[float] | None = None  # arm_hand and manus only (deg; metres for prismatic)
+    arm_joints: dict[str, float] | None = None  # robots with a body: by URDF joint name, chain order (deg; m)
 
     def to_dict(self) -> dict:
         d = asdict(self)

@@ -25,7 +25,8 @@ __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_ta
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
 MAX_OBSTACLES = 1000
-KNOWN_KEYS = {"robot", "object", "contacts", "palm_bounds", "obstacles", "name", "description", "reference", "notes"}
+KNOWN_KEYS = {"robot", "object", "contacts", "palm_bounds", "bounds", "obstacles", "name", "description", "reference",
+              "notes"}
 
 
 def _numbers(value: Any, n: int, where: str, what: str = "numbers", lo: float = -MAX_LENGTH_M,
@@ -162,6 +163,8 @@ class GraspProblem:
         object: the grasped object (optional; pictures and collisions); its pose places the
             object frame in the world. Without an object, the object frame is the world.
         palm_bounds: search space of the palm pose, or None for the robot's default.
+        joint_bounds: robots with an arm: (min, max) of its joints in chain order, as written
+            (degrees for revolute joints, metres for prismatic ones), or None for the joint limits.
         obstacles: other shapes in the world.
         name, description: for tasks.
         reference: a posture known to solve the problem (optional).
@@ -178,6 +181,7 @@ class GraspProblem:
     reference: ReferencePosture | None = None
     source: str = "<memory>"
     robot_cfg: RobotCfg | None = field(default=None, repr=False, compare=False)
+    joint_bounds: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -238,6 +242,24 @@ class GraspProblem:
                 bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
             except ConfigError as exc:
                 raise ProblemError(str(exc)) from None
+        joint_bounds = None
+        if data.get("bounds") is not None:
+            if robot_cfg.arm is None:
+                raise ProblemError(f"{source}: 'bounds' are an arm's joint ranges; robot '{robot}' has no arm "
+                                   f"(use palm_bounds)")
+            raw_b = data["bounds"]
+            if not isinstance(raw_b, Mapping) or _keys(raw_b, {"min", "max"}) or len(raw_b) != 2:
+                raise ProblemError(f"{source}: bounds: expected {{min: [...], max: [...]}} (arm joints in chain "
+                                   f"order, degrees or metres)")
+            lo_b, hi_b = (np.asarray(number_list(raw_b[k], None, f"{source}: bounds.{k}", ProblemError,
+                                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values"), dtype=np.float64)
+                          for k in ("min", "max"))
+            if lo_b.shape != hi_b.shape or not lo_b.size:
+                raise ProblemError(f"{source}: bounds: min and max must list the same joints")
+            if np.any(lo_b > hi_b):
+                raise ProblemError(f"{source}: bounds: min > max for joint(s) "
+                                   f"{', '.join(str(i) for i in np.nonzero(lo_b > hi_b)[0])}")
+            joint_bounds = (lo_b, hi_b)
         obstacles = data.get("obstacles")
         obstacles = [] if obstacles is None else obstacles
         if not isinstance(obstacles, list):
@@ -251,7 +273,7 @@ class GraspProblem:
                 raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
-                   source=source, robot_cfg=robot_cfg)
+                   source=source, robot_cfg=robot_cfg, joint_bounds=joint_bounds)
 
     @staticmethod
     def _reference(data: Any, contacts: list[Contact], robot_cfg: RobotCfg, source: str) -> ReferencePosture | None:

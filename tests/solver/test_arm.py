@@ -1,0 +1,85 @@
+"""The arm's environment on the one loop: arm joints -> palm -> FCNN fingers; results from FK."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.solver.arm import ArmHandEnvironment
+
+
+@pytest.fixture(scope="module")
+def arm_hand():
+    return gt.load_robot("arm_hand")
+
+
+def problem_from_arm_posture(robot, fingers, seed=0, bounds=None):
+    g = torch.Generator().manual_seed(seed)
+    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+    qa = lo + (hi - lo) * (0.3 + 0.4 * torch.rand(lo.shape, generator=g, dtype=torch.float64))
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = flo + (fhi - flo) * (0.2 + 0.6 * torch.rand(flo.shape, generator=g, dtype=torch.float64))
+    tips = robot.fingertips_world_from_body(qa, q)
+    data = {"robot": "arm_hand",
+            "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers]}
+    if bounds is not None:
+        data["bounds"] = bounds
+    return gt.GraspProblem.from_mapping(data, source="from-arm-posture"), qa
+
+
+def test_the_hand_checkpoint_serves_the_arm_hand(arm_hand):
+    ik = gt.load_finger_ik(arm_hand)  # configs/robot/arm_hand.yaml: checkpoint: checkpoints/hand/fcnn.pt
+    assert ik.finger_names == arm_hand.finger_names
+
+
+def test_evaluation_agrees_with_forward_kinematics(arm_hand):
+    problem, qa = problem_from_arm_posture(arm_hand, ("thumb", "index", "middle"), seed=1)
+    env = ArmHandEnvironment(arm_hand, problem, gt.load_finger_ik(arm_hand), dtype=torch.float64)
+    assert env.n == 7
+    configs = torch.stack([qa, (env.lower + env.upper) / 2])
+    ev = env.evaluate(configs)
+    q = arm_hand.home_posture().fingers.expand(2, -1, -1).clone()
+    q[:, env.idx] = ev.joints
+    tips = arm_hand.fingertips_world_from_body(configs, q)[:, env.idx]
+    err = torch.linalg.vector_norm(tips - torch.as_tensor(problem.contacts_world()), dim=-1)
+    assert torch.allclose(ev.finger_errors, err, atol=1e-9) and torch.allclose(ev.error, err.sum(1), atol=1e-9)
+    assert float(ev.error[0]) < 0.01  # at the posture that made the contacts, the FCNN nearly reaches them
+
+
+def test_solve_reports_arm_joints_by_name_and_checkable_errors(arm_hand):
+    problem, _ = problem_from_arm_posture(arm_hand, ("thumb", "index"), seed=2)
+    result = gt.solve(problem, trials=4, seed=0, max_iterations=60)
+    data = json.loads(result.to_json())
+    assert list(data["arm_joints"]) == list(arm_hand.body_joint_names)
+    d = math.pi / 180
+    for trial in [data, *data["trials"]]:
+        qa = torch.tensor([trial["arm_joints"][n] * d for n in arm_hand.body_joint_names], dtype=torch.float64)
+        q = torch.tensor([[a * d for a in trial["joints"][f]] for f in arm_hand.finger_names], dtype=torch.float64)
+        tips = arm_hand.fingertips_world_from_body(qa, q)
+        for f, mm in trial["fingertip_error_mm"].items():
+            contact = torch.as_tensor(problem.contacts_world()[problem.fingers.index(f)])
+            assert float(torch.linalg.vector_norm(tips[arm_hand.finger_index(f)] - contact)) * 1000 == pytest.approx(
+                mm, abs=1e-6)
+        _, t = arm_hand.palm_frame(qa)
+        assert trial["palm_pose"][:3] == pytest.approx(t.tolist(), abs=1e-9)
+
+
+def test_problem_bounds_limit_the_arm_search(arm_hand):
+    names = arm_hand.body_joint_names
+    lo = [10.0, 10.0, 0.0, 60.0, 0.0, 0.0, 0.0]
+    hi = [20.0, 20.0, 5.0, 70.0, 5.0, 5.0, 5.0]
+    problem, _ = problem_from_arm_posture(arm_hand, ("thumb", "index"), seed=3, bounds={"min": lo, "max": hi})
+    result = gt.solve(problem, trials=3, seed=0, max_iterations=20)
+    for t in result.trials:
+        for k, n in enumerate(names):
+            assert lo[k] - 1e-9 <= t.arm_joints[n] <= hi[k] + 1e-9
+    with pytest.raises(gt.ProblemError, match="robot 'arm_hand' has 7 arm joints"):
+        bad, _ = problem_from_arm_posture(arm_hand, ("thumb", "index"), bounds={"min": [0, 0], "max": [1, 1]})
+        gt.solve(bad, trials=1, max_iterations=1)
+    with pytest.raises(gt.ProblemError, match="'bounds' are an arm's joint ranges; robot 'hand' has no arm"):
+        gt.GraspProblem.from_mapping({"robot": "hand", "bounds": {"min": [0], "max": [1]}, "contacts": [
+            {"finger": "thumb", "position": [0, 0, 0.2]}, {"finger": "index", "position": [0, 0, 0.2]}]})
