@@ -95,7 +95,34 @@ def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
     for f, fp in state["fingerprints"].items():
         if f in robot.fingers and chain_fingerprint(robot.fingers[f].chain) != fp:
             raise CheckpointError(f"{path}: cannot resume, finger '{f}' of robot '{robot.name}' has changed")
+    for f, finger_state in state["fingers"].items():
+        _check_finger_state(path, robot, f, finger_state, cfg)
     return state
+
+
+def _check_finger_state(path: Path, robot: Robot, finger: str, state: dict, cfg: FCNNTrainCfg) -> None:
+    """The parts of a finger's training state that can be checked without building its trainer:
+    the keys, the experts' tensors (loaded into an expert set of the finger's size) and the data."""
+    from graspnet_torch.fcnn.experts import ExpertSet
+
+    where = f"{path}: cannot resume, the state of finger '{clip(finger, 40)}'"
+    if finger not in robot.fingers:
+        raise CheckpointError(f"{where} is not a finger of robot '{robot.name}'")
+    if set(state) != {"experts", "optimizer", "data", "generator", "epochs_done"}:
+        raise CheckpointError(f"{where} is malformed (keys)")
+    n = robot.fingers[finger].chain.n_joints
+    z3, zn = torch.zeros(3), torch.zeros(n)
+    try:
+        ExpertSet(n, z3, z3 + 1, zn, zn + 1, cfg.experts).load_state_dict(state["experts"])
+        data = state["data"]
+        x, q, owner = data["x"], data["q"], data["owner"]
+        ok = (x.dim() == 2 and x.shape[1] == 3 and tuple(q.shape) == (x.shape[0], n)
+              and tuple(owner.shape) == (x.shape[0],) and isinstance(state["epochs_done"], int)
+              and isinstance(state["generator"], torch.Tensor) and state["generator"].dtype == torch.uint8)
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as exc:
+        raise CheckpointError(f"{where} is malformed ({type(exc).__name__})") from None
+    if not ok:
+        raise CheckpointError(f"{where} is malformed (data shapes)")
 
 
 def train_fcnn(
