@@ -1,0 +1,165 @@
+"""Collision counts with python-fcl, the engine of record (shared/INTERFACE.md, "Collisions").
+
+A :class:`CollisionScene` holds the robot's links (the URDF's ``<collision>`` primitives) and the
+problem's environment: its obstacles and the grasped object. For a posture it counts
+
+- the distinct (robot link, obstacle) pairs whose geometries intersect, and
+- the robot links that penetrate the object by more than ``object_tolerance`` (2 mm), except the
+  distal links of the fingers that touch it at their contacts,
+
+with a broad phase (FCL's dynamic AABB tree over the links, one per environment element) and a
+narrow phase (FCL's primitive-primitive tests; penetration depth by GJK/EPA).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.tasks.problem import GraspProblem, Shape
+
+__all__ = ["CollisionReport", "CollisionScene", "fcl_geometry"]
+
+OBJECT_TOLERANCE_M = 0.002
+
+
+def fcl_geometry(kind: str, size: tuple[float, ...], mesh=None):
+    """An FCL geometry: box (full extents), cylinder (radius, length along z), sphere (radius), or
+    a triangle mesh (a ``trimesh.Trimesh`` in its own frame)."""
+    import fcl
+
+    if kind == "box":
+        return fcl.Box(*size)
+    if kind == "cylinder":
+        return fcl.Cylinder(size[0], size[1])
+    if kind == "sphere":
+        return fcl.Sphere(size[0])
+    model = fcl.BVHModel()
+    model.beginModel(len(mesh.vertices), len(mesh.faces))
+    model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
+    model.endModel()
+    return model
+
+
+def _transform(T: np.ndarray):
+    import fcl
+
+    return fcl.Transform(T[:3, :3], T[:3, 3])
+
+
+def _environment_object(shape: Shape):
+    """An obstacle or the object as an FCL collision object at its pose in the world."""
+    import fcl
+
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    T = np.eye(4)
+    T[:3, :3] = rpy_matrix_np(shape.pose[3:])
+    T[:3, 3] = shape.pose[:3]
+    if shape.kind == "mesh":
+        import trimesh
+
+        geometry = fcl_geometry("mesh", (), trimesh.load(shape.mesh, force="mesh"))
+    else:
+        geometry = fcl_geometry(shape.kind, shape.size)
+    return fcl.CollisionObject(geometry, _transform(T))
+
+
+@dataclass
+class CollisionReport:
+    """What :meth:`CollisionScene.check` found: ``count`` (INTERFACE.md's number), the colliding
+    (link, obstacle index) pairs and the links that penetrate the object (with depths in metres)."""
+
+    count: int
+    obstacle_pairs: list[tuple[str, int]]
+    object_links: dict[str, float]
+
+
+class CollisionScene:
+    """A robot's links against a problem's obstacles and object.
+
+    Args:
+        robot: the robot (its URDF's collision primitives).
+        problem: obstacles and object; its contact fingers' distal links may touch the object.
+        object_tolerance: penetration of the object (metres) below which a link does not count.
+    """
+
+    def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M):
+        import fcl
+
+        self.robot, self.problem, self.object_tolerance = robot, problem, object_tolerance
+        self.shapes = link_shapes(robot.urdf, "collision")
+        self.link_objects = [fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl.Transform()) for s in self.shapes]
+        self.obstacles = [_environment_object(o) for o in problem.obstacles]
+        self.object = _environment_object(problem.object) if problem.object is not None else None
+        self.touching = {self._distal_link(f) for f in problem.fingers}
+        self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
+        self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
+        self.links = fcl.DynamicAABBTreeCollisionManager()
+        self.links.registerObjects(self.link_objects)
+        self.links.setup()
+        self.environment = fcl.DynamicAABBTreeCollisionManager()
+        if self.obstacles:
+            self.environment.registerObjects(self.obstacles)
+        self.environment.setup()
+
+    def _distal_link(self, finger: str) -> str:
+        """The link nearest the fingertip that carries collision geometry (the one that touches)."""
+        with_geometry = {s.link for s in self.shapes}
+        link = self.robot.cfg.fingers[finger].tip
+        while link not in with_geometry and link in self.robot.urdf.parent_joint:
+            link = self.robot.urdf.parent_joint[link].parent
+        return link
+
+    def place(self, posture: Posture) -> None:
+        """Move every link's geometry to the posture (forward kinematics in float64)."""
+        frames = self.robot.link_frames(posture)
+        for obj, shape in zip(self.link_objects, self.shapes, strict=True):
+            obj.setTransform(_transform(frames[shape.link] @ shape.origin))
+        self.links.update()
+
+    def check(self, posture: Posture) -> CollisionReport:
+        """The collision count of a posture and what makes it up."""
+        import fcl
+
+        self.place(posture)
+        pairs: set[tuple[str, int]] = set()
+        if self.obstacles:
+            data = fcl.CollisionData(request=fcl.CollisionRequest(num_max_contacts=100000, enable_contact=True))
+            self.links.collide(self.environment, data, fcl.defaultCollisionCallback)
+            for contact in data.result.contacts:
+                a, b = contact.o1, contact.o2
+                link = self._link_of.get(id(a)) or self._link_of.get(id(b))
+                owner = self._owner.get(id(b), self._owner.get(id(a)))
+                if link is not None and owner is not None:
+                    pairs.add((link, owner))
+            if not pairs and data.result.is_collision:  # contacts not reported: fall back to pairwise tests
+                pairs = self._pairwise()
+        depths: dict[str, float] = {}
+        if self.object is not None:
+            request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
+            for obj, shape in zip(self.link_objects, self.shapes, strict=True):
+                if shape.link in self.touching:
+                    continue
+                result = fcl.CollisionResult()
+                if fcl.collide(obj, self.object, request, result):
+                    depth = max((c.penetration_depth for c in result.contacts), default=0.0)
+                    if depth > self.object_tolerance:
+                        depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
+        return CollisionReport(len(pairs) + len(depths), sorted(pairs), depths)
+
+    def _pairwise(self) -> set[tuple[str, int]]:
+        import fcl
+
+        pairs = set()
+        for obj, shape in zip(self.link_objects, self.shapes, strict=True):
+            for k, obstacle in enumerate(self.obstacles):
+                if fcl.collide(obj, obstacle, fcl.CollisionRequest(), fcl.CollisionResult()):
+                    pairs.add((shape.link, k))
+        return pairs
+
+    def count(self, posture: Posture) -> int:
+        return self.check(posture).count
