@@ -8,7 +8,6 @@ curves (like the paper's Fig. 3).
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Mapping
 from dataclasses import replace
@@ -24,7 +23,7 @@ from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_so
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.settings import build, clip
-from graspnet_torch.solver.api import robot_and_ik, solve
+from graspnet_torch.solver.api import robot_and_ik, solve, trial_posture
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.hand import check_reach
 from graspnet_torch.solver.result import GraspResult, TrialResult
@@ -62,12 +61,7 @@ def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, r
 
 def posture_of(robot, trial: TrialResult):
     """The :class:`~graspnet_torch.robot.Posture` of a reported trial (degrees -> radians)."""
-    from graspnet_torch.robot.robot import Posture
-
-    d = math.pi / 180
-    pose = torch.tensor(trial.palm_pose[:3] + [a * d for a in trial.palm_pose[3:]], dtype=torch.float64)
-    q = torch.tensor([[a * d for a in trial.joints[f]] for f in robot.finger_names], dtype=torch.float64)
-    return Posture(palm_pose=pose, fingers=q, body=torch.zeros(0, dtype=torch.float64))
+    return trial_posture(robot, trial)
 
 
 def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...], every: int = 10) -> None:
@@ -92,9 +86,10 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
 
 def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
     """One row per trial (the first ``max_rows``; the result JSON has them all)."""
-    headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "reinforcement"]
+    headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "collisions",
+               "reinforcement"]
     rows = [[k, "yes" if t.success else "no", t.iterations, t.total_error_mm,
-             *[t.fingertip_error_mm[f] for f in fingers], round(t.reinforcement, 5)]
+             *[t.fingertip_error_mm[f] for f in fingers], t.collisions, round(t.reinforcement, 5)]
             for k, t in enumerate(result.trials[:max_rows])]
     more = len(result.trials) - max_rows
     return format_table(headers, rows, floatfmt=".3g") + (f"\n... {more} more trials in the result" if more > 0 else "")
@@ -151,8 +146,10 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
         stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
     else:  # noise presets: a noisy signal crosses any threshold by chance
         stops = f"no stopping threshold: {trials} trials ran their whole budget"
+    free = sum(t.collisions == 0 for t in result.trials)
     print(f"\n{problem.name or problem.source}: {stops}; best total "
-          f"error {best.total_error_mm:.3f} mm ({per_finger}); median {np.median(errors):.3f} mm; "
+          f"error {best.total_error_mm:.3f} mm ({per_finger}), {best.collisions} collision(s); median "
+          f"{np.median(errors):.3f} mm; {free}/{trials} trials collision-free (FCL, INTERFACE.md); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")

@@ -12,7 +12,7 @@ from graspnet_torch.fcnn.checkpoint import load_finger_ik
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
-from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.arm import ArmHandEnvironment
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
@@ -22,7 +22,7 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "robot_and_ik", "solve"]
+__all__ = ["build_environment", "robot_and_ik", "solve", "trial_posture"]
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -97,11 +97,39 @@ def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, 
     return HandEnvironment(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device)
 
 
+def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:
+    """The :class:`~graspnet_torch.robot.Posture` of a reported trial (its degrees -> radians):
+    palm pose, every finger's joints and, for robots with a body, the body joints by name."""
+    get = trial.get if isinstance(trial, dict) else lambda k: getattr(trial, k)
+    d = math.pi / 180
+    palm = get("palm_pose")
+    pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
+    joints = get("joints")
+    q = torch.tensor([[a * d for a in joints[f]] for f in robot.finger_names], dtype=torch.float64)
+    q = q.reshape(robot.n_fingers, robot.joints_per_finger)
+    body = torch.zeros(0, dtype=torch.float64)
+    if robot.has_body:
+        arm = get("arm_joints")
+        body = torch.tensor([arm[n] * (d if kind == "revolute" else 1.0)
+                             for n, kind in zip(robot.body_joint_names, robot.body.joint_types, strict=True)],
+                            dtype=torch.float64)
+    return Posture(palm_pose=pose, fingers=q, body=body)
+
+
 def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: SolverCfg) -> list[TrialResult]:
     """Per-trial results: the environment's fields of the reported configuration (float64), the
-    noise-free reinforcement recomputed from them and success against the threshold."""
+    noise-free reinforcement recomputed from them, success against the threshold, and the
+    collision count by FCL (INTERFACE.md) of each reported posture when the problem has an object
+    or obstacles."""
     fields = env.report(outcome.config, outcome.evaluation)
-    collisions = outcome.evaluation.collisions
+    problem = env.problem
+    if problem.object is not None or problem.obstacles:
+        from graspnet_torch.collision import CollisionScene
+
+        scene = CollisionScene(env.robot, problem)
+        collisions = torch.tensor([scene.count(trial_posture(env.robot, f)) for f in fields])
+    else:
+        collisions = None
     error = torch.tensor([f.pop("error") for f in fields], dtype=torch.float64)
     evaluation = Evaluation(error=error, collisions=None if collisions is None else collisions.cpu())
     r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
