@@ -345,7 +345,7 @@ class Robot:
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
         """(4, 4) float64 world pose of every link, from pytorch-kinematics (for pictures and
         collision scenes; not a hot path)."""
-        chain = self.urdf.chain.to(dtype=torch.float64)
+        chain = self.urdf.chain64
         values = self.joint_values(posture)
         names = chain.get_joint_parameter_names()
         th = torch.tensor([[values.get(n, 0.0) for n in names]], dtype=torch.float64)
