@@ -24,7 +24,7 @@ from typing import Protocol
 import torch
 from torch import Tensor
 
-__all__ = ["Environment", "Evaluation"]
+__all__ = ["Environment", "Evaluation", "FingerEnvironment"]
 
 
 @dataclass
@@ -69,3 +69,111 @@ class Environment(Protocol):
     def evaluate(self, config: Tensor) -> Evaluation:
         """(T, n) configurations -> their evaluation."""
         ...
+
+
+class FingerEnvironment:
+    """What every environment whose fingers are placed by the FCNN shares (free palm, arm + hand):
+    the contacts expressed in each contact finger's base frame from a palm frame, the finger
+    joints by expert competition (+ refinement), the final polish and the float64 report.
+
+    Subclasses set ``n``, ``lower``, ``upper`` and define :meth:`palm_frame` (the palm in the world
+    for a configuration) and :meth:`clamp` (a configuration within its exact bounds, float64).
+    """
+
+    n: int
+    lower: Tensor
+    upper: Tensor
+
+    def __init__(self, robot, problem, ik, refine: int, candidates: int, dtype: torch.dtype,
+                 device: torch.device | str):
+        import numpy as np
+
+        from graspnet_torch.errors import ProblemError
+
+        missing = [f for f in problem.fingers if f not in ik.experts]
+        if missing:
+            raise ProblemError(f"{problem.source}: no FCNN experts for finger(s) {', '.join(missing)}")
+        self.robot, self.problem, self.ik = robot, problem, ik
+        self.refine, self.candidates = refine, candidates
+        self.fingers = problem.fingers
+        self.idx = [robot.finger_index(f) for f in self.fingers]
+        self.contacts = torch.as_tensor(problem.contacts_world(), dtype=dtype, device=device)  # (F, 3)
+        base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]),
+                               dtype=dtype, device=device)
+        self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
+        ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
+
+    def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
+        raise NotImplementedError
+
+    def clamp(self, config: Tensor) -> Tensor:
+        """(T, n) configurations -> float64 on the CPU, within the exact bounds."""
+        raise NotImplementedError
+
+    def targets(self, config: Tensor) -> Tensor:
+        """Contacts in each contact finger's base frame. config: (T, n) -> (T, F, 3)."""
+        from graspnet_torch.robot.transforms import untransform_points
+
+        R, t = self.palm_frame(config)
+        in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self.contacts)
+        return untransform_points(self.base_R, self.base_t, in_palm)
+
+    def finger_joints(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """Finger joints (T, F, j) within limits and fingertip errors (T, F) in metres."""
+        targets = self.targets(config)
+        if self.candidates > 1 and self.refine > 0:
+            return self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
+        if self.refine <= 0:
+            return self.ik.compete(targets, self.fingers)
+        q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
+        return self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
+
+    def evaluate(self, config: Tensor) -> Evaluation:
+        """config: (T, n) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, j)."""
+        q, errors = self.finger_joints(config)
+        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q)
+
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:
+        """Refine the finger joints of the reported configurations (the configuration kept); never
+        worse."""
+        if iterations <= 0:
+            return evaluation
+        with torch.inference_mode():
+            q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
+        return Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
+                          collisions=evaluation.collisions)
+
+    def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
+        """Per trial, the result fields of the reported configuration, recomputed in float64: the
+        palm pose, every finger's joints (the non-contact fingers at home), the fingertip errors by
+        forward kinematics against the contacts, and ``error`` (E, metres). The loop runs in
+        float32, whose rounded limits can exceed the exact ones by ~1e-7: configurations and joints
+        are clamped to the exact bounds and limits first."""
+        import math
+
+        from graspnet_torch.robot.transforms import rt_to_pose, transform_points
+
+        robot, problem = self.robot, self.problem
+        exact = self.clamp(config)
+        T = exact.shape[0]
+        flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+        q = robot.home_posture(torch.float64).fingers.expand(T, -1, -1).clone()
+        q[:, self.idx] = torch.clamp(evaluation.joints.detach().to(torch.float64).cpu(), flo[self.idx],
+                                     fhi[self.idx])
+        R, t = self.palm_frame(exact)
+        tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
+        contacts = torch.as_tensor(problem.contacts_world(), dtype=torch.float64)
+        err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
+        palm = rt_to_pose(R, t)
+        deg = 180.0 / math.pi
+        out = []
+        for k in range(T):
+            pose = palm[k].tolist()
+            out.append({
+                "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
+                "joints": {f: [v * deg for v in q[k, j].tolist()] for j, f in enumerate(robot.finger_names)},
+                "fingertip_error_mm": {f: float(err[k, j]) * 1000 for j, f in enumerate(problem.fingers)},
+                "error": float(err[k].sum()),
+            })
+        return out
