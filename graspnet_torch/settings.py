@@ -191,6 +191,23 @@ def build(cls: type[T], data: Any, where: str = "") -> T:
     return cls(**values)
 
 
+def unset(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` without the keys whose value is None where the field does not allow None: in a
+    group's YAML, ``null`` on such a key means "the robot's default" (e.g. ``srv.lr_bp``)."""
+    fields = _fields(cls)
+    return {k: v for k, v in data.items()
+            if not (v is None and k in fields and type(None) not in typing.get_args(fields[k][0]))}
+
+
+def with_defaults(cls: type[T], data: Mapping[str, Any] | T | None, defaults: Mapping[str, Any] | None,
+                  where: str = "") -> T:
+    """``cls`` from ``defaults`` (a robot's ``solver_defaults`` of this group) overridden by the
+    keys of ``data`` that are set (see :func:`unset`); an instance of ``cls`` is returned as is."""
+    if isinstance(data, cls):
+        return data
+    return build(cls, {**(defaults or {}), **unset(cls, data or {})}, where)
+
+
 def lookup(cls: type, dotted: str) -> tuple[Any, Mapping[str, Any]] | None:
     """Type and metadata of a dotted key below ``cls``; ``(Free, {})`` inside a free-form field;
     ``None`` for a key that does not exist."""

@@ -95,7 +95,7 @@ class CollisionScene:
         self.link_objects = [fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl.Transform()) for s in self.shapes]
         self.obstacles = [_environment_object(o) for o in problem.obstacles]
         self.object = _environment_object(problem.object) if problem.object is not None else None
-        self.touching = {self._distal_link(f) for f in problem.fingers}
+        self.touching = self.distal_links(robot, self.shapes, problem.fingers)
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
         self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
         self.links = fcl.DynamicAABBTreeCollisionManager()
@@ -106,13 +106,18 @@ class CollisionScene:
             self.environment.registerObjects(self.obstacles)
         self.environment.setup()
 
-    def _distal_link(self, finger: str) -> str:
-        """The link nearest the fingertip that carries collision geometry (the one that touches)."""
-        with_geometry = {s.link for s in self.shapes}
-        link = self.robot.cfg.fingers[finger].tip
-        while link not in with_geometry and link in self.robot.urdf.parent_joint:
-            link = self.robot.urdf.parent_joint[link].parent
-        return link
+    @staticmethod
+    def distal_links(robot: Robot, shapes: list, fingers: tuple[str, ...]) -> set[str]:
+        """For each finger, the link nearest its fingertip that carries collision geometry (the one
+        that touches the object at the contact)."""
+        with_geometry = {s.link for s in shapes}
+        out = set()
+        for finger in fingers:
+            link = robot.cfg.fingers[finger].tip
+            while link not in with_geometry and link in robot.urdf.parent_joint:
+                link = robot.urdf.parent_joint[link].parent
+            out.add(link)
+        return out
 
     def place(self, posture: Posture) -> None:
         """Move every link's geometry to the posture (forward kinematics in float64)."""

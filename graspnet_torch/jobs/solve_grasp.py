@@ -22,11 +22,12 @@ from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import RobotCfg
-from graspnet_torch.settings import build, clip
+from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import robot_and_ik, solve, trial_posture
-from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.solver.hand import check_reach
 from graspnet_torch.solver.result import GraspResult, TrialResult
+from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -105,12 +106,19 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         the settings, the problem, the device, the result path and the solver settings (with
         ``max_iterations`` applied).
     """
+    groups = {}
+    if isinstance(cfg, Mapping):  # null in a group's YAML: the robot's default (srv.lr_bp, reward.kind, ...)
+        groups = {name: dict(cfg.get(name) or {}) for name in ("srv", "reward")}
+        cfg = {**cfg, **{name: unset(cls, groups[name]) for name, cls in (("srv", SRVNetCfg), ("reward", RewardCfg))}}
     job = build(SolveGraspJobCfg, cfg)
     device = check_device(job.device)
     robot = job.robot
     if isinstance(robot, Mapping):  # the robot group, as composed (overrides included)
         robot = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")
     problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
+    defaults = problem.robot_cfg.solver_defaults
+    job = replace(job, srv=with_defaults(SRVNetCfg, groups.get("srv", job.srv), defaults.get("srv"), "srv"),
+                  reward=with_defaults(RewardCfg, groups.get("reward", job.reward), defaults.get("reward"), "reward"))
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     solver = job.solver
     if job.max_iterations is not None:

@@ -85,6 +85,9 @@ class RobotCfg:
             for prismatic ones), for pictures; missing joints are 0.
         checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
             (``arm_hand`` reuses the hand's: same finger chains).
+        solver_defaults: group ('srv', 'reward', 'solver') -> settings this robot uses unless the
+            user sets them (the ACNN's section 6.3 parameters for ``arm_hand``); checked against
+            the groups' dataclasses.
         source: the file this came from, for error messages.
     """
 
@@ -98,6 +101,7 @@ class RobotCfg:
     gripper_points: tuple[str, ...] = ()
     home: dict[str, float] = field(default_factory=dict)
     checkpoint: Path | None = None
+    solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
 
     @classmethod
@@ -112,7 +116,7 @@ class RobotCfg:
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
-                 "gripper_points", "home", "description", "checkpoint"}
+                 "gripper_points", "home", "description", "checkpoint", "solver_defaults"}
         unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
@@ -157,7 +161,7 @@ class RobotCfg:
             checkpoint = Path(raw) if Path(raw).is_absolute() else bases[0] / raw
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
-                   home=home, checkpoint=checkpoint, source=source)
+                   home=home, checkpoint=checkpoint, solver_defaults=_solver_defaults(data, source), source=source)
 
 
 def _chain(value: Any, where: str) -> ChainCfg:
@@ -195,3 +199,25 @@ def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
     data = read_document(path, "robot config", ConfigError)
     shipped = path.resolve().parent == (configs_dir() / "robot").resolve()
     return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent)
+
+
+def _solver_defaults(data: Mapping[str, Any], source: str) -> dict[str, dict[str, Any]]:
+    """The robot's ``solver_defaults``, each group checked against its dataclass."""
+    from graspnet_torch.settings import build
+    from graspnet_torch.solver.config import RewardCfg, SolverCfg
+    from graspnet_torch.srv.network import SRVNetCfg
+
+    raw = data.get("solver_defaults")
+    if raw is None:
+        return {}
+    groups = {"srv": SRVNetCfg, "reward": RewardCfg, "solver": SolverCfg}
+    if not isinstance(raw, Mapping) or any(k not in groups for k in raw):
+        raise ConfigError(f"{source}: 'solver_defaults' must map srv, reward or solver to settings")
+    out = {}
+    for group, values in raw.items():
+        where = f"{source}: solver_defaults.{group}"
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"{where}: expected a mapping of settings")
+        build(groups[group], dict(values), where)
+        out[group] = dict(values)
+    return out

@@ -19,6 +19,7 @@ from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.solver.loop import LoopOutcome, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
+from graspnet_torch.settings import with_defaults
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -61,7 +62,9 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         trials: independent learners run as one batch; the result reports each and the best.
         seed: all randomness (initial weights, random starts, exploration, sensor noise).
         max_iterations: overrides ``solver.max_iterations``.
-        solver, srv, reward, noise: settings (defaults: the paper's); ``noise`` may be sigma_n.
+        solver, srv, reward, noise: settings; ``None``: the robot's (its config's
+            ``solver_defaults``: the paper's section 5.1 for the hand, 6.3 for the arm) over the
+            paper's defaults; ``noise`` may be sigma_n.
         robot, finger_ik: override the shipped robot and its trained FCNN.
     """
     if not isinstance(problem, GraspProblem):
@@ -70,31 +73,38 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
     solver = solver or SolverCfg()
     if max_iterations is not None:
         solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
-    srv, reward = srv or SRVNetCfg(), reward or RewardCfg()
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
     if robot is None or finger_ik is None:
-        shipped_robot, shipped_ik = robot_and_ik(problem.robot)
+        shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
-    env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device)
+    defaults = robot.cfg.solver_defaults
+    srv = with_defaults(SRVNetCfg, srv, defaults.get("srv"), "srv")
+    reward = with_defaults(RewardCfg, reward, defaults.get("reward"), "reward")
+    env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
     if solver.final_refine > 0:
         outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
     trial_results = _report(env, outcome, reward, solver)
     settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
                 "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
-                "reward_a": reward.a, "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
+                "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
+                "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
+                "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
     return GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source, seed=seed,
                        settings=settings, outcome=outcome)
 
 
 def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, solver: SolverCfg,
-                      dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu") -> Environment:
+                      dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu",
+                      reward: RewardCfg | None = None) -> Environment:
     """The environment of a robot and a problem: a free palm (robots without an arm) or a palm
-    carried by an arm (an arm with fingers, any arm and any hand)."""
-    if robot.has_body:
-        return ArmHandEnvironment(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device)
-    return HandEnvironment(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device)
+    carried by an arm (an arm with fingers, any arm and any hand). It counts collisions (the
+    torch proxy of :mod:`graspnet_torch.collision.proxy`) when the reward uses them (R2-R4) and
+    the problem has an object or obstacles."""
+    collisions = reward is not None and reward.kind != "r1"
+    cls = ArmHandEnvironment if robot.has_body else HandEnvironment
+    return cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
 
 
 def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:

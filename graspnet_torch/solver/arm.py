@@ -52,10 +52,10 @@ class ArmHandEnvironment(FingerEnvironment):
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem, ik: FingerIK, refine: int = 0, candidates: int = 1,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"):
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False):
         if not robot.has_body or robot.n_fingers == 0:
             raise ProblemError(f"{problem.source}: robot '{robot.name}' is not an arm with fingers")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device)
+        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions)
         self.n = len(robot.body_joint_names)
         lo, hi = arm_bounds(robot, problem)
         self.lower = torch.as_tensor(lo, dtype=dtype, device=device)

@@ -85,7 +85,7 @@ class FingerEnvironment:
     upper: Tensor
 
     def __init__(self, robot, problem, ik, refine: int, candidates: int, dtype: torch.dtype,
-                 device: torch.device | str):
+                 device: torch.device | str, collisions: bool = False):
         import numpy as np
 
         from graspnet_torch.errors import ProblemError
@@ -102,6 +102,12 @@ class FingerEnvironment:
                                dtype=dtype, device=device)
         self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
+        self.proxy = None
+        if collisions and (problem.object is not None or problem.obstacles):
+            from graspnet_torch.collision.proxy import CollisionProxy
+
+            self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device)
+            self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
 
     def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
         """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
@@ -111,17 +117,18 @@ class FingerEnvironment:
         """(T, n) configurations -> float64 on the CPU, within the exact bounds."""
         raise NotImplementedError
 
-    def targets(self, config: Tensor) -> Tensor:
-        """Contacts in each contact finger's base frame. config: (T, n) -> (T, F, 3)."""
+    def targets(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None) -> Tensor:
+        """Contacts in each contact finger's base frame. config: (T, n) -> (T, F, 3); ``palm``: its
+        palm frame if already known."""
         from graspnet_torch.robot.transforms import untransform_points
 
-        R, t = self.palm_frame(config)
+        R, t = palm if palm is not None else self.palm_frame(config)
         in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self.contacts)
         return untransform_points(self.base_R, self.base_t, in_palm)
 
-    def finger_joints(self, config: Tensor) -> tuple[Tensor, Tensor]:
+    def finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None) -> tuple[Tensor, Tensor]:
         """Finger joints (T, F, j) within limits and fingertip errors (T, F) in metres."""
-        targets = self.targets(config)
+        targets = self.targets(config, palm)
         if self.candidates > 1 and self.refine > 0:
             return self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
         if self.refine <= 0:
@@ -130,9 +137,17 @@ class FingerEnvironment:
         return self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
 
     def evaluate(self, config: Tensor) -> Evaluation:
-        """config: (T, n) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, j)."""
-        q, errors = self.finger_joints(config)
-        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q)
+        """config: (T, n) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, j) and,
+        with a collision proxy, the collision count (T,) of the whole posture (the fingers without
+        a contact at home)."""
+        palm = self.palm_frame(config)
+        q, errors = self.finger_joints(config, palm)
+        collisions = None
+        if self.proxy is not None:
+            every = self.home.expand(q.shape[0], -1, -1).clone()
+            every[:, self.idx] = q
+            collisions = self.proxy.count(palm, every, config if self.robot.has_body else None)
+        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions)
 
     def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:
         """Refine the finger joints of the reported configurations (the configuration kept); never

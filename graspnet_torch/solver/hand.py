@@ -51,10 +51,10 @@ class HandEnvironment(FingerEnvironment):
     n = 6
 
     def __init__(self, robot: Robot, problem: GraspProblem, ik: FingerIK, refine: int = 1, candidates: int = 1,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"):
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False):
         if robot.has_body:
             raise ProblemError(f"{problem.source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device)
+        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions)
         bounds = problem.bounds()
         self.lower = torch.as_tensor(bounds.lower, dtype=dtype, device=device)
         self.upper = torch.as_tensor(bounds.upper, dtype=dtype, device=device)

@@ -1,0 +1,392 @@
+"""A batched torch approximation of the collision count, for the closed loop.
+
+FCL (``collision/scene.py``) is the engine of record, but it checks one posture at a time from
+Python: for T = 1000 trials it would cost far more than the rest of an iteration. The loop
+therefore counts collisions with this proxy, and every reported count still comes from FCL
+(tests measure how often the two agree on random configurations).
+
+The robot. Every collision primitive of the URDF becomes a few spheres fixed in its link:
+
+- a sphere is itself;
+- a cylinder (radius r, length L along z) becomes spheres of radius r whose centres run along
+  the axis from -(L/2 - e) to (L/2 - e), e = min(r/2, L/2), at most r/2 apart: a capsule-like
+  union whose waist is >= 0.97 r and which overshoots the flat ends by r/2 on the axis only;
+- a box becomes spheres of radius rho (its smallest half-extent) on a grid over the box shrunk
+  by rho, at most rho apart: a slab with rounded edges.
+
+Each sphere hangs from one *frame*: a level of the body chain (the first k arm joints), the palm,
+or a level of a finger chain (the first k finger joints), so that for a batch of configurations
+all sphere centres come from a few batched matrix products:
+
+    body level k:    P_k = F_0 M_0(q_0) F_1 M_1(q_1) ... F_{k-1} M_{k-1}(q_{k-1})    (chain.py)
+    finger level k:  W_palm B_f F_0 M_0(q_0) ... F_{k-1} M_{k-1}(q_{k-1})
+    M(q) = I + s(q) A + c(q) B:  revolute s = sin q, c = 1 - cos q, A = [a]x, B = [a]x^2 (Rodrigues);
+                                 prismatic s = q, c = 0, A = the axis as a translation.
+
+The environment. Signed distances of the sphere centres to the problem's primitives (exact for
+box, cylinder and sphere; a mesh is approximated by its bounding box in its own frame):
+
+    box (half-extents h):       d = |p| - h;  sd = |max(d, 0)| + min(max_i d_i, 0)
+    cylinder (r, half-height):  d = (|p_xy| - r, |p_z| - h);  same formula in 2-D
+    sphere (r):                 sd = |p| - r
+
+A sphere (c, rho) intersects an obstacle when sd(c) < rho, and penetrates the object by more
+than the tolerance tau when sd(c) < rho - tau. The count is INTERFACE.md's: distinct (link,
+obstacle) pairs plus links penetrating the object, the touching fingers' distal links excepted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.robot.geometry import Shape as LinkShape
+from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.tasks.problem import GraspProblem, Shape
+
+__all__ = ["CollisionProxy", "shape_spheres"]
+
+
+def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
+    """A link primitive as spheres in its link's frame: centres (k, 3), radii (k,)."""
+    if shape.kind == "sphere":
+        local, radii = np.zeros((1, 3)), np.array([shape.size[0]])
+    elif shape.kind == "cylinder":
+        r, length = shape.size
+        half = length / 2 - min(r / 4, length / 2)
+        k = max(1, math.ceil(2 * half / (r / 2)) + 1)
+        z = np.linspace(-half, half, k) if k > 1 else np.zeros(1)
+        local, radii = np.stack([np.zeros(k), np.zeros(k), z], axis=1), np.full(k, r)
+    elif shape.kind == "box":
+        h = np.asarray(shape.size, dtype=np.float64) / 2
+        rho = float(h.min())
+        axes = []
+        for hi in h - rho:
+            k = max(1, math.ceil(2 * hi / rho) + 1)
+            axes.append(np.linspace(-hi, hi, k) if k > 1 else np.zeros(1))
+        local = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        radii = np.full(len(local), rho)
+        # the slab's rounded rim misses the box's edges: spheres of radius rho/2 along the rim,
+        # rho/2 inside both faces that meet there, at most rho/2 apart
+        a = int(np.argmin(h))
+        b, c = [i for i in range(3) if i != a]
+        hb, hc, r2 = h[b] - rho / 2, h[c] - rho / 2, rho / 2
+        rim = []
+        for u0, u1, v0, v1 in ((-hb, hb, -hc, -hc), (hb, hb, -hc, hc), (hb, -hb, hc, hc), (-hb, -hb, hc, -hc)):
+            k = max(2, math.ceil(max(abs(u1 - u0), abs(v1 - v0)) / r2) + 1)
+            rim += [(u, v) for u, v in zip(np.linspace(u0, u1, k)[:-1], np.linspace(v0, v1, k)[:-1], strict=True)]
+        for side in (-1, 1):
+            for u, v in rim:
+                point = np.zeros(3)
+                point[a], point[b], point[c] = side * (h[a] - r2), u, v
+                local = np.vstack([local, point])
+                radii = np.append(radii, r2)
+    else:  # pragma: no cover - link_shapes refuses other kinds
+        raise ConfigError(f"link '{shape.link}': no sphere model for {shape.kind}")
+    centres = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
+    return centres, radii
+
+
+def _motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 4, 4) A and B of M(q) = I + s(q) A + c(q) B, and (n,) revolute mask."""
+    n = len(types)
+    A, B = np.zeros((n, 4, 4)), np.zeros((n, 4, 4))
+    for i, (a, kind) in enumerate(zip(axes, types, strict=True)):
+        if kind == "revolute":
+            K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+            A[i, :3, :3], B[i, :3, :3] = K, K @ K
+        else:
+            A[i, :3, 3] = a
+    return A, B, np.array([t == "revolute" for t in types])
+
+
+@dataclass
+class _Chain:
+    """Torch constants of one (batch of) serial chain(s): M(q) terms and offsets."""
+
+    A: Tensor  # (..., n, 4, 4)
+    B: Tensor
+    revolute: Tensor  # (..., n) bool
+    offsets: Tensor  # (..., n + 1, 4, 4)
+
+    def levels(self, q: Tensor, upto: int) -> list[Tensor]:
+        """q (T, ..., n) -> [P_0, ..., P_upto], each (T, ..., 4, 4) (P_0 = identity)."""
+        s = torch.where(self.revolute, torch.sin(q), q)
+        c = torch.where(self.revolute, 1 - torch.cos(q), torch.zeros_like(q))
+        eye = torch.eye(4, dtype=q.dtype, device=q.device)
+        M = eye + s[..., None, None] * self.A + c[..., None, None] * self.B  # (T, ..., n, 4, 4)
+        FM = self.offsets[..., :-1, :, :] @ M
+        P = [eye.expand(*q.shape[:-1], 4, 4)]
+        for k in range(upto):
+            P.append(FM[..., k, :, :] if k == 0 else P[-1] @ FM[..., k, :, :])
+        return P
+
+
+CLUSTER = 8  # spheres per cluster (a link's spheres are cut into clusters of at most this many)
+
+
+class CollisionProxy:
+    """The collision count of a robot in a problem, batched over configurations, in torch.
+
+    Args:
+        robot: the robot (its URDF's collision primitives).
+        problem: obstacles, object and contact fingers.
+        object_tolerance: penetration of the object (m) that counts (INTERFACE.md: 2 mm).
+
+    Call :meth:`count` with the palm frame, the body joints (robots with an arm) and every
+    finger's joints. Two phases, as FCL: each link's spheres are cut into clusters of at most
+    ``CLUSTER`` neighbours, each with a bounding sphere; a cluster's spheres are placed and tested
+    only where its bounding sphere meets an element (broad phase), so the cost follows the
+    number of near (cluster, element) pairs, not T x spheres x elements.
+    """
+
+    def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = 0.002,
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"):
+        from graspnet_torch.collision.scene import CollisionScene
+
+        self.robot = robot
+        shapes = link_shapes(robot.urdf, "collision")
+        touching = CollisionScene.distal_links(robot, shapes, problem.fingers)
+        frames = self._frames_at_zero(robot)
+        # the frame each link hangs from: ('body', k) | ('palm', 0) | ('finger', f, k)
+        by_link: dict[str, list] = {}
+        attach: dict[str, tuple] = {}
+        for shape in shapes:
+            where, G = self._attachment(robot, shape.link, frames)
+            attach[shape.link] = where
+            for c, r in zip(*shape_spheres(shape), strict=True):
+                by_link.setdefault(shape.link, []).append((G[:3, :3] @ c + G[:3, 3], float(r)))
+        self.links = list(by_link)
+        self.n_spheres = sum(len(v) for v in by_link.values())
+        self.body_levels = max((w[1] for w in attach.values() if w[0] == "body"), default=0)
+        self.finger_levels = max((w[2] for w in attach.values() if w[0] == "finger"), default=0)
+        # frames are stacked in a fixed order: body levels, palm, finger levels finger by finger
+        n_body = self.body_levels + 1 if robot.body is not None else 0
+        n_f = self.finger_levels + 1
+
+        def frame_id(w: tuple) -> int:
+            if w[0] == "body":
+                return w[1]
+            if w[0] == "palm":
+                return n_body
+            return n_body + 1 + w[1] * n_f + w[2]
+
+        clusters = []  # (frame id, link index, centres (k, 3), radii (k,))
+        for li, (link, spheres) in enumerate(by_link.items()):
+            for start in range(0, len(spheres), CLUSTER):
+                chunk = spheres[start:start + CLUSTER]
+                clusters.append((frame_id(attach[link]), li, np.stack([c for c, _ in chunk]),
+                                 np.array([r for _, r in chunk])))
+        C = len(clusters)
+        local = np.zeros((C, 4, CLUSTER))
+        radii = np.full((C, CLUSTER), np.nan)
+        bound = np.zeros((C, 4, 1))
+        bound_r = np.zeros(C)
+        for k, (_f, _l, c, r) in enumerate(clusters):
+            local[k, :3, :len(r)], local[k, 3, :len(r)], radii[k, :len(r)] = c.T, 1.0, r
+            centre = (c.min(0) + c.max(0)) / 2
+            bound[k, :3, 0], bound[k, 3, 0] = centre, 1.0
+            bound_r[k] = float(np.max(np.linalg.norm(c - centre, axis=1) + r))
+        kw = {"dtype": dtype, "device": device}
+        self._cluster_frame = torch.tensor([f for f, *_ in clusters], device=device)
+        self._cluster_link = torch.tensor([li for _, li, *_ in clusters], device=device)
+        self._cluster_local = torch.as_tensor(local, **kw)  # (C, 4, CLUSTER) homogeneous sphere centres
+        self._cluster_bound = torch.as_tensor(bound, **kw)  # (C, 4, 1) bounding-sphere centres
+        if robot.body is not None:
+            A, B, rev = _motion_terms(robot.body.axes, robot.body.joint_types)
+            self.body = _Chain(torch.as_tensor(A, **kw), torch.as_tensor(B, **kw), torch.as_tensor(rev, device=device),
+                               torch.as_tensor(robot.body.offsets, **kw))
+        if robot.n_fingers:
+            terms = [_motion_terms(f.chain.axes, f.chain.joint_types) for f in robot.fingers.values()]
+            self.fingers = _Chain(torch.as_tensor(np.stack([t[0] for t in terms]), **kw),
+                                  torch.as_tensor(np.stack([t[1] for t in terms]), **kw),
+                                  torch.as_tensor(np.stack([t[2] for t in terms]), device=device),
+                                  torch.as_tensor(np.stack([f.chain.offsets for f in robot.fingers.values()]), **kw))
+            self.base_in_palm = torch.as_tensor(np.stack([f.base_in_palm for f in robot.fingers.values()]), **kw)
+        self._bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], **kw)
+        # the environment: obstacles, then the object (its own threshold; touching links exempt)
+        elements = list(problem.obstacles)
+        margin = [0.0] * len(elements)
+        exempt: list[set] = [set()] * len(elements)
+        if problem.object is not None:
+            elements.append(problem.object)
+            margin.append(object_tolerance)
+            exempt.append(touching)
+        self.n_elements = len(elements)
+        self._groups = _primitive_groups(elements, kw)
+        for g in self._groups:
+            # a sphere (c, rho) hits element o when sd_o(c) < rho - margin_o; padding never hits
+            thr = radii[:, :, None] - np.array([margin[k] for k in g["index"]])  # (C, CLUSTER, O_g)
+            for col, k in enumerate(g["index"]):
+                for ci, (_f, li, *_r) in enumerate(clusters):
+                    if self.links[li] in exempt[k]:
+                        thr[ci, :, col] = -np.inf
+            thr = np.nan_to_num(thr, nan=-np.inf)
+            g["thr"] = torch.as_tensor(thr, **kw)
+            # broad phase: the bounding sphere within reach (never below zero: inside counts)
+            g["bound_thr"] = torch.as_tensor(bound_r[:, None] - np.array([margin[k] for k in g["index"]]), **kw)
+        self._column_of = {k: (gi, col) for gi, g in enumerate(self._groups) for col, k in enumerate(g["index"])}
+
+    @staticmethod
+    def _frames_at_zero(robot: Robot) -> dict[str, np.ndarray]:
+        zero = Posture(palm_pose=torch.zeros(6, dtype=torch.float64),
+                       fingers=torch.zeros(robot.n_fingers, robot.joints_per_finger, dtype=torch.float64),
+                       body=torch.zeros(len(robot.body_joint_names), dtype=torch.float64))
+        return robot.link_frames(zero)
+
+    @staticmethod
+    def _attachment(robot: Robot, link: str, frames: dict[str, np.ndarray]) -> tuple[tuple, np.ndarray]:
+        """Which frame a link hangs from and its (4, 4) pose in that frame (at any configuration)."""
+        urdf = robot.urdf
+        path = [link]  # link and its ancestors, up to the root
+        while path[-1] in urdf.parent_joint:
+            path.append(urdf.parent_joint[path[-1]].parent)
+
+        def movable(upto: str) -> int:
+            return sum(urdf.parent_joint[child].type != "fixed" for child in path[:path.index(upto)])
+
+        palm = robot.cfg.palm_link
+        for f, finger in enumerate(robot.fingers.values()):
+            if finger.chain.root in path:
+                k = movable(finger.chain.root)
+                P = np.eye(4)
+                for i in range(k):
+                    P = P @ finger.chain.offsets[i]
+                frame = frames[palm] @ finger.base_in_palm @ P
+                return ("finger", f, k), np.linalg.inv(frame) @ frames[link]
+        if palm in path:
+            if movable(palm):
+                raise ConfigError(f"{robot.cfg.source}: link '{link}' moves with the palm but is on no finger chain")
+            return ("palm", 0), np.linalg.inv(frames[palm]) @ frames[link]
+        if robot.body is None:  # above the palm of a free hand: rigid with it
+            return ("palm", 0), np.linalg.inv(frames[palm]) @ frames[link]
+        joints = tuple(urdf.parent_joint[c].name for c in reversed(path[:-1]) if urdf.parent_joint[c].type != "fixed")
+        k = len(joints)
+        if robot.body.joint_names[:k] != joints:
+            raise ConfigError(f"{robot.cfg.source}: link '{link}' moves but is on neither the arm nor a finger")
+        P = np.eye(4)
+        for i in range(k):
+            P = P @ robot.body.offsets[i]
+        return ("body", k), np.linalg.inv(P) @ frames[link]
+
+    def frames(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+        """Every frame spheres hang from. palm: R (T, 3, 3), t (T, 3); fingers: (T, F_all, j) every
+        finger's joints; body: (T, m) the body joints (robots with an arm) -> (n_frames, T, 3, 4)."""
+        R, t = palm
+        T = R.shape[0]
+        W = torch.cat([R, t.unsqueeze(-1)], -1)  # (T, 3, 4)
+        frames = []
+        if self.robot.body is not None:
+            frames += [P[..., :3, :] for P in self.body.levels(body, self.body_levels)]
+        frames.append(W)
+        stacked = torch.stack(frames)  # (n, T, 3, 4)
+        if self.robot.n_fingers:
+            W4 = torch.cat([W, self._bottom.expand(T, 1, 4)], -2)
+            base = W4.unsqueeze(1) @ self.base_in_palm  # (T, F, 4, 4)
+            levels = torch.stack([(base @ P)[..., :3, :] for P in self.fingers.levels(fingers, self.finger_levels)],
+                                 dim=2)  # (T, F, K, 3, 4)
+            stacked = torch.cat([stacked, levels.flatten(1, 2).transpose(0, 1)])
+        return stacked
+
+    def sphere_centres(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+        """World centres of every cluster's spheres (padding included): (T, C, CLUSTER, 3)."""
+        frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
+        return (frames @ self._cluster_local.unsqueeze(1)).permute(1, 0, 3, 2)
+
+    def pairs(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+        """(T, L, O) bool: link l (``self.links``) collides with element o (the obstacles in problem
+        order, then the object)."""
+        frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
+        C, T = frames.shape[:2]
+        out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
+        bound = (frames @ self._cluster_bound.unsqueeze(1)).squeeze(-1)  # (C, T, 3)
+        for g in self._groups:
+            near = _hit(g, _local(g, bound), g["bound_thr"].unsqueeze(1))  # (C, T, O_g)
+            c, t, o = near.nonzero(as_tuple=True)
+            if c.numel() == 0:
+                continue
+            centres = (frames[c, t] @ self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
+            p = torch.einsum("nji,nkj->nki", g["R"][o], centres - g["t"][o].unsqueeze(1))
+            hit = _hit_pairs(g, p, g["size"][o], g["thr"][c, :, o]).any(-1)  # (N,)
+            columns = torch.as_tensor(g["index"], device=frames.device)[o]
+            out.index_put_((t[hit], self._cluster_link[c[hit]], columns[hit]), torch.ones((), dtype=torch.bool,
+                                                                                        device=frames.device))
+        return out
+
+    def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+        """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object."""
+        if self.n_elements == 0:
+            return torch.zeros(palm[0].shape[0], dtype=torch.long, device=palm[0].device)
+        return self.pairs(palm, fingers, body).sum(dim=(1, 2))
+
+
+def _local(g: dict, points: Tensor) -> Tensor:
+    """(..., 3) world points -> (..., O_g, 3) in each element's frame of a group."""
+    return torch.einsum("oji,...oj->...oi", g["R"], points.unsqueeze(-2) - g["t"])
+
+
+def _clearance_sq(kind: str, p: Tensor, size: Tensor) -> tuple[Tensor, Tensor]:
+    """Squared distance outside the element and whether inside: p (..., 3) in the element's
+    frame, size broadcastable to (..., 3 | 2 | 1) (box half-extents | cylinder radius and
+    half-height | sphere radius)."""
+    if kind == "sphere":
+        d = (torch.linalg.vector_norm(p, dim=-1) - size[..., 0]).unsqueeze(-1)
+    elif kind == "box":
+        d = p.abs() - size
+    else:
+        d = torch.stack([torch.linalg.vector_norm(p[..., :2], dim=-1), p[..., 2].abs()], dim=-1) - size
+    return d.clamp(min=0).square().sum(-1), d.amax(-1) <= 0
+
+
+def _hit(g: dict, p: Tensor, thr: Tensor) -> Tensor:
+    """sd(p) < thr for points p (..., O_g, 3) against the group's elements."""
+    outside, inside = _clearance_sq(g["kind"], p, g["size"])
+    return torch.where(thr > 0, (outside < thr.clamp(min=0).square()) | inside, torch.zeros_like(inside))
+
+
+def _hit_pairs(g: dict, p: Tensor, size: Tensor, thr: Tensor) -> Tensor:
+    """sd(p) < thr for (N, K, 3) points, each row against its own element of size (N, s); thr (N, K)."""
+    outside, inside = _clearance_sq(g["kind"], p, size.unsqueeze(1))
+    return torch.where(thr > 0, (outside < thr.clamp(min=0).square()) | inside, torch.zeros_like(inside))
+
+
+def _primitive_groups(elements: list[Shape], kw: dict) -> list[dict]:
+    """Elements grouped by kind: rotations (O, 3, 3), origins (O, 3), half sizes; a mesh becomes its
+    bounding box in its own frame."""
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    groups: dict[str, dict] = {}
+    for k, e in enumerate(elements):
+        R, t = rpy_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
+        if e.kind == "mesh":
+            import trimesh
+
+            mesh = trimesh.load(e.mesh, force="mesh")
+            lo, hi = np.asarray(mesh.bounds[0]), np.asarray(mesh.bounds[1])
+            kind, half = "box", (hi - lo) / 2
+            t = t + R @ ((hi + lo) / 2)
+        elif e.kind == "box":
+            kind, half = "box", np.asarray(e.size) / 2
+        elif e.kind == "cylinder":
+            kind, half = "cylinder", np.array([e.size[0], e.size[1] / 2, 0.0])
+        else:
+            kind, half = "sphere", np.array([e.size[0], 0.0, 0.0])
+        g = groups.setdefault(kind, {"kind": kind, "index": [], "R": [], "t": [], "size": []})
+        g["index"].append(k)
+        g["R"].append(R)
+        g["t"].append(t)
+        g["size"].append(half)
+    out = []
+    for kind in ("box", "cylinder", "sphere"):
+        if kind in groups:
+            g = groups[kind]
+            size = np.asarray(g["size"])[:, :3 if kind == "box" else 2]
+            out.append({"kind": kind, "index": g["index"], "R": torch.as_tensor(np.stack(g["R"]), **kw),
+                        "t": torch.as_tensor(np.stack(g["t"]), **kw), "size": torch.as_tensor(size, **kw)})
+    return out
