@@ -303,7 +303,7 @@ class CollisionProxy:
         """(T, L, O) bool: link l (``self.links``) collides with element o (the obstacles in problem
         order, then the object)."""
         frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
-        C, T = frames.shape[:2]
+        T = frames.shape[1]
         out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
         bound = (frames @ self._cluster_bound.unsqueeze(1)).squeeze(-1)  # (C, T, 3)
         for g in self._groups:

@@ -13,13 +13,13 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.arm import ArmHandEnvironment
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.solver.loop import LoopOutcome, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
-from graspnet_torch.settings import with_defaults
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
