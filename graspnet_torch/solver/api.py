@@ -23,7 +23,7 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "robot_and_ik", "solve", "trial_posture"]
+__all__ = ["build_environment", "reference_posture", "robot_and_ik", "solve", "trial_posture"]
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -124,6 +124,27 @@ def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:
                              for n, kind in zip(robot.body_joint_names, robot.body.joint_types, strict=True)],
                             dtype=torch.float64)
     return Posture(palm_pose=pose, fingers=q, body=body)
+
+
+def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
+    """The problem's reference posture as a :class:`~graspnet_torch.robot.Posture` (fingers not
+    listed at home; an arm's joints not listed at home, its palm by forward kinematics)."""
+    ref = problem.reference
+    if ref is None:
+        raise ValueError(f"{problem.source}: no reference posture")
+    home = robot.home_posture(torch.float64)
+    q = home.fingers.clone()
+    for f, v in ref.joints.items():
+        q[robot.finger_index(f)] = torch.as_tensor(v, dtype=torch.float64)
+    if robot.has_body:
+        body = home.body.clone()
+        for k, name in enumerate(robot.body_joint_names):
+            if ref.arm_joints and name in ref.arm_joints:
+                body[k] = ref.arm_joints[name]
+        from graspnet_torch.robot.transforms import rt_to_pose
+
+        return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=q, body=body)
+    return Posture(palm_pose=torch.as_tensor(ref.palm_pose, dtype=torch.float64), fingers=q, body=home.body)
 
 
 def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: SolverCfg) -> list[TrialResult]:

@@ -8,6 +8,7 @@ metres and radians.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,10 +148,12 @@ class Contact:
 @dataclass(frozen=True)
 class ReferencePosture:
     """A known posture that reaches every contact (shipped tasks carry one, to show that the task
-    is reachable): palm pose (6,) in m/rad and finger joints per finger in radians."""
+    is reachable): palm pose (6,) in m/rad (a free hand; None for an arm, whose palm its joints
+    place), finger joints per finger and, for an arm, its joints by name, in radians."""
 
-    palm_pose: np.ndarray
+    palm_pose: np.ndarray | None
     joints: dict[str, np.ndarray]
+    arm_joints: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -280,8 +283,12 @@ class GraspProblem:
         if data is None:
             return None
         where = f"{source}: reference"
-        if not isinstance(data, Mapping) or _keys(data, {"palm_pose", "joints"}) or len(data) != 2:
-            raise ProblemError(f"{where}: expected {{palm_pose: [...], joints: {{finger: [...]}}}}")
+        arm = robot_cfg.arm is not None
+        expected = "{arm_joints: {joint: deg}, joints: {finger: [...]}}" if arm else \
+            "{palm_pose: [...], joints: {finger: [...]}}"
+        first = "arm_joints" if arm else "palm_pose"
+        if not isinstance(data, Mapping) or _keys(data, {first, "joints"}) or len(data) != 2:
+            raise ProblemError(f"{where}: expected {expected}")
         if not isinstance(data["joints"], Mapping):
             raise ProblemError(f"{where}.joints: expected a mapping finger -> joint angles (degrees), got "
                                f"{short(data['joints'])}")
@@ -297,6 +304,13 @@ class GraspProblem:
         missing = [c.finger for c in contacts if c.finger not in joints]
         if missing:
             raise ProblemError(f"{where}.joints: missing finger(s) {', '.join(missing)}")
+        if arm:
+            raw = data["arm_joints"]
+            if not isinstance(raw, Mapping) or not all(isinstance(k, str) for k in raw):
+                raise ProblemError(f"{where}.arm_joints: expected a mapping joint name -> degrees")
+            values = number_list(list(raw.values()), None, f"{where}.arm_joints", ProblemError, -MAX_ANGLE_DEG,
+                                 MAX_ANGLE_DEG, "joint angles (degrees)")
+            return ReferencePosture(None, joints, {k: math.radians(v) for k, v in zip(raw, values, strict=True)})
         return ReferencePosture(_pose(data["palm_pose"], f"{where}.palm_pose"), joints)
 
     @classmethod

@@ -72,7 +72,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["trials=[1,"], "cannot parse the command line"),
     (["seed=" + "9" * 5000], "cannot parse the command line: Exceeds the limit"),
     (["out=/tmp/graspnet-no-such.d/"], "ends with '/': give a file path"),
-    (["task=null"], "task=null: expected one of block5, glass3"),
+    (["task=null"], "task=null: expected one of block5, env1, env2, fig10, glass3"),
     (["--foo"], "unknown option '--foo'"),
     (["--cfg", "nonsense"], "argument --cfg/-c: invalid choice"),
     (["--config-name=train_fcnn"], "--config-name, --config-path and --config-dir are not supported"),
