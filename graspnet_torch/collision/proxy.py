@@ -9,8 +9,9 @@ The robot. Every collision primitive of the URDF becomes a few spheres fixed in 
 
 - a sphere is itself;
 - a cylinder (radius r, length L along z) becomes spheres of radius r whose centres run along
-  the axis from -(L/2 - e) to (L/2 - e), e = min(r/2, L/2), at most r/2 apart: a capsule-like
-  union whose waist is >= 0.97 r and which overshoots the flat ends by r/2 on the axis only;
+  the axis from -(L/2 - e) to (L/2 - e), e = min(r/4, L/2), at most r/2 apart: a capsule-like
+  union whose waist is >= 0.97 r, which covers the rim (to within 3 % of r) and overshoots the
+  flat ends by 3r/4 on the axis (the URDF's joint spheres sit there for most links);
 - a box becomes spheres of radius rho (its smallest half-extent) on a grid over the box shrunk
   by rho, at most rho apart: a slab with rounded edges.
 
@@ -157,10 +158,13 @@ class CollisionProxy:
         # the frame each link hangs from: ('body', k) | ('palm', 0) | ('finger', f, k)
         by_link: dict[str, list] = {}
         attach: dict[str, tuple] = {}
+        self.link_spheres: dict[str, list[np.ndarray]] = {}
         for shape in shapes:
             where, G = self._attachment(robot, shape.link, frames)
             attach[shape.link] = where
-            for c, r in zip(*shape_spheres(shape), strict=True):
+            centres, radii_ = shape_spheres(shape)
+            self.link_spheres.setdefault(shape.link, []).append(centres)  # in the link frame
+            for c, r in zip(centres, radii_, strict=True):
                 by_link.setdefault(shape.link, []).append((G[:3, :3] @ c + G[:3, 3], float(r)))
         self.links = list(by_link)
         self.n_spheres = sum(len(v) for v in by_link.values())
