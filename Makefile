@@ -19,8 +19,8 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)  ## create .venv if missing (torch first, pinned) and install the package
 
-demo: $(STAMP)  ## solve the default problem (task glass3, 20 trials) -> outputs/demo/
-	$(PY) scripts/solve_grasp.py task=glass3 hydra.run.dir=outputs/demo
+demo: $(STAMP)  ## solve the default problem (glass3, 20 trials, R3: no finger through the glass) -> outputs/demo/
+	$(PY) scripts/solve_grasp.py task=glass3 reward=r3 hydra.run.dir=outputs/demo
 
 robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
 	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots

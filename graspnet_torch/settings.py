@@ -202,10 +202,14 @@ def unset(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
 def with_defaults(cls: type[T], data: Mapping[str, Any] | T | None, defaults: Mapping[str, Any] | None,
                   where: str = "") -> T:
     """``cls`` from ``defaults`` (a robot's ``solver_defaults`` of this group) overridden by the
-    keys of ``data`` that are set (see :func:`unset`); an instance of ``cls`` is returned as is."""
+    keys of ``data`` that are set: a None value is unset where the field does not allow None
+    (:func:`unset`) or where ``defaults`` has the key (``reward.p: null`` = the robot's p, else
+    the budget); an instance of ``cls`` is returned as is."""
     if isinstance(data, cls):
         return data
-    return build(cls, {**(defaults or {}), **unset(cls, data or {})}, where)
+    defaults = dict(defaults or {})
+    kept = {k: v for k, v in unset(cls, data or {}).items() if not (v is None and k in defaults)}
+    return build(cls, {**defaults, **kept}, where)
 
 
 def lookup(cls: type, dotted: str) -> tuple[Any, Mapping[str, Any]] | None:

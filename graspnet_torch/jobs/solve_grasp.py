@@ -66,7 +66,8 @@ def posture_of(robot, trial: TrialResult):
 
 
 def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...], every: int = 10) -> None:
-    """Per trial: reinforcement, expected reinforcement, mean sigma, total and per-finger error."""
+    """Per trial: reinforcement, expected reinforcement, mean sigma, total and per-finger error and,
+    when the loop counted them (rewards R2-R4 with an object or obstacles), collisions."""
     history = result.outcome.history if result.outcome is not None else None
     if history is None:
         return
@@ -83,6 +84,8 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
                 writer.add_scalar(f"{tag}/total_error_mm", float(history["total"][k, t]) * 1000, k + 1)
                 for f, finger in enumerate(fingers):
                     writer.add_scalar(f"{tag}/error_mm/{finger}", float(history["errors"][k, t, f]) * 1000, k + 1)
+                if "collisions" in history:
+                    writer.add_scalar(f"{tag}/collisions", float(history["collisions"][k, t]), k + 1)
 
 
 def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
@@ -184,9 +187,16 @@ def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) 
     posture = posture_of(robot, result.best)
     meshes = tuple(s.trimesh() for s in ((problem.object,) if problem.object else ()) + problem.obstacles)
     contacts = problem.contacts_world()
-    caption = f"{problem.name or 'problem'}: best trial, total error {result.best.total_error_mm:.2f} mm"
-    panels = [Panel(caption, posture, (12.0, -150.0), contacts, meshes),
-              Panel("side view", posture, (12.0, -60.0), contacts, meshes)]
+    red: frozenset[str] = frozenset()
+    if problem.object is not None or problem.obstacles:
+        from graspnet_torch.collision import CollisionScene
+
+        report = CollisionScene(robot, problem).check(posture)
+        red = frozenset({link for link, _ in report.obstacle_pairs} | set(report.object_links))
+    caption = (f"{problem.name or 'problem'}: best trial, total error {result.best.total_error_mm:.2f} mm, "
+               f"{result.best.collisions} collision(s){' (red)' if red else ''}")
+    panels = [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),
+              Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]
     path = render_robot(robot, panels, run_dir / "posture.png")
     print(f"pictures: {path}", end="")
     history = result.outcome.history if result.outcome is not None else None

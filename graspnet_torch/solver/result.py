@@ -54,8 +54,9 @@ class GraspResult:
 
     @property
     def best(self) -> TrialResult:
-        """The successful trial with the smallest total error (else the smallest error)."""
-        return min(self.trials, key=lambda t: (not t.success, t.total_error_mm))
+        """The successful trial with the smallest total error, collision-free ones first (else the
+        smallest error, collision-free first)."""
+        return min(self.trials, key=lambda t: (not t.success, t.collisions > 0, t.total_error_mm))
 
     @property
     def success(self) -> bool:

@@ -25,15 +25,21 @@ def plot_learning_curves(history: Mapping[str, np.ndarray], path: str | Path, ti
                          highlight: int | None = None) -> Path:
     """Reinforcement, total error, expected reinforcement and sigma per iteration.
 
-    history: arrays (K, T) under 'reinforcement', 'total' (m), 'expected', 'sigma'; every trial is
-    a thin line, ``highlight`` (a trial index) a bold one.
+    history: arrays (K, T) under 'reinforcement', 'total' (m), 'expected', 'sigma' and optionally
+    'collisions' (a fifth panel, as the paper's Fig. 9); every trial is a thin line,
+    ``highlight`` (a trial index) a bold one.
     """
     plt = _plt()
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), dpi=110, sharex=True)
     panels = [("reinforcement", "a/ reinforcement r", None), ("total", "b/ total error E (m)", "log"),
               ("expected", "c/ expected reinforcement r_hat (mean over SRV units)", None),
               ("sigma", "d/ standard deviation sigma (mean over SRV units)", None)]
-    for ax, (key, label, scale) in zip(axes.ravel(), panels, strict=True):
+    if "collisions" in history:
+        panels.append(("collisions", "e/ collisions (the loop's count)", None))
+    rows = (len(panels) + 1) // 2
+    fig, axes = plt.subplots(rows, 2, figsize=(10, 3.25 * rows), dpi=110, sharex=True)
+    if len(panels) % 2:
+        axes.ravel()[-1].set_visible(False)
+    for ax, (key, label, scale) in zip(axes.ravel(), panels, strict=False):
         data = np.asarray(history[key])
         x = np.arange(1, data.shape[0] + 1)
         ax.plot(x, data, color="tab:blue", alpha=0.25, linewidth=0.7)
@@ -44,7 +50,7 @@ def plot_learning_curves(history: Mapping[str, np.ndarray], path: str | Path, ti
             ax.set_yscale(scale)
         ax.set_title(label, fontsize=9)
         ax.grid(alpha=0.3)
-    for ax in axes[1]:
+    for ax in axes[-1]:
         ax.set_xlabel("iteration")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()

@@ -57,14 +57,19 @@ def _apply(T: np.ndarray, X, Y, Z):
     return (out[0].reshape(X.shape), out[1].reshape(X.shape), out[2].reshape(X.shape))
 
 
-def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alpha: float = 1.0) -> np.ndarray:
-    """Draw primitives at their links' world frames; returns (N, 3) points spanning the drawing."""
+COLLIDING = (0.85, 0.1, 0.1)
+
+
+def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alpha: float = 1.0,
+                red: frozenset[str] = frozenset()) -> np.ndarray:
+    """Draw primitives at their links' world frames, the links in ``red`` red (colliding);
+    returns (N, 3) points spanning the drawing."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     extent = []
     for s in shapes:
         T = frames[s.link] @ s.origin
-        color = s.rgba[:3]
+        color = COLLIDING if s.link in red else s.rgba[:3]
         if s.kind == "box":
             hx, hy, hz = (0.5 * d for d in s.size)
             corners = np.array([[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)])
@@ -99,13 +104,15 @@ def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) ->
 @dataclass(frozen=True)
 class Panel:
     """One picture panel: a posture seen from (elevation, azimuth) degrees, with optional red
-    markers (N, 3) in the world (e.g. contact points) and trimesh meshes (objects, obstacles)."""
+    markers (N, 3) in the world (e.g. contact points), trimesh meshes (objects, obstacles) and the
+    links to draw red (colliding)."""
 
     caption: str
     posture: Posture
     view: tuple[float, float] = (15.0, -60.0)
     markers: np.ndarray | None = None
     meshes: tuple = ()
+    red_links: frozenset[str] = frozenset()
 
 
 def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndarray:
@@ -122,7 +129,7 @@ def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title:
     shapes = link_shapes(robot.urdf)
     fig, axes = new_figure(len(panels))
     for ax, panel in zip(axes, panels, strict=True):
-        pts = draw_shapes(ax, shapes, robot.link_frames(panel.posture))
+        pts = draw_shapes(ax, shapes, robot.link_frames(panel.posture), red=panel.red_links)
         for mesh in panel.meshes:
             pts = np.concatenate([pts, draw_mesh(ax, mesh)])
         if panel.markers is not None and len(panel.markers):

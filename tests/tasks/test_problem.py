@@ -59,6 +59,36 @@ def test_shipped_task_is_reachable(hand, task):
     assert float(d.max()) < 1.5e-3  # the cylinder is a 48-gon
 
 
+@pytest.mark.parametrize("task", ["env1", "env2", "fig10"])
+def test_arm_task_has_a_collision_free_reachable_reference(task):
+    """Each arm task's reference (arm joints within the task's bounds, finger joints within
+    limits) puts every fingertip on its contact, and FCL finds no collision: the task is
+    solvable collision-free. The obstacles neither touch the object nor swallow a contact."""
+    import fcl
+
+    from graspnet_torch.collision import CollisionScene
+    from graspnet_torch.solver.api import reference_posture
+    from graspnet_torch.solver.arm import arm_bounds
+
+    arm = gt.load_robot("arm_hand")
+    p = gt.GraspProblem.from_task(task)
+    assert p.robot == "arm_hand" and p.obstacles and p.object is not None
+    ref = reference_posture(arm, p)
+    lo, hi = arm_bounds(arm, p)
+    assert bool(np.all(ref.body.numpy() >= lo) and np.all(ref.body.numpy() <= hi))
+    flo, fhi = arm.finger_limits
+    assert bool(np.all(ref.fingers.numpy() >= flo - 1e-9) and np.all(ref.fingers.numpy() <= fhi + 1e-9))
+    idx = [arm.finger_index(f) for f in p.fingers]
+    tips = arm.fingertips_world_from_body(ref.body, ref.fingers)[idx]
+    assert float(torch.linalg.vector_norm(tips - torch.as_tensor(p.contacts_world()), dim=-1).max()) < 1e-5
+    scene = CollisionScene(arm, p)
+    assert scene.check(ref).count == 0
+    for k, obstacle in enumerate(scene.obstacles):
+        assert not fcl.collide(obstacle, scene.object, fcl.CollisionRequest(), fcl.CollisionResult()), k
+    for o in p.obstacles:
+        assert not o.trimesh().contains(p.contacts_world()).any()  # no obstacle swallows a contact
+
+
 @pytest.mark.parametrize(("change", "message"), [
     ({"robot": "robonaut"}, r"robot: unknown robot 'robonaut'"),
     ({"robot": 3}, r"'robot' must name a robot"),
