@@ -39,7 +39,6 @@ obstacle) pairs plus links penetrating the object, the touching fingers' distal 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -107,29 +106,41 @@ def _motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray,
     return A, B, np.array([t == "revolute" for t in types])
 
 
-@dataclass
 class _Chain:
-    """Torch constants of one (batch of) serial chain(s): M(q) terms and offsets."""
+    """Torch constants of one (batch of) serial chain(s). With M(q) = I + s(q) A + c(q) B,
 
-    A: Tensor  # (..., n, 4, 4)
-    B: Tensor
-    revolute: Tensor  # (..., n) bool
-    offsets: Tensor  # (..., n + 1, 4, 4)
+        F_k M_k(q_k) = F_k + s(q_k) (F_k A_k) + c(q_k) (F_k B_k),
+
+    so each joint's transform costs two fused multiply-adds on precomputed products, no matmul."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, revolute: np.ndarray, offsets: np.ndarray, kw: dict):
+        F = offsets[..., :-1, :, :]
+        self.F = torch.as_tensor(F, **kw)  # (..., n, 4, 4)
+        self.FA = torch.as_tensor(F @ A, **kw)
+        self.FB = torch.as_tensor(F @ B, **kw)
+        self.all_revolute = bool(np.all(revolute))
+        self.revolute = torch.as_tensor(revolute, device=kw["device"])
 
     def levels(self, q: Tensor, upto: int) -> list[Tensor]:
-        """q (T, ..., n) -> [P_0, ..., P_upto], each (T, ..., 4, 4) (P_0 = identity)."""
-        s = torch.where(self.revolute, torch.sin(q), q)
-        c = torch.where(self.revolute, 1 - torch.cos(q), torch.zeros_like(q))
-        eye = torch.eye(4, dtype=q.dtype, device=q.device)
-        M = eye + s[..., None, None] * self.A + c[..., None, None] * self.B  # (T, ..., n, 4, 4)
-        FM = self.offsets[..., :-1, :, :] @ M
-        P = [eye.expand(*q.shape[:-1], 4, 4)]
-        for k in range(upto):
-            P.append(FM[..., k, :, :] if k == 0 else P[-1] @ FM[..., k, :, :])
-        return P
+        """q (T, ..., n) -> [P_1, ..., P_upto], each (T, ..., 4, 4) (P_0 = identity is left out)."""
+        if upto == 0:
+            return []
+        if self.all_revolute:
+            s, c = torch.sin(q), 1 - torch.cos(q)
+        else:
+            s = torch.where(self.revolute, torch.sin(q), q)
+            c = torch.where(self.revolute, 1 - torch.cos(q), torch.zeros_like(q))
+        FM = torch.addcmul(torch.addcmul(self.F, s[..., None, None], self.FA), c[..., None, None], self.FB)
+        lead = FM.shape[:-3]
+        flat = FM.reshape(-1, *FM.shape[-3:])  # (B, n, 4, 4): products as bmm, the cheapest small matmul
+        P = [flat[:, 0]]
+        for k in range(1, upto):
+            P.append(torch.bmm(P[-1], flat[:, k]))
+        return [p.view(*lead, 4, 4) for p in P]
 
 
 CLUSTER = 8  # spheres per cluster (a link's spheres are cut into clusters of at most this many)
+DENSE_LIMIT = 1 << 13  # T x clusters x CLUSTER x elements below which every sphere is tested (no broad phase)
 
 
 class CollisionProxy:
@@ -200,20 +211,25 @@ class CollisionProxy:
         kw = {"dtype": dtype, "device": device}
         self._cluster_frame = torch.tensor([f for f, *_ in clusters], device=device)
         self._cluster_link = torch.tensor([li for _, li, *_ in clusters], device=device)
+        one_hot = np.zeros((len(clusters), len(self.links)))
+        one_hot[np.arange(len(clusters)), [li for _, li, *_ in clusters]] = 1
+        self._link_of_cluster = torch.as_tensor(one_hot, **kw)  # (C, L)
         self._cluster_local = torch.as_tensor(local, **kw)  # (C, 4, CLUSTER) homogeneous sphere centres
         self._cluster_bound = torch.as_tensor(bound, **kw)  # (C, 4, 1) bounding-sphere centres
         if robot.body is not None:
             A, B, rev = _motion_terms(robot.body.axes, robot.body.joint_types)
-            self.body = _Chain(torch.as_tensor(A, **kw), torch.as_tensor(B, **kw), torch.as_tensor(rev, device=device),
-                               torch.as_tensor(robot.body.offsets, **kw))
+            self.body = _Chain(A, B, rev, robot.body.offsets, kw)
+            self._palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)
         if robot.n_fingers:
             terms = [_motion_terms(f.chain.axes, f.chain.joint_types) for f in robot.fingers.values()]
-            self.fingers = _Chain(torch.as_tensor(np.stack([t[0] for t in terms]), **kw),
-                                  torch.as_tensor(np.stack([t[1] for t in terms]), **kw),
-                                  torch.as_tensor(np.stack([t[2] for t in terms]), device=device),
-                                  torch.as_tensor(np.stack([f.chain.offsets for f in robot.fingers.values()]), **kw))
-            self.base_in_palm = torch.as_tensor(np.stack([f.base_in_palm for f in robot.fingers.values()]), **kw)
+            self.fingers = _Chain(np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]),
+                                  np.stack([t[2] for t in terms]),
+                                  np.stack([f.chain.offsets for f in robot.fingers.values()]), kw)
+            base = np.stack([f.base_in_palm for f in robot.fingers.values()])  # (F, 4, 4)
+            self.n_f = len(base)
+            self._base_cols = torch.as_tensor(base.transpose(1, 0, 2).reshape(4, -1), **kw)  # (4, 4F): W4 @ it
         self._bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], **kw)
+        self._eye34 = torch.eye(4, **kw)[:3]
         # the environment: obstacles, then the object (its own threshold; touching links exempt)
         elements = list(problem.obstacles)
         margin = [0.0] * len(elements)
@@ -232,10 +248,17 @@ class CollisionProxy:
                     if self.links[li] in exempt[k]:
                         thr[ci, :, col] = -np.inf
             thr = np.nan_to_num(thr, nan=-np.inf)
-            g["thr"] = torch.as_tensor(thr, **kw)
-            # broad phase: the bounding sphere within reach (never below zero: inside counts)
-            g["bound_thr"] = torch.as_tensor(bound_r[:, None] - np.array([margin[k] for k in g["index"]]), **kw)
-        self._column_of = {k: (gi, col) for gi, g in enumerate(self._groups) for col, k in enumerate(g["index"])}
+            g["pos"] = torch.as_tensor(thr > 0, device=device)
+            g["thr_sq"] = torch.as_tensor(np.where(thr > 0, thr, 0.0) ** 2, **kw)
+            # broad phase: the cluster's bounding sphere within reach
+            bthr = np.broadcast_to(bound_r[:, None, None] - np.array([margin[k] for k in g["index"]]),
+                                   (C, 1, len(g["index"])))[:, 0]  # (C, O_g)
+            g["bound_pos"] = torch.as_tensor(bthr > 0, device=device).unsqueeze(1)  # (C, 1, O_g)
+            g["bound_thr_sq"] = torch.as_tensor(np.where(bthr > 0, bthr, 0.0) ** 2, **kw).unsqueeze(1)
+            g["columns"] = torch.as_tensor(g["index"], device=device)
+            g["R_cols"] = g["R"].permute(1, 0, 2).reshape(3, -1)  # [R_1 .. R_O]
+            g["Rt"] = torch.einsum("oji,oj->oi", g["R"], g["t"]).reshape(-1)  # [R_o^T t_o]
+        self._true = torch.ones((), dtype=torch.bool, device=device)
 
     @staticmethod
     def _frames_at_zero(robot: Robot) -> dict[str, np.ndarray]:
@@ -279,23 +302,39 @@ class CollisionProxy:
             P = P @ robot.body.offsets[i]
         return ("body", k), np.linalg.inv(P) @ frames[link]
 
-    def frames(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+    def body_levels_and_palm(self, body: Tensor) -> tuple[list[Tensor], tuple[Tensor, Tensor]]:
+        """The body chain's frames P_1..P_m (T, 4, 4) and the palm frame R (T, 3, 3), t (T, 3) that
+        its end gives (P_m F_m): the arm's forward kinematics as m small batched products, cheaper
+        than the general kernel for a few trials."""
+        levels = self.body.levels(body, len(self.robot.body_joint_names))
+        end = torch.matmul(levels[-1], self._palm_offset) if levels else self._palm_offset.expand(body.shape[0], 4, 4)
+        return levels, (end[:, :3, :3], end[:, :3, 3])
+
+    def frames(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
+               body_levels: list[Tensor] | None = None) -> Tensor:
         """Every frame spheres hang from. palm: R (T, 3, 3), t (T, 3); fingers: (T, F_all, j) every
-        finger's joints; body: (T, m) the body joints (robots with an arm) -> (n_frames, T, 3, 4)."""
+        finger's joints; body: (T, m) the body joints (robots with an arm), or ``body_levels`` from
+        :meth:`body_levels_and_palm` -> (n_frames, T, 3, 4)."""
         R, t = palm
         T = R.shape[0]
         W = torch.cat([R, t.unsqueeze(-1)], -1)  # (T, 3, 4)
         frames = []
         if self.robot.body is not None:
-            frames += [P[..., :3, :] for P in self.body.levels(body, self.body_levels)]
+            frames.append(self._eye34.expand(T, 3, 4))
+            if body_levels is None:
+                body_levels = self.body.levels(body, self.body_levels)
+            frames += [P[..., :3, :] for P in body_levels[:self.body_levels]]
         frames.append(W)
         stacked = torch.stack(frames)  # (n, T, 3, 4)
         if self.robot.n_fingers:
-            W4 = torch.cat([W, self._bottom.expand(T, 1, 4)], -2)
-            base = W4.unsqueeze(1) @ self.base_in_palm  # (T, F, 4, 4)
-            levels = torch.stack([(base @ P)[..., :3, :] for P in self.fingers.levels(fingers, self.finger_levels)],
-                                 dim=2)  # (T, F, K, 3, 4)
-            stacked = torch.cat([stacked, levels.flatten(1, 2).transpose(0, 1)])
+            # base_f = W B_f for every finger at once: (T, 3, 4) @ (4, 4F)
+            base = (W @ self._base_cols).view(T, 3, self.n_f, 4).transpose(1, 2)  # (T, F, 3, 4)
+            levels = [base]
+            if self.finger_levels:
+                base4 = torch.cat([base, self._bottom.expand(T, self.n_f, 1, 4)], -2).reshape(-1, 4, 4)
+                for P in self.fingers.levels(fingers, self.finger_levels):
+                    levels.append(torch.bmm(base4, P.reshape(-1, 4, 4))[:, :3].view(T, self.n_f, 3, 4))
+            stacked = torch.cat([stacked, torch.stack(levels, dim=2).flatten(1, 2).transpose(0, 1)])
         return stacked
 
     def sphere_centres(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
@@ -303,61 +342,61 @@ class CollisionProxy:
         frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
         return (frames @ self._cluster_local.unsqueeze(1)).permute(1, 0, 3, 2)
 
-    def pairs(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+    def pairs(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
+              body_levels: list[Tensor] | None = None) -> Tensor:
         """(T, L, O) bool: link l (``self.links``) collides with element o (the obstacles in problem
         order, then the object)."""
-        frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
+        frames = self.frames(palm, fingers, body, body_levels)[self._cluster_frame]  # (C, T, 3, 4)
         T = frames.shape[1]
         out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
-        bound = (frames @ self._cluster_bound.unsqueeze(1)).squeeze(-1)  # (C, T, 3)
+        C = frames.shape[0]
+        flat = frames.reshape(C, T * 3, 4)
+        if T * C * CLUSTER * self.n_elements <= DENSE_LIMIT:  # small batches: every sphere, no gathers
+            centres = torch.bmm(flat, self._cluster_local).view(C, T, 3, CLUSTER).transpose(2, 3)  # (C, T, K, 3)
+            for g in self._groups:
+                hit = _hit(g, _local(g, centres), g["pos"].unsqueeze(1), g["thr_sq"].unsqueeze(1)).any(2)  # (C, T, O_g)
+                per_link = torch.einsum("cto,cl->tlo", hit.to(self._link_of_cluster.dtype), self._link_of_cluster)
+                out[..., g["columns"]] |= per_link > 0
+            return out
+        bound = torch.bmm(flat, self._cluster_bound).view(C, T, 3)  # bounding-sphere centres
         for g in self._groups:
-            near = _hit(g, _local(g, bound), g["bound_thr"].unsqueeze(1))  # (C, T, O_g)
+            near = _hit(g, _local(g, bound), g["bound_pos"], g["bound_thr_sq"])  # (C, T, O_g)
             c, t, o = near.nonzero(as_tuple=True)
             if c.numel() == 0:
                 continue
-            centres = (frames[c, t] @ self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
-            p = torch.einsum("nji,nkj->nki", g["R"][o], centres - g["t"][o].unsqueeze(1))
-            hit = _hit_pairs(g, p, g["size"][o], g["thr"][c, :, o]).any(-1)  # (N,)
-            columns = torch.as_tensor(g["index"], device=frames.device)[o]
-            out.index_put_((t[hit], self._cluster_link[c[hit]], columns[hit]), torch.ones((), dtype=torch.bool,
-                                                                                        device=frames.device))
+            centres = torch.bmm(frames[c, t], self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
+            p = torch.bmm(centres - g["t"][o].unsqueeze(1), g["R"][o])  # rows: R^T (x - t)
+            hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][o].unsqueeze(1)).any(-1)  # (N,)
+            out.index_put_((t[hit], self._cluster_link[c[hit]], g["columns"][o[hit]]), self._true)
         return out
 
-    def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
+    def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
+              body_levels: list[Tensor] | None = None) -> Tensor:
         """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object."""
         if self.n_elements == 0:
             return torch.zeros(palm[0].shape[0], dtype=torch.long, device=palm[0].device)
-        return self.pairs(palm, fingers, body).sum(dim=(1, 2))
+        return self.pairs(palm, fingers, body, body_levels).sum(dim=(1, 2))
 
 
 def _local(g: dict, points: Tensor) -> Tensor:
-    """(..., 3) world points -> (..., O_g, 3) in each element's frame of a group."""
-    return torch.einsum("oji,...oj->...oi", g["R"], points.unsqueeze(-2) - g["t"])
+    """(..., 3) world points -> (..., O_g, 3) in each element's frame of a group: R_o^T (x - t_o)
+    for every element at once as x @ [R_1 .. R_O] - [R_o^T t_o]."""
+    return (points @ g["R_cols"] - g["Rt"]).view(*points.shape[:-1], -1, 3)
 
 
-def _clearance_sq(kind: str, p: Tensor, size: Tensor) -> tuple[Tensor, Tensor]:
-    """Squared distance outside the element and whether inside: p (..., 3) in the element's
-    frame, size broadcastable to (..., 3 | 2 | 1) (box half-extents | cylinder radius and
-    half-height | sphere radius)."""
-    if kind == "sphere":
+def _hit(g: dict, p: Tensor, positive: Tensor, thr_sq: Tensor, size: Tensor | None = None) -> Tensor:
+    """sd(p) < thr for points p (..., 3) in their element's frame, with thr > 0 (``positive``;
+    otherwise never) and ``thr_sq`` = thr^2: outside a primitive |max(d, 0)|^2 < thr^2, inside
+    always. d: box |p| - h; cylinder (|p_xy| - r, |p_z| - h); sphere |p| - r."""
+    size = g["size"] if size is None else size
+    if g["kind"] == "sphere":
         d = (torch.linalg.vector_norm(p, dim=-1) - size[..., 0]).unsqueeze(-1)
-    elif kind == "box":
+    elif g["kind"] == "box":
         d = p.abs() - size
     else:
         d = torch.stack([torch.linalg.vector_norm(p[..., :2], dim=-1), p[..., 2].abs()], dim=-1) - size
-    return d.clamp(min=0).square().sum(-1), d.amax(-1) <= 0
-
-
-def _hit(g: dict, p: Tensor, thr: Tensor) -> Tensor:
-    """sd(p) < thr for points p (..., O_g, 3) against the group's elements."""
-    outside, inside = _clearance_sq(g["kind"], p, g["size"])
-    return torch.where(thr > 0, (outside < thr.clamp(min=0).square()) | inside, torch.zeros_like(inside))
-
-
-def _hit_pairs(g: dict, p: Tensor, size: Tensor, thr: Tensor) -> Tensor:
-    """sd(p) < thr for (N, K, 3) points, each row against its own element of size (N, s); thr (N, K)."""
-    outside, inside = _clearance_sq(g["kind"], p, size.unsqueeze(1))
-    return torch.where(thr > 0, (outside < thr.clamp(min=0).square()) | inside, torch.zeros_like(inside))
+    outside = d.clamp(min=0).square().sum(-1)
+    return positive & ((outside < thr_sq) | (d.amax(-1) <= 0))
 
 
 def _primitive_groups(elements: list[Shape], kw: dict) -> list[dict]:

@@ -87,6 +87,7 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
     trial_results = _report(env, outcome, reward, solver)
     settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
+                "enough": solver.enough,
                 "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
                 "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
                 "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,

@@ -59,6 +59,9 @@ class SolverCfg:
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
         time_budget: wall-clock seconds after which the loop stops (``None``: no limit).
+        enough: stop the whole batch once this many trials have succeeded, the others reported as
+            they stand (``None``: every trial runs to its own stop, the paper's independent runs;
+            a number: "give me a grasp", when the trials are restarts of one search).
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
@@ -69,6 +72,7 @@ class SolverCfg:
     max_iterations: int = setting(2000, lo=1, hi=10_000_000)
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
+    enough: int | None = setting(None, lo=1, hi=1_000_000)
     refine: int = setting(0, lo=0, hi=1000)
     final_refine: int = setting(3, lo=0, hi=1000)
     candidates: int = setting(1, lo=1, hi=64)

@@ -108,6 +108,7 @@ class FingerEnvironment:
 
             self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device)
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
+            self._idx = torch.as_tensor(self.idx, device=device)
 
     def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
         """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
@@ -140,13 +141,16 @@ class FingerEnvironment:
         """config: (T, n) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, j) and,
         with a collision proxy, the collision count (T,) of the whole posture (the fingers without
         a contact at home)."""
-        palm = self.palm_frame(config)
+        levels = None
+        if self.proxy is not None and self.robot.has_body:  # the proxy's arm chain gives the palm too
+            levels, palm = self.proxy.body_levels_and_palm(config)
+        else:
+            palm = self.palm_frame(config)
         q, errors = self.finger_joints(config, palm)
         collisions = None
         if self.proxy is not None:
-            every = self.home.expand(q.shape[0], -1, -1).clone()
-            every[:, self.idx] = q
-            collisions = self.proxy.count(palm, every, config if self.robot.has_body else None)
+            every = self.home.expand(q.shape[0], -1, -1).index_copy(1, self._idx, q)
+            collisions = self.proxy.count(palm, every, config if self.robot.has_body else None, levels)
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions)
 
     def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:

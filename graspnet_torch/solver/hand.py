@@ -24,8 +24,10 @@ __all__ = ["HandEnvironment", "check_reach"]
 def check_reach(robot: Robot, problem: GraspProblem) -> None:
     """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther from
     the box of palm positions than the finger can reach (its base offset plus the lengths of its
-    links, an upper bound whatever the joints). Robots with an arm are left to their environment."""
+    links, an upper bound whatever the joints). For a robot with an arm: farther from the arm's
+    first joint than the arm's links, their prismatic travel and the finger can reach."""
     if robot.has_body:
+        _check_arm_reach(robot, problem)
         return
     bounds = problem.bounds()
     lo, hi = bounds.lower[:3], bounds.upper[:3]
@@ -67,3 +69,23 @@ class HandEnvironment(FingerEnvironment):
         bounds = self.problem.bounds()
         return torch.clamp(palm_pose.detach().to(torch.float64).cpu(), torch.as_tensor(bounds.lower),
                            torch.as_tensor(bounds.upper))
+
+
+def _finger_reach(robot: Robot, finger: str) -> float:
+    """Upper bound of a fingertip's distance from the palm origin, whatever the joints."""
+    spec = robot.fingers[finger]
+    return float(np.linalg.norm(spec.base_in_palm[:3, 3]) + np.linalg.norm(spec.chain.offsets[:, :3, 3], axis=1).sum())
+
+
+def _check_arm_reach(robot: Robot, problem: GraspProblem) -> None:
+    body = robot.body
+    origin = body.offsets[0][:3, 3]  # the first joint, in the world
+    arm = float(np.linalg.norm(body.offsets[1:, :3, 3], axis=1).sum())
+    arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
+               if kind == "prismatic")
+    for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
+        reach = arm + _finger_reach(robot, contact.finger)
+        gap = float(np.linalg.norm(point - origin))
+        if gap > reach:
+            raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the arm's first "
+                               f"joint but the arm and {contact.finger} reach at most {reach:.3f} m")

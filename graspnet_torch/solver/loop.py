@@ -48,6 +48,7 @@ class LoopOutcome:
         iterations: iterations each trial ran (its stop, or the budget).
         success: reinforcement exceeded the threshold.
         wall_time_s: the whole loop; per-iteration wall times are ``history['time']``.
+        start: (T, n) each trial's random start within the bounds (for baselines on the same starts).
     """
 
     config: Tensor
@@ -57,6 +58,7 @@ class LoopOutcome:
     success: Tensor
     wall_time_s: float
     history: dict[str, Tensor] | None
+    start: Tensor | None = None
 
     @property
     def joints(self) -> Tensor | None:
@@ -85,6 +87,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     gen = torch.Generator(device=device).manual_seed(seed)
     net = ConfigurationNetwork(n, T, srv, gen, dtype=dtype, device=device)
     o_prev = torch.rand(T, n, generator=gen, dtype=dtype, device=device)  # random start within the bounds
+    o_start = o_prev.clone()
     threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
         raise ValueError(f"solver.report must be 'best' or 'final', got '{solver.report}'")
@@ -108,8 +111,9 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
             history[key] = torch.where(after.view(K, -1, *([1] * (v.dim() - 2))), held, v)
         history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
     success = best_r > threshold if threshold is not None else torch.zeros(T, dtype=torch.bool, device=device)
+    start = torch.addcmul(env.lower, env.upper - env.lower, o_start)
     return LoopOutcome(config=best_config, evaluation=best_ev, reinforcement=best_r, iterations=iterations,
-                       success=success, wall_time_s=wall, history=history)
+                       success=success, wall_time_s=wall, history=history, start=start)
 
 
 def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
@@ -162,5 +166,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 active = active & ~done
                 all_active = False
                 if not bool(active.any()):
+                    break
+                if solver.enough is not None and int((~active).sum()) >= solver.enough:  # the batch has its grasps
+                    iterations = torch.where(active, torch.full_like(iterations, k + 1), iterations)
                     break
     return best_config, best_ev, best_r, iterations

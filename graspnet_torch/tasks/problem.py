@@ -137,6 +137,35 @@ def _check_mesh(path: Path, where: str) -> None:
                            f"+-{MAX_LENGTH_M:g} m (metres expected)")
 
 
+def _inside(shape: Shape, points: np.ndarray) -> np.ndarray:
+    """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    if shape.kind == "mesh":
+        return np.asarray(shape.trimesh().contains(points), dtype=bool)
+    p = (points - shape.pose[:3]) @ rpy_matrix_np(shape.pose[3:])  # into the shape's frame
+    if shape.kind == "box":
+        return np.all(np.abs(p) < np.asarray(shape.size) / 2, axis=1)
+    if shape.kind == "cylinder":
+        return (np.linalg.norm(p[:, :2], axis=1) < shape.size[0]) & (np.abs(p[:, 2]) < shape.size[1] / 2)
+    return np.linalg.norm(p, axis=1) < shape.size[0]
+
+
+def _check_free_contacts(obstacles: Sequence[Shape], contacts: list[Contact], obj: Shape | None, source: str) -> None:
+    """Refuse an obstacle that swallows a contact: no fingertip could touch it collision-free."""
+    points = np.stack([c.position for c in contacts])
+    if obj is not None:
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        points = points @ rpy_matrix_np(obj.pose[3:]).T + obj.pose[:3]
+    for k, shape in enumerate(obstacles):
+        inside = _inside(shape, points)
+        if inside.any():
+            fingers = ", ".join(contacts[i].finger for i in np.nonzero(inside)[0])
+            raise ProblemError(f"{source}: obstacles[{k}] ({shape.kind}) contains the {fingers} contact: no "
+                               f"fingertip can reach it without a collision")
+
+
 @dataclass(frozen=True)
 class Contact:
     """One contact: the finger that touches it and its position in the object frame (m)."""
@@ -271,6 +300,8 @@ class GraspProblem:
             raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
         obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
         reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
+        if obstacles:
+            _check_free_contacts(obstacles, contacts, obj, source)
         for key in ("name", "description"):
             if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
                 raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")

@@ -154,3 +154,15 @@ def test_touching_fingertips_do_not_count_but_other_links_in_the_object_do(arm_h
     inside = {proxy.links[i] for i in obj.nonzero().flatten().tolist()}
     assert "palm" in inside
     assert not inside & {"thumb_distal", "index_distal", "middle_distal"}
+
+
+def test_the_proxy_arm_chain_gives_the_kernel_palm_frame(arm_hand):
+    """The environment takes the palm from the proxy's arm chain when it counts collisions: the
+    same frame as the robot's kinematics kernel (float64)."""
+    problem = gt.GraspProblem.from_task("env1")
+    proxy = CollisionProxy(arm_hand, problem, dtype=torch.float64)
+    body, _ = _random_arm(arm_hand, problem, 5, seed=4)
+    levels, (R, t) = proxy.body_levels_and_palm(body)
+    R0, t0 = arm_hand.palm_frame(body)
+    assert len(levels) == 7
+    assert torch.allclose(R, R0, atol=1e-12) and torch.allclose(t, t0, atol=1e-12)

@@ -262,3 +262,23 @@ def test_a_contact_out_of_reach_is_refused_before_the_solve(tmp_path):
     text = "robot: hand\ncontacts:\n  - {finger: thumb, position: [9.9, 9.9, 9.9]}\n" + INDEX
     path = _problem(tmp_path, text)
     _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="the thumb contact lies 16.888 m from the palm's")
+
+
+ENV1 = (Path(__file__).resolve().parents[2] / "configs" / "task" / "env1.yaml").read_text()
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    (ENV1.replace("obstacles:\n", "obstacles:\n  - {shape: cylinder, size: [0.05]}\n"),
+     "obstacles[0].size: expected 2 numbers"),
+    (ENV1.replace("obstacles:\n", "obstacles:\n  - {shape: torus, size: [0.05, 0.01]}\n"),
+     "obstacles[0].shape: expected box, cylinder, sphere or mesh, got 'torus'"),
+    (ENV1.replace("obstacles:\n", "obstacles:\n  - {shape: sphere, size: [0.05], pose: [0.4, -0.15, -0.2, 0, 0, 0]}\n"),
+     "obstacles[0] (sphere) contains the thumb, index, middle contact"),
+    (ENV1.replace("pose: [0.4, -0.15, -0.25, 0, 0, 180]", "pose: [3.0, -0.15, -0.25, 0, 0, 180]"),
+     "the thumb contact lies 2.979 m from the arm's first joint but the arm and thumb reach at most 0.731 m"),
+])
+def test_bad_arm_problems_are_refused(tmp_path, text, message):
+    """Malformed obstacles, an obstacle that swallows a contact and a contact beyond the arm's reach:
+    exit 2, one line, nothing written."""
+    path = _problem(tmp_path, text)
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
