@@ -125,11 +125,12 @@ def product(n: int) -> dict:
 
 
 def random_problems(n: int) -> dict:
-    """Random reachable arm problems: a random arm posture (middle 60 % of every joint range) and
-    three fingers (middle 60 % of their ranges) give the contacts; two to three obstacles (boxes,
-    cylinders, spheres) are placed 3-10 cm from the arm's links, clear of that posture (FCL); the
-    search space is +-30 deg about the posture, shifted by up to 10 deg. Solved with R3, 16
-    learners: the best trial collision-free with total error < 10 mm."""
+    """Random reachable arm problems: a random arm posture (the middle 60 % of every joint
+    range) and three fingers (the middle 60 % of their ranges) give the contacts; two or three
+    obstacles (boxes, cylinders, spheres of 3-15 cm) are centred 12-20 cm from a point near the
+    shoulder, the elbow or the palm, kept only if they clear that posture (FCL) and swallow no
+    contact; the search space is +-30 deg about the posture, shifted by up to 10 deg. Solved with
+    R3 and 16 learners: solved when the best trial is collision-free with total error < 10 mm."""
     robot = gt.load_robot("arm_hand")
     rng = np.random.default_rng(7)
     lo, hi = (np.degrees(a) for a in robot.body_limits)
@@ -160,7 +161,10 @@ def random_problems(n: int) -> dict:
                 "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers],
                 "bounds": {"min": np.maximum(qa + shift - 30, lo).tolist(),
                            "max": np.minimum(qa + shift + 30, hi).tolist()}}
-        problem = gt.GraspProblem.from_mapping(data, source=f"random-{made}")
+        try:
+            problem = gt.GraspProblem.from_mapping(data, source=f"random-{made}")
+        except gt.ProblemError:  # an obstacle swallows a contact: draw again
+            continue
         posture = gt.Posture(palm_pose=torch.zeros(6), fingers=q, body=body)
         if CollisionScene(robot, problem).count(posture) > 0:
             continue  # an obstacle hits the posture that made the contacts: draw again
@@ -198,11 +202,12 @@ def figures(out: Path, results: dict) -> None:
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), dpi=110, sharex=True)
     for ax, kind in zip(axes.ravel(), REWARDS, strict=True):
         h = results["env1", kind].outcome.history
-        x = np.arange(1, h["reinforcement"].shape[0] + 1)
-        ax.plot(x, h["reinforcement"][:, k], label="reinforcement", linewidth=0.7)
-        ax.plot(x, h["expected"][:, k], label="expected reinforcement", linewidth=1.4)
-        ax.plot(x, h["sigma"][:, k], label="sigma (mean)", linestyle="--", linewidth=1.4)
-        ax.set_title(f"{kind.upper()} (env1, learner {k})", fontsize=9)
+        stop = results["env1", kind].trials[k].iterations  # the curves up to this learner's stop
+        x = np.arange(1, stop + 1)
+        ax.plot(x, h["reinforcement"][:stop, k], label="reinforcement", linewidth=0.7)
+        ax.plot(x, h["expected"][:stop, k], label="expected reinforcement", linewidth=1.4)
+        ax.plot(x, h["sigma"][:stop, k], label="sigma (mean)", linestyle="--", linewidth=1.4)
+        ax.set_title(f"{kind.upper()} (env1, learner {k}, stops at {stop})", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7)
     for ax in axes[1]:
@@ -212,7 +217,8 @@ def figures(out: Path, results: dict) -> None:
     fig.savefig(out / "fig8_learning.png")
     plt.close(fig)
     fig, ax = plt.subplots(1, 1, figsize=(6, 3.5), dpi=110)
-    ax.plot(np.arange(1, hist3["collisions"].shape[0] + 1), hist3["collisions"][:, k])
+    stop = results["env1", "r3"].trials[k].iterations
+    ax.plot(np.arange(1, stop + 1), hist3["collisions"][:stop, k])
     ax.set_xlabel("iteration")
     ax.set_ylabel("collisions (the loop's count)")
     ax.set_title(f"Fig. 9: collisions under R3 (env1, learner {k})", fontsize=10)
@@ -287,7 +293,8 @@ def main() -> int:
                              f"{prod[env, e]['ok']}/{args.runs}", prod[env, e]["median_s"], prod[env, e]["max_s"]]
                             for env in ("env1", "env2") for e in (None, 8)], floatfmt=".2f"), "",
               "## Random reachable arm problems", "",
-              f"{random_problems.__doc__.split(':', 1)[1].strip()} **{rand['solved']}/{rand['n']}** solved.", "",
+              " ".join(random_problems.__doc__.split(":", 1)[1].split()) + f" **{rand['solved']}/{rand['n']}** solved.",
+              "",
               "![Fig. 6](fig6_rewards.png)", "![Fig. 8](fig8_learning.png)", "![Fig. 9](fig9_collisions.png)",
               "![Fig. 10](fig10_posture.png)", ""]
     (args.out / "acnn_obstacles.md").write_text("\n".join(lines))

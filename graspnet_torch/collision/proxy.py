@@ -155,7 +155,9 @@ class CollisionProxy:
     finger's joints. Two phases, as FCL: each link's spheres are cut into clusters of at most
     ``CLUSTER`` neighbours, each with a bounding sphere; a cluster's spheres are placed and tested
     only where its bounding sphere meets an element (broad phase), so the cost follows the
-    number of near (cluster, element) pairs, not T x spheres x elements.
+    number of near (cluster, element) pairs, not T x spheres x elements. Small batches (T x
+    clusters x ``CLUSTER`` x elements <= ``DENSE_LIMIT``, e.g. one trial) test every sphere at
+    once: fewer operations, the same answer (tests compare the two).
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = 0.002,
