@@ -174,6 +174,12 @@ def random_problems(n: int) -> dict:
     return {"solved": solved, "n": n}
 
 
+def _sentence(text: str) -> str:
+    """A docstring's text on one line, its first letter a capital."""
+    text = " ".join(text.split())
+    return text[:1].upper() + text[1:]
+
+
 def figures(out: Path, results: dict) -> None:
     from graspnet_torch.viz import Panel, render_robot
     from graspnet_torch.viz.plots import _plt
@@ -293,7 +299,7 @@ def main() -> int:
                              f"{prod[env, e]['ok']}/{args.runs}", prod[env, e]["median_s"], prod[env, e]["max_s"]]
                             for env in ("env1", "env2") for e in (None, 8)], floatfmt=".2f"), "",
               "## Random reachable arm problems", "",
-              " ".join(random_problems.__doc__.split(":", 1)[1].split()) + f" **{rand['solved']}/{rand['n']}** solved.",
+              _sentence(random_problems.__doc__.split(":", 1)[1]) + f" **{rand['solved']}/{rand['n']}** solved.",
               "",
               "![Fig. 6](fig6_rewards.png)", "![Fig. 8](fig8_learning.png)", "![Fig. 9](fig9_collisions.png)",
               "![Fig. 10](fig10_posture.png)", ""]
