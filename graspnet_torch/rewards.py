@@ -79,7 +79,9 @@ def add_noise(reward: Tensor, sigma: float, generator: torch.Generator | None = 
 class Reward:
     """The reinforcement of the ``reward`` group, as a function of an evaluation, the iteration i
     (1-based) and the budget p: R_1 (eq. 20), or R_2, R_3, R_4 (eq. 21-23) from its collision
-    count. An evaluation without a collision component counts no collision.
+    count. An evaluation without a collision component counts no collision. For a gripper (an
+    evaluation with ``alignment``) the base is the MANUS criterion R = (R1 + R2) / 2 of eq. 29
+    (R1 = alignment, R2 = 1 - tanh(a d)), shaped the same way by collisions.
 
     Args:
         cfg: kind, a, beta and p (``None``: p = ``budget``).
@@ -93,6 +95,8 @@ class Reward:
     def __call__(self, evaluation: Evaluation, iteration: int | Tensor) -> Tensor:
         """(T,) reinforcement, noise-free; ``iteration`` an int or (T,) per trial."""
         r = r1(evaluation.error, self.cfg.a)
+        if evaluation.alignment is not None:  # a gripper (MANUS): R = (|n_g . n_o| + 1 - tanh(a d)) / 2 (eq. 24-29)
+            r = (evaluation.alignment + r) / 2
         if self.cfg.kind == "r1" or evaluation.collisions is None:
             return r
         c = evaluation.collisions

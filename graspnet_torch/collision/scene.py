@@ -108,12 +108,12 @@ class CollisionScene:
 
     @staticmethod
     def distal_links(robot: Robot, shapes: list, fingers: tuple[str, ...]) -> set[str]:
-        """For each finger, the link nearest its fingertip that carries collision geometry (the one
-        that touches the object at the contact)."""
+        """For each finger (and each marked point of a gripper), the link nearest its tip that
+        carries collision geometry (the one that touches the object at the contact)."""
         with_geometry = {s.link for s in shapes}
         out = set()
-        for finger in fingers:
-            link = robot.cfg.fingers[finger].tip
+        tips = [robot.cfg.fingers[f].tip for f in fingers] + list(robot.cfg.gripper_points)  # a gripper's jaws too
+        for link in tips:
             while link not in with_geometry and link in robot.urdf.parent_joint:
                 link = robot.urdf.parent_joint[link].parent
             out.add(link)

@@ -29,15 +29,16 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
 
 @lru_cache(maxsize=8)
-def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK]:
+def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK | None]:
     robot = Robot.from_config(robot_name)
-    return robot, load_finger_ik(robot)
+    return robot, (load_finger_ik(robot) if robot.n_fingers else None)
 
 
-def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK]:
-    """A robot and its trained FCNN: a shipped robot by name (cached per process), or a robot
-    config; a config that differs from the shipped one of its name only in its search space,
-    home posture or description reuses the shipped kinematics and FCNN."""
+def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
+    """A robot and its trained FCNN (None for a robot without fingers, the MANUS): a shipped
+    robot by name (cached per process), or a robot config; a config that differs from the shipped
+    one of its name only in its search space, home posture or description reuses the shipped
+    kinematics and FCNN."""
     if isinstance(robot, str):
         return _shipped_robot_and_ik(robot)
     if robot.name in available_robots():
@@ -45,7 +46,7 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK]:
         if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
             return _shipped_robot_and_ik(robot.name)
     built = Robot(robot)
-    return built, load_finger_ik(built)
+    return built, (load_finger_ik(built) if built.n_fingers else None)
 
 
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points")
@@ -74,7 +75,7 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
     if max_iterations is not None:
         solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
-    if robot is None or finger_ik is None:
+    if robot is None or (finger_ik is None and problem.points is None):
         shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
@@ -104,6 +105,10 @@ def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, 
     torch proxy of :mod:`graspnet_torch.collision.proxy`) when the reward uses them (R2-R4) and
     the problem has an object or obstacles."""
     collisions = reward is not None and reward.kind != "r1"
+    if robot.n_fingers == 0:  # a gripper with two marked points (MANUS)
+        from graspnet_torch.solver.gripper import GripperEnvironment
+
+        return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg)
     cls = ArmHandEnvironment if robot.has_body else HandEnvironment
     return cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
 
@@ -115,9 +120,9 @@ def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:
     d = math.pi / 180
     palm = get("palm_pose")
     pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
-    joints = get("joints")
+    joints = get("joints") or {}
     q = torch.tensor([[a * d for a in joints[f]] for f in robot.finger_names], dtype=torch.float64)
-    q = q.reshape(robot.n_fingers, robot.joints_per_finger)
+    q = q.reshape(robot.n_fingers, robot.joints_per_finger if robot.n_fingers else 0)
     body = torch.zeros(0, dtype=torch.float64)
     if robot.has_body:
         arm = get("arm_joints")
@@ -162,11 +167,17 @@ def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: S
         collisions = torch.tensor([scene.count(trial_posture(env.robot, f)) for f in fields])
     else:
         collisions = None
-    error = torch.tensor([f.pop("error") for f in fields], dtype=torch.float64)
+    error = torch.tensor([f["error"] for f in fields], dtype=torch.float64)
     evaluation = Evaluation(error=error, collisions=None if collisions is None else collisions.cpu())
     r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
     threshold = math.inf if solver.stop_threshold is None else solver.stop_threshold
-    return [TrialResult(success=bool(r[t] > threshold), total_error_mm=float(error[t]) * 1000,
+    if outcome.evaluation.alignment is not None:  # a gripper: the base of R is eq. 29's
+        evaluation.alignment = torch.tensor([f["alignment"] for f in fields], dtype=torch.float64)
+    for f in fields:
+        if "distance_mm" not in f:
+            f["total_error_mm"] = f["error"] * 1000
+        f.pop("error")
+    return [TrialResult(success=bool(r[t] > threshold),
                         iterations=int(outcome.iterations[t]), reinforcement=float(r[t]),
                         wall_time_s=outcome.wall_time_s,
                         collisions=0 if collisions is None else int(collisions[t]), **fields[t])

@@ -58,6 +58,9 @@ class SolverCfg:
         final_refine: refinement iterations applied after the loop to the reported configuration's
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
+        approach_m, approach_deg: a gripper problem with an ``approach`` configuration searches
+            within +- these of it (prismatic joints in metres, revolute joints in degrees),
+            clipped to the joint limits (section 7 automates the last phase only).
         time_budget: wall-clock seconds after which the loop stops (``None``: no limit).
         enough: stop the whole batch once this many trials have succeeded, the others reported as
             they stand (``None``: every trial runs to its own stop, the paper's independent runs;
@@ -73,6 +76,8 @@ class SolverCfg:
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
     enough: int | None = setting(None, lo=1, hi=1_000_000)
+    approach_m: float = setting(0.2, lo=0.0, lo_open=True, hi=10.0)
+    approach_deg: float = setting(30.0, lo=0.0, lo_open=True, hi=360.0)
     refine: int = setting(0, lo=0, hi=1000)
     final_refine: int = setting(3, lo=0, hi=1000)
     candidates: int = setting(1, lo=1, hi=64)

@@ -36,12 +36,15 @@ class Evaluation:
         finger_errors: (T, F) per contact finger, or None.
         joints: (T, F, j) finger joints chosen for each contact finger, or None.
         collisions: (T,) collision count, or None when the environment has no collision component.
+        alignment: (T,) a gripper's |n_gripper . n_object| (eq. 24), or None; then ``error`` is d
+            (eq. 26) and the reinforcement's base is (R1 + R2) / 2 (eq. 29).
     """
 
     error: Tensor
     finger_errors: Tensor | None = None
     joints: Tensor | None = None
     collisions: Tensor | None = None
+    alignment: Tensor | None = None
 
     def tensors(self) -> dict[str, Tensor]:
         """The parts that are present, by name."""

@@ -20,24 +20,31 @@ __all__ = ["GraspResult", "TrialResult"]
 
 @dataclass
 class TrialResult:
-    """One trial: the configuration it found and how good it is."""
+    """One trial: the configuration it found and how good it is. Hand and arm_hand results have
+    the finger fields; a gripper (MANUS) result has ``distance_mm``, ``alignment`` and
+    ``gripper_points`` instead (INTERFACE.md); fields that do not apply are left out of the JSON."""
 
     success: bool
-    palm_pose: list[float]  # palm_link in the world: x, y, z (m), rx, ry, rz (deg)
-    joints: dict[str, list[float]]  # every finger, joints in chain order (deg)
-    fingertip_error_mm: dict[str, float]  # contact fingers
-    total_error_mm: float  # eq. 3
     iterations: int
     reinforcement: float  # noise-free, at the reported configuration
     wall_time_s: float
+    palm_pose: list[float] | None = None  # palm_link in the world: x, y, z (m), rx, ry, rz (deg)
+    joints: dict[str, list[float]] | None = None  # every finger, joints in chain order (deg)
+    fingertip_error_mm: dict[str, float] | None = None  # contact fingers
+    total_error_mm: float | None = None  # eq. 3
     collisions: int = 0
     arm_joints: dict[str, float] | None = None  # robots with a body: by URDF joint name, chain order (deg; m)
+    distance_mm: float | None = None  # a gripper: d of eq. 26
+    alignment: float | None = None  # a gripper: |n_gripper . n_object| (eq. 24)
+    gripper_points: list[list[float]] | None = None  # a gripper: its two marked points in the world (m)
+
+    @property
+    def error_mm(self) -> float:
+        """The error the trial is ranked by: E (eq. 3) for fingers, d (eq. 26) for a gripper."""
+        return self.total_error_mm if self.total_error_mm is not None else self.distance_mm
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        if d["arm_joints"] is None:
-            d.pop("arm_joints")
-        return d
+        return {k: v for k, v in asdict(self).items() if v is not None}
 
 
 @dataclass
@@ -56,7 +63,7 @@ class GraspResult:
     def best(self) -> TrialResult:
         """The successful trial with the smallest total error, collision-free ones first (else the
         smallest error, collision-free first)."""
-        return min(self.trials, key=lambda t: (not t.success, t.collisions > 0, t.total_error_mm))
+        return min(self.trials, key=lambda t: (not t.success, t.collisions > 0, t.error_mm))
 
     @property
     def success(self) -> bool:

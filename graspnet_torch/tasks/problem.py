@@ -26,7 +26,8 @@ __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_ta
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
 MAX_OBSTACLES = 1000
-KNOWN_KEYS = {"robot", "object", "contacts", "palm_bounds", "bounds", "obstacles", "name", "description", "reference",
+KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds", "bounds", "obstacles", "name",
+              "description", "reference",
               "notes"}
 
 
@@ -200,6 +201,10 @@ class GraspProblem:
         obstacles: other shapes in the world.
         name, description: for tasks.
         reference: a posture known to solve the problem (optional).
+        points: a gripper robot (MANUS, section 7): the two object points (2, 3), object frame,
+            metres, that the gripper's two marked points must meet (either pairing); else None.
+        approach: a gripper robot: the configuration the user reached, by URDF joint name as
+            written (metres, degrees); the search stays near it. None: the robot's search space.
         source: where it came from, for messages.
     """
 
@@ -214,6 +219,8 @@ class GraspProblem:
     source: str = "<memory>"
     robot_cfg: RobotCfg | None = field(default=None, repr=False, compare=False)
     joint_bounds: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False)
+    points: np.ndarray | None = field(default=None, compare=False)
+    approach: dict[str, float] | None = field(default=None, compare=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -243,6 +250,11 @@ class GraspProblem:
         elif robot_cfg.name != robot:
             raise ProblemError(f"{source}: the problem is for robot '{robot}', not '{robot_cfg.name}'")
         fingers = list(robot_cfg.fingers)
+        if not fingers:  # a gripper with two marked points (MANUS): points instead of contacts
+            return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)
+        if data.get("points") is not None or data.get("approach") is not None:
+            key = "points" if data.get("points") is not None else "approach"
+            raise ProblemError(f"{source}: '{key}' is for a gripper robot (manus); robot '{robot}' takes contacts")
         raw = data.get("contacts")
         if not isinstance(raw, Sequence) or isinstance(raw, str):
             raise ProblemError(f"{source}: 'contacts' must be a list of {{finger, position}}")
@@ -308,6 +320,58 @@ class GraspProblem:
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
                    source=source, robot_cfg=robot_cfg, joint_bounds=joint_bounds)
+
+    @classmethod
+    def _gripper_problem(cls, data: Mapping, source: str, robot: str, robot_cfg: RobotCfg, folder: Path | None,
+                         allow_outside_paths: bool) -> GraspProblem:
+        """A MANUS problem (INTERFACE.md): two object points, an object, an optional approach
+        configuration and obstacles; no contacts."""
+        if data.get("contacts") is not None:
+            raise ProblemError(f"{source}: robot '{robot}' has no fingers: give 'points' (the two object points "
+                               f"its gripper points meet), not 'contacts'")
+        for key in ("palm_bounds", "bounds", "reference"):
+            if data.get(key) is not None:
+                raise ProblemError(f"{source}: '{key}' does not apply to robot '{robot}' (use 'approach')")
+        raw = data.get("points")
+        if not isinstance(raw, Sequence) or isinstance(raw, str) or len(raw) != 2:
+            n = len(raw) if isinstance(raw, Sequence) and not isinstance(raw, str) else "none"
+            raise ProblemError(f"{source}: points: robot '{robot}' needs exactly 2 object points "
+                               f"[[x, y, z], [x, y, z]] (metres, object frame), got {n}")
+        points = np.stack([_numbers(p, 3, f"{source}: points[{k}]") for k, p in enumerate(raw)])
+        if np.linalg.norm(points[0] - points[1]) < 1e-4:
+            raise ProblemError(f"{source}: points: the two points are at the same place (closer than 0.1 mm): "
+                               f"they define no direction")
+        shape = {"folder": folder, "allow_outside_paths": allow_outside_paths}
+        obj = Shape.from_mapping(data["object"], f"{source}: object", **shape) if data.get("object") is not None \
+            else None
+        approach = data.get("approach")
+        if approach is not None:
+            if not isinstance(approach, Mapping) or not approach or not all(isinstance(k, str) for k in approach):
+                raise ProblemError(f"{source}: approach: expected a mapping joint name -> value (m, degrees)")
+            values = number_list(list(approach.values()), None, f"{source}: approach", ProblemError,
+                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values (m, degrees)")
+            approach = dict(zip(approach, values, strict=True))
+        obstacles = data.get("obstacles")
+        obstacles = [] if obstacles is None else obstacles
+        if not isinstance(obstacles, list) or len(obstacles) > MAX_OBSTACLES:
+            raise ProblemError(f"{source}: 'obstacles' must be a list of at most {MAX_OBSTACLES} shapes")
+        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
+        for key in ("name", "description"):
+            if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
+                raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
+        return cls(robot=robot, contacts=(), object=obj, obstacles=obstacles, name=data.get("name"),
+                   description=data.get("description"), source=source, robot_cfg=robot_cfg, points=points,
+                   approach=approach)
+
+    def points_world(self) -> np.ndarray:
+        """(2, 3) the object points in the world (object pose applied)."""
+        if self.points is None:
+            raise ValueError(f"{self.source}: not a two-point (gripper) problem")
+        if self.object is None:
+            return self.points.copy()
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        return self.points @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
 
     @staticmethod
     def _reference(data: Any, contacts: list[Contact], robot_cfg: RobotCfg, source: str) -> ReferencePosture | None:

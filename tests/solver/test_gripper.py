@@ -1,0 +1,103 @@
+"""The MANUS's two-point environment (paper section 7) on the one loop: problems with `points` and
+`approach`, eq. 24-29 against an independent recomputation, results by joint name."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.robot.robot import Posture
+from graspnet_torch.solver.gripper import GripperEnvironment, gripper_bounds
+
+CUBE = {"robot": "manus", "object": {"shape": "box", "size": [0.06, 0.06, 0.06], "pose": [0.9, 0.2, 0.75, 0, 0, 30]},
+        "points": [[0.0, 0.03, 0.0], [0.0, -0.03, 0.0]]}
+
+
+@pytest.fixture(scope="module")
+def manus():
+    return gt.load_robot("manus")
+
+
+def test_evaluation_is_eq_24_to_28_of_forward_kinematics(manus):
+    """d = min of the two pairings' summed distances and |n_g . n_o|, with the gripper points from
+    pytorch-kinematics link frames (float64)."""
+    problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
+    env = GripperEnvironment(manus, problem, dtype=torch.float64)
+    assert env.n == 9
+    g = torch.Generator().manual_seed(0)
+    q = env.lower + (env.upper - env.lower) * torch.rand(5, 9, generator=g, dtype=torch.float64)
+    ev = env.evaluate(q)
+    target = problem.points_world()
+    for k in range(5):
+        frames = manus.link_frames(Posture(palm_pose=torch.zeros(6), fingers=torch.zeros(0, 0), body=q[k]))
+        p1, p2 = (frames[name][:3, 3] for name in manus.cfg.gripper_points)
+        d1 = np.linalg.norm(target[0] - p1) + np.linalg.norm(target[1] - p2)
+        d2 = np.linalg.norm(target[1] - p1) + np.linalg.norm(target[0] - p2)
+        n_g, n_o = (p2 - p1) / np.linalg.norm(p2 - p1), (target[1] - target[0]) / np.linalg.norm(target[1] - target[0])
+        assert float(ev.error[k]) == pytest.approx(min(d1, d2), abs=1e-6)  # pk holds URDF origins in float32
+        assert float(ev.alignment[k]) == pytest.approx(abs(n_g @ n_o), abs=1e-6)
+    r = gt.rewards.Reward(gt.RewardCfg(), 2000)(ev, 1)
+    expected = (ev.alignment + 1 - torch.tanh(ev.error)) / 2  # eq. 29 with a = 1
+    assert torch.allclose(r, expected)
+
+
+def test_approach_bounds_the_search_within_the_limits(manus):
+    data = {**CUBE, "approach": {"base_x": 0.45, "shoulder_pitch": 20.0}}
+    problem = gt.GraspProblem.from_mapping(data, source="cube")
+    lo, hi = gripper_bounds(manus, problem, approach_m=0.2, approach_deg=30.0)
+    names = manus.body_joint_names
+    x, pitch = names.index("base_x"), names.index("shoulder_pitch")
+    limits = manus.body_limits
+    assert (lo[x], hi[x]) == pytest.approx((0.25, limits[1][x]))  # 0.45 + 0.2 clipped to the limit 0.5
+    assert (lo[pitch], hi[pitch]) == pytest.approx((math.radians(-10), math.radians(50)))
+    free = names.index("wrist_roll")
+    assert (lo[free], hi[free]) == pytest.approx((limits[0][free], limits[1][free]))
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}]}, "has no fingers: give 'points'"),
+    ({"points": [[0, 0, 0]]}, "needs exactly 2 object points"),
+    ({"points": [[0, 0, 0], [0, 0, 0], [0, 0, 1]]}, "needs exactly 2 object points"),
+    ({"points": [[0, 0, 0], [0, 0, 0.00001]]}, "the two points are at the same place"),
+    ({"points": [[0, 0, "x"], [0, 0, 1]]}, "points[0][2]: expected a number"),
+    ({"bounds": {"min": [0] * 9, "max": [1] * 9}}, "'bounds' does not apply to robot 'manus'"),
+])
+def test_bad_gripper_problems_are_refused(change, message):
+    with pytest.raises(gt.ProblemError) as info:
+        gt.GraspProblem.from_mapping({**CUBE, **change}, source="cube")
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize(("approach", "message"), [
+    ({"base_z": 0.1}, "approach: unknown joint(s) base_z"),
+    ({"shoulder_pitch": 120.0}, "approach.shoulder_pitch: 120 lies outside its limits [-90, 90] degrees"),
+])
+def test_bad_approach_is_refused(manus, approach, message):
+    problem = gt.GraspProblem.from_mapping({**CUBE, "approach": approach}, source="cube")
+    with pytest.raises(gt.ProblemError) as info:
+        GripperEnvironment(manus, problem)
+    assert message in str(info.value)
+
+
+def test_solve_reports_the_interface_fields_recomputable_from_the_urdf(manus):
+    problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
+    result = gt.solve(problem, trials=3, seed=0, max_iterations=30)
+    data = json.loads(result.to_json())
+    for key in ("arm_joints", "distance_mm", "alignment", "gripper_points", "collisions", "success", "iterations",
+                "reinforcement", "wall_time_s", "trials"):
+        assert key in data, key
+    assert "joints" not in data and "total_error_mm" not in data
+    assert list(data["arm_joints"]) == list(manus.body_joint_names)
+    q = torch.tensor([v * (math.pi / 180 if kind == "revolute" else 1.0)
+                      for v, kind in zip(data["arm_joints"].values(), manus.body.joint_types, strict=True)],
+                     dtype=torch.float64)
+    points = manus.gripper_points(q)
+    assert torch.allclose(points, torch.tensor(data["gripper_points"], dtype=torch.float64), atol=1e-9)
+    target = torch.as_tensor(problem.points_world())
+    d = min(float((target - points).norm(dim=-1).sum()), float((target.flip(0) - points).norm(dim=-1).sum()))
+    assert data["distance_mm"] == pytest.approx(d * 1000, abs=1e-6)
