@@ -96,8 +96,8 @@ def cmaes_rows(runs: int, results: dict) -> dict:
         t0 = time.perf_counter()
         for k in range(runs):
             o = cmaes_search(environment, starts[k], reward_cfg("r3"), budget=2000, seed=k)
-            ev = environment.finish(o.config.unsqueeze(0), o.evaluation, solver.final_refine)
-            fields = environment.report(o.config.unsqueeze(0), ev)[0]
+            config, ev = environment.finish(o.config.unsqueeze(0), o.evaluation, solver.final_refine)
+            fields = environment.report(config, ev)[0]
             collisions = scene.count(trial_posture(robot, fields))
             stats.append((o.success, o.success and collisions == 0, o.evaluations, fields["error"] * 1000))
         evals = [s[2] for s in stats if s[0]]

@@ -111,8 +111,9 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     """
     groups = {}
     if isinstance(cfg, Mapping):  # null in a group's YAML: the robot's default (srv.lr_bp, reward.kind, ...)
-        groups = {name: dict(cfg.get(name) or {}) for name in ("srv", "reward")}
-        cfg = {**cfg, **{name: unset(cls, groups[name]) for name, cls in (("srv", SRVNetCfg), ("reward", RewardCfg))}}
+        classes = {"srv": SRVNetCfg, "reward": RewardCfg, "solver": SolverCfg}
+        groups = {name: dict(cfg.get(name) or {}) for name in classes}
+        cfg = {**cfg, **{name: unset(cls, groups[name]) for name, cls in classes.items()}}
     job = build(SolveGraspJobCfg, cfg)
     device = check_device(job.device)
     robot = job.robot
@@ -121,7 +122,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
     defaults = problem.robot_cfg.solver_defaults
     job = replace(job, srv=with_defaults(SRVNetCfg, groups.get("srv", job.srv), defaults.get("srv"), "srv"),
-                  reward=with_defaults(RewardCfg, groups.get("reward", job.reward), defaults.get("reward"), "reward"))
+                  reward=with_defaults(RewardCfg, groups.get("reward", job.reward), defaults.get("reward"), "reward"),
+                  solver=with_defaults(SolverCfg, groups.get("solver", job.solver), defaults.get("solver"), "solver"))
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     solver = job.solver
     if job.max_iterations is not None:

@@ -71,21 +71,21 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
     if not isinstance(problem, GraspProblem):
         p = Path(str(problem))
         problem = GraspProblem.from_file(p) if p.suffix or p.exists() else GraspProblem.from_task(str(problem))
-    solver = solver or SolverCfg()
-    if max_iterations is not None:
-        solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
     if robot is None or (finger_ik is None and problem.points is None):
         shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
     defaults = robot.cfg.solver_defaults
+    solver = with_defaults(SolverCfg, solver, defaults.get("solver"), "solver")
+    if max_iterations is not None:
+        solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
     srv = with_defaults(SRVNetCfg, srv, defaults.get("srv"), "srv")
     reward = with_defaults(RewardCfg, reward, defaults.get("reward"), "reward")
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
     if solver.final_refine > 0:
-        outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
+        outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
     trial_results = _report(env, outcome, reward, solver)
     settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
                 "enough": solver.enough,

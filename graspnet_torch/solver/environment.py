@@ -8,7 +8,8 @@ an environment with
 - ``evaluate(config (T, n)) -> Evaluation``: the error the reinforcement is built from (E of
   eq. 3) and optional parts (per-finger errors, the finger joints the FCNN chose, collision
   counts);
-- ``finish(config, evaluation) -> Evaluation``: a last refinement of what is reported;
+- ``finish(config, evaluation, iterations) -> (config, Evaluation)``: a last refinement of what
+  is reported (the fingers' joints; a gripper's whole configuration);
 - ``report(...)``: the result fields of each trial, recomputed in float64.
 
 Rewards (R1-R4, eq. 20-23) are functions of the evaluation, the iteration and the budget
@@ -156,15 +157,15 @@ class FingerEnvironment:
             collisions = self.proxy.count(palm, every, config if self.robot.has_body else None, levels)
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions)
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
         """Refine the finger joints of the reported configurations (the configuration kept); never
-        worse."""
+        worse. Returns the configurations and their evaluation."""
         if iterations <= 0:
-            return evaluation
+            return config, evaluation
         with torch.inference_mode():
             q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
-        return Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
-                          collisions=evaluation.collisions)
+        return config, Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
+                                  collisions=evaluation.collisions)
 
     def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
         """Per trial, the result fields of the reported configuration, recomputed in float64: the

@@ -90,9 +90,36 @@ class GripperEnvironment:
             collisions = self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels)
         return Evaluation(error=d, alignment=alignment, collisions=collisions)
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> Evaluation:
-        """Nothing to polish: no fingers."""
-        return evaluation
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
+        """Polish the reported configurations: ``iterations`` damped least-squares steps (float64)
+        on the two gripper points against the object points of each trial's nearer pairing,
+        within the bounds, each step kept only where it lowers d (never worse). The analogue of
+        the hand's final finger refinement: the loop finds the basin, the polish lands in it.
+
+            dq = J^T (J J^T + lambda^2 I)^-1 e,   J = d(points)/dq (6 x n, forward differences, float64)
+        """
+        if iterations <= 0:
+            return config, evaluation
+        lo, hi = (torch.as_tensor(a) for a in self._bounds)
+        q = self.clamp(config)
+        targets = torch.as_tensor(self.problem.points_world(), dtype=torch.float64)
+        swap = _pairing(self.robot.gripper_points(q), targets)  # (T,) True: point 1 -> target 2
+        goal = torch.where(swap.view(-1, 1, 1), targets.flip(0), targets).reshape(-1, 6)
+        lam, h = 1e-3, 1e-6
+        eye = torch.eye(self.n, dtype=torch.float64)
+        for _ in range(iterations):
+            pts = self.robot.gripper_points(q).reshape(-1, 6)
+            e = goal - pts
+            shifted = q.unsqueeze(1) + h * eye  # (T, n, n): one joint moved per row
+            J = (self.robot.gripper_points(shifted).reshape(q.shape[0], self.n, 6)
+                 - pts.reshape(-1, 1, 6)).transpose(1, 2) / h  # (T, 6, n)
+            A = J @ J.transpose(1, 2) + lam ** 2 * torch.eye(6, dtype=torch.float64)
+            dq = (J.transpose(1, 2) @ torch.linalg.solve(A, e.unsqueeze(-1))).squeeze(-1)
+            new = torch.clamp(q + dq, lo, hi)
+            better = (goal - self.robot.gripper_points(new).reshape(-1, 6)).norm(dim=-1) < e.norm(dim=-1)
+            q = torch.where(better.unsqueeze(1), new, q)
+        ev = self.evaluate(q.to(config))
+        return q.to(config), ev
 
     def clamp(self, config: Tensor) -> Tensor:
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
@@ -124,3 +151,10 @@ class GripperEnvironment:
                 "error": float(d[k]),
             })
         return out
+
+
+def _pairing(points: Tensor, targets: Tensor) -> Tensor:
+    """(T,) True where the crossed pairing (eq. 28) is the nearer: gripper point 1 -> object point 2."""
+    d1 = (targets - points).norm(dim=-1).sum(-1)
+    d2 = (targets.flip(0) - points).norm(dim=-1).sum(-1)
+    return d2 < d1
