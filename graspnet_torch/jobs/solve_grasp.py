@@ -8,6 +8,7 @@ curves (like the paper's Fig. 3).
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Mapping
 from dataclasses import replace
@@ -90,11 +91,16 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
 
 def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
     """One row per trial (the first ``max_rows``; the result JSON has them all)."""
-    headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "collisions",
-               "reinforcement"]
-    rows = [[k, "yes" if t.success else "no", t.iterations, t.total_error_mm,
-             *[t.fingertip_error_mm[f] for f in fingers], t.collisions, round(t.reinforcement, 5)]
-            for k, t in enumerate(result.trials[:max_rows])]
+    if result.trials and result.trials[0].distance_mm is not None:  # a gripper
+        headers = ["trial", "success", "iterations", "d mm", "alignment", "collisions", "reinforcement"]
+        rows = [[k, "yes" if t.success else "no", t.iterations, t.distance_mm, round(t.alignment, 6), t.collisions,
+                 round(t.reinforcement, 5)] for k, t in enumerate(result.trials[:max_rows])]
+    else:
+        headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "collisions",
+                   "reinforcement"]
+        rows = [[k, "yes" if t.success else "no", t.iterations, t.total_error_mm,
+                 *[t.fingertip_error_mm[f] for f in fingers], t.collisions, round(t.reinforcement, 5)]
+                for k, t in enumerate(result.trials[:max_rows])]
     more = len(result.trials) - max_rows
     return format_table(headers, rows, floatfmt=".3g") + (f"\n... {more} more trials in the result" if more > 0 else "")
 
@@ -132,6 +138,10 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
                        4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     check_reach(robot, problem)
+    if problem.points is not None:  # a gripper: its approach names known joints within their limits
+        from graspnet_torch.solver.gripper import gripper_bounds
+
+        gripper_bounds(robot, problem, solver.approach_m, solver.approach_deg)
     return job, problem, device, out, solver
 
 
@@ -153,15 +163,19 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     best = result.best
     print(_trial_table(result, fingers))
     n_ok = sum(t.success for t in result.trials)
-    errors = np.array([t.total_error_mm for t in result.trials])
-    per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
+    errors = np.array([t.error_mm for t in result.trials])
     if solver.stop_threshold is not None:
         stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
     else:  # noise presets: a noisy signal crosses any threshold by chance
         stops = f"no stopping threshold: {trials} trials ran their whole budget"
     free = sum(t.collisions == 0 for t in result.trials)
-    print(f"\n{problem.name or problem.source}: {stops}; best total "
-          f"error {best.total_error_mm:.3f} mm ({per_finger}), {best.collisions} collision(s); median "
+    if best.distance_mm is not None:  # a gripper: d (eq. 26) and the alignment (eq. 24)
+        quality = (f"best d {best.distance_mm:.3f} mm, alignment {best.alignment:.6f} "
+                   f"({math.degrees(math.acos(min(1.0, best.alignment))):.2f} deg)")
+    else:
+        per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
+        quality = f"best total error {best.total_error_mm:.3f} mm ({per_finger})"
+    print(f"\n{problem.name or problem.source}: {stops}; {quality}, {best.collisions} collision(s); median "
           f"{np.median(errors):.3f} mm; {free}/{trials} trials collision-free (FCL, INTERFACE.md); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
@@ -188,14 +202,17 @@ def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) 
 
     posture = posture_of(robot, result.best)
     meshes = tuple(s.trimesh() for s in ((problem.object,) if problem.object else ()) + problem.obstacles)
-    contacts = problem.contacts_world()
+    if problem.points is not None:  # a gripper: the object's two points and the gripper's two
+        contacts = np.concatenate([problem.points_world(), np.asarray(result.best.gripper_points)])
+    else:
+        contacts = problem.contacts_world()
     red: frozenset[str] = frozenset()
     if problem.object is not None or problem.obstacles:
         from graspnet_torch.collision import CollisionScene
 
         report = CollisionScene(robot, problem).check(posture)
         red = frozenset({link for link, _ in report.obstacle_pairs} | set(report.object_links))
-    caption = (f"{problem.name or 'problem'}: best trial, total error {result.best.total_error_mm:.2f} mm, "
+    caption = (f"{problem.name or 'problem'}: best trial, error {result.best.error_mm:.2f} mm, "
                f"{result.best.collisions} collision(s){' (red)' if red else ''}")
     panels = [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),
               Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]

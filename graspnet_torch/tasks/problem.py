@@ -441,7 +441,9 @@ class GraspProblem:
         raise ProblemError(f"{self.source}: no palm_bounds in the problem nor in robot '{self.robot}'")
 
     def contacts_object(self) -> np.ndarray:
-        """(F, 3) contact positions in the object frame."""
+        """(F, 3) contact positions in the object frame ((0, 3) for a two-point gripper problem)."""
+        if not self.contacts:
+            return np.zeros((0, 3))
         return np.stack([c.position for c in self.contacts])
 
     def contacts_world(self) -> np.ndarray:

@@ -72,7 +72,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["trials=[1,"], "cannot parse the command line"),
     (["seed=" + "9" * 5000], "cannot parse the command line: Exceeds the limit"),
     (["out=/tmp/graspnet-no-such.d/"], "ends with '/': give a file path"),
-    (["task=null"], "task=null: expected one of block5, env1, env2, fig10, glass3"),
+    (["task=null"], "task=null: expected one of block5, cube, env1, env2, fig10, glass3"),
     (["--foo"], "unknown option '--foo'"),
     (["--cfg", "nonsense"], "argument --cfg/-c: invalid choice"),
     (["--config-name=train_fcnn"], "--config-name, --config-path and --config-dir are not supported"),
@@ -280,5 +280,22 @@ ENV1 = (Path(__file__).resolve().parents[2] / "configs" / "task" / "env1.yaml").
 def test_bad_arm_problems_are_refused(tmp_path, text, message):
     """Malformed obstacles, an obstacle that swallows a contact and a contact beyond the arm's reach:
     exit 2, one line, nothing written."""
+    path = _problem(tmp_path, text)
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+
+
+CUBE = (Path(__file__).resolve().parents[2] / "configs" / "task" / "cube.yaml").read_text()
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    (CUBE.replace("points: [[0.0, 0.035, 0.0], [0.0, -0.035, 0.0]]", "points: [[0.0, 0.035, 0.0]]"),
+     "points: robot 'manus' needs exactly 2 object points"),
+    (CUBE.replace("points: [[0.0, 0.035, 0.0], [0.0, -0.035, 0.0]]", "points: [[0, 0, 0], [0, 0, 0]]"),
+     "the two points are at the same place"),
+    (CUBE + "contacts: [{finger: thumb, position: [0, 0, 0]}]\n", "robot 'manus' has no fingers: give 'points'"),
+    (CUBE + "approach: {base_z: 0.1}\n", "approach: unknown joint(s) base_z"),
+    (CUBE + "approach: {elbow_pitch: 170}\n", "approach.elbow_pitch: 170 lies outside its limits [-150, 150] degrees"),
+])
+def test_bad_manus_problems_are_refused(tmp_path, text, message):
     path = _problem(tmp_path, text)
     _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)

@@ -172,3 +172,14 @@ def test_the_free_hand_with_r3_keeps_its_fingers_out_of_the_glass():
     free3 = sum(t.collisions == 0 for t in r3.trials)
     assert free3 >= 15 and free3 >= free1 + 8, (free1, free3)
     assert r3.best.collisions == 0 and r3.best.success and r3.best.total_error_mm < 1.0
+
+
+def test_manus_from_the_command_line(tmp_path):
+    """`robot=manus task=cube`: the result JSON of INTERFACE.md (all 9 joints by name, d, alignment,
+    gripper points, collisions) and a one-line summary."""
+    res = _run("robot=manus", "task=cube", "trials=2", "seed=0", "max_iterations=50", f"hydra.run.dir={tmp_path}")
+    assert res.returncode == 0, res.stderr
+    data = json.loads((tmp_path / "result.json").read_text())
+    assert data["robot"] == "manus" and len(data["arm_joints"]) == 9
+    assert {"distance_mm", "alignment", "gripper_points", "collisions"} <= set(data)
+    assert "best d " in res.stdout and (tmp_path / "posture.png").exists()
