@@ -218,6 +218,9 @@ def _solver_defaults(data: Mapping[str, Any], source: str) -> dict[str, dict[str
         where = f"{source}: solver_defaults.{group}"
         if not isinstance(values, Mapping):
             raise ConfigError(f"{where}: expected a mapping of settings")
-        build(groups[group], dict(values), where)
+        try:
+            build(groups[group], dict(values), f"solver_defaults.{group}")
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
         out[group] = dict(values)
     return out

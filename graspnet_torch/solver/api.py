@@ -143,6 +143,12 @@ def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
     for f, v in ref.joints.items():
         q[robot.finger_index(f)] = torch.as_tensor(v, dtype=torch.float64)
     if robot.has_body:
+        unknown = sorted(set(ref.arm_joints or {}) - set(robot.body_joint_names))
+        if unknown:
+            from graspnet_torch.errors import ProblemError
+
+            raise ProblemError(f"{problem.source}: reference.arm_joints: unknown joint(s) {', '.join(unknown[:5])} "
+                               f"of robot '{robot.name}'")
         body = home.body.clone()
         for k, name in enumerate(robot.body_joint_names):
             if ref.arm_joints and name in ref.arm_joints:

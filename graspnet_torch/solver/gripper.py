@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.rewards import manus_reward
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.tasks.problem import GraspProblem
@@ -80,8 +81,6 @@ class GripperEnvironment:
     def evaluate(self, config: Tensor) -> Evaluation:
         """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
         proxy, the collision count."""
-        from graspnet_torch.rewards import manus_reward
-
         points = self.robot.gripper_points(config)  # (T, 2, 3)
         _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
         collisions = None
@@ -128,7 +127,6 @@ class GripperEnvironment:
     def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
         """Per trial, recomputed in float64: every body joint by name (m / degrees), the palm
         (gripper) pose, the two gripper points, d in mm, the alignment and ``error`` (d, metres)."""
-        from graspnet_torch.rewards import manus_reward
         from graspnet_torch.robot.transforms import rt_to_pose
 
         q = self.clamp(config)

@@ -138,6 +138,23 @@ def _check_mesh(path: Path, where: str) -> None:
                            f"+-{MAX_LENGTH_M:g} m (metres expected)")
 
 
+def _obstacles(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:
+    """The problem's ``obstacles``: a list of at most :data:`MAX_OBSTACLES` shapes."""
+    obstacles = data.get("obstacles")
+    obstacles = [] if obstacles is None else obstacles
+    if not isinstance(obstacles, list):
+        raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
+    if len(obstacles) > MAX_OBSTACLES:
+        raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
+    return tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
+
+
+def _check_texts(data: Mapping, source: str) -> None:
+    for key in ("name", "description"):
+        if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
+            raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
+
+
 def _inside(shape: Shape, points: np.ndarray) -> np.ndarray:
     """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
     from graspnet_torch.robot.chain import rpy_matrix_np
@@ -304,19 +321,11 @@ class GraspProblem:
                 raise ProblemError(f"{source}: bounds: min > max for joint(s) "
                                    f"{', '.join(str(i) for i in np.nonzero(lo_b > hi_b)[0])}")
             joint_bounds = (lo_b, hi_b)
-        obstacles = data.get("obstacles")
-        obstacles = [] if obstacles is None else obstacles
-        if not isinstance(obstacles, list):
-            raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
-        if len(obstacles) > MAX_OBSTACLES:
-            raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
-        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
+        obstacles = _obstacles(data, source, shape)
         reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
         if obstacles:
             _check_free_contacts(obstacles, contacts, obj, source)
-        for key in ("name", "description"):
-            if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
-                raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
+        _check_texts(data, source)
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
                    source=source, robot_cfg=robot_cfg, joint_bounds=joint_bounds)
@@ -351,14 +360,8 @@ class GraspProblem:
             values = number_list(list(approach.values()), None, f"{source}: approach", ProblemError,
                                  -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values (m, degrees)")
             approach = dict(zip(approach, values, strict=True))
-        obstacles = data.get("obstacles")
-        obstacles = [] if obstacles is None else obstacles
-        if not isinstance(obstacles, list) or len(obstacles) > MAX_OBSTACLES:
-            raise ProblemError(f"{source}: 'obstacles' must be a list of at most {MAX_OBSTACLES} shapes")
-        obstacles = tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
-        for key in ("name", "description"):
-            if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
-                raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
+        obstacles = _obstacles(data, source, shape)
+        _check_texts(data, source)
         return cls(robot=robot, contacts=(), object=obj, obstacles=obstacles, name=data.get("name"),
                    description=data.get("description"), source=source, robot_cfg=robot_cfg, points=points,
                    approach=approach)

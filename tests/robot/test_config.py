@@ -104,3 +104,15 @@ def test_malformed_yaml_names_the_file(tmp_path):
     path.write_text("name: hand\nfingers: [unclosed\n")
     with pytest.raises(gt.ConfigError, match=r"broken.yaml: malformed YAML \(line"):
         gt.load_robot(path)
+
+
+@pytest.mark.parametrize(("defaults", "message"), [
+    ({"srv": {"lr_bp": -1}}, r"solver_defaults.srv.lr_bp=-1: expected a number in \[0, 100\]"),
+    ({"srv": {"learning": 0.1}}, r"unknown setting 'solver_defaults.srv.learning'"),
+    ({"reward": {"kind": "r9"}}, r"solver_defaults.reward.kind='r9': expected one of r1, r2, r3, r4"),
+    ({"noise": {"sigma": 0.1}}, r"'solver_defaults' must map srv, reward or solver to settings"),
+    ({"solver": 3}, r"solver_defaults.solver: expected a mapping of settings"),
+])
+def test_bad_solver_defaults_are_refused(tmp_path, defaults, message):
+    with pytest.raises(gt.ConfigError, match=message):
+        gt.load_robot(_hand_yaml(tmp_path, solver_defaults=defaults))

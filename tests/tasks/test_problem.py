@@ -146,3 +146,36 @@ def test_round_trip_through_mapping(tmp_path):
     again = gt.GraspProblem.from_mapping(p.to_mapping(), source="again")
     np.testing.assert_allclose(again.contacts_world(), p.contacts_world())
     assert again.fingers == p.fingers
+
+
+FINGERS = {f: [0, 0, 0, 0] for f in ("thumb", "index", "middle")}
+
+
+@pytest.mark.parametrize(("reference", "message"), [
+    ({"palm_pose": [0, 0, 0, 0, 0, 0], "joints": {"thumb": [0, 0, 0, 0]}}, r"reference: expected \{arm_joints"),
+    ({"arm_joints": [1, 2], "joints": FINGERS}, r"reference.arm_joints: expected a mapping"),
+    ({"arm_joints": {"elbow_flexion": "x"}, "joints": FINGERS}, r"reference.arm_joints\[0\]"),
+])
+def test_bad_arm_references_are_refused(reference, message):
+    """Malformed arm references are refused (FINGERS: every contact finger given)."""
+    import yaml
+
+    from graspnet_torch.paths import configs_dir
+
+    data = yaml.safe_load((configs_dir() / "task" / "env1.yaml").read_text())
+    data["reference"] = reference
+    with pytest.raises(gt.ProblemError, match=message):
+        gt.GraspProblem.from_mapping(data, source="env1")
+
+
+def test_an_arm_reference_with_an_unknown_joint_is_refused():
+    import yaml
+
+    from graspnet_torch.paths import configs_dir
+    from graspnet_torch.solver.api import reference_posture
+
+    data = yaml.safe_load((configs_dir() / "task" / "env1.yaml").read_text())
+    data["reference"]["arm_joints"]["knee"] = 10.0
+    problem = gt.GraspProblem.from_mapping(data, source="env1")
+    with pytest.raises(gt.ProblemError, match=r"reference.arm_joints: unknown joint\(s\) knee of robot 'arm_hand'"):
+        reference_posture(gt.load_robot("arm_hand"), problem)
