@@ -18,7 +18,8 @@ URDFS = ["hand/hand.urdf", "arm_hand/arm_hand.urdf", "manus/manus.urdf"]
 # virtual x / y stages.
 FRAME_LINKS = {
     "hand/hand.urdf": {f"{f}_{s}" for f in ("thumb", "index", "middle", "ring", "pinky") for s in ("base", "tip")},
-    "manus/manus.urdf": {"world", "base_x", "base_y", "wrist_pitch_link"},
+    # the gripper points are markers (drawn, not bodies): the jaws touch the object
+    "manus/manus.urdf": {"world", "base_x", "base_y", "wrist_pitch_link", "gripper_point_1", "gripper_point_2"},
 }
 FRAME_LINKS["arm_hand/arm_hand.urdf"] = FRAME_LINKS["hand/hand.urdf"] | {
     "shoulder_flexion_link", "wrist_pronation_link", "wrist_flexion_link", "wrist_deviation_link"}

@@ -153,6 +153,7 @@ class Geom:
     xyz: tuple = (0.0, 0.0, 0.0)
     rpy: tuple = (0.0, 0.0, 0.0)
     color: str = "skin"
+    collision: bool = True  # False: drawn only (a marker such as the MANUS gripper points)
 
     def xml(self, tag: str) -> str:
         if self.kind == "box":
@@ -174,7 +175,7 @@ class Link:
     def xml(self) -> str:
         if not self.geoms:
             return f'  <link name="{self.name}"/>'
-        body = "\n".join(g.xml("visual") + "\n" + g.xml("collision") for g in self.geoms)
+        body = "\n".join(g.xml("visual") + ("\n" + g.xml("collision") if g.collision else "") for g in self.geoms)
         return f'  <link name="{self.name}">\n{body}\n  </link>'
 
 
@@ -354,7 +355,8 @@ def build_manus() -> str:
         links.append(Link(jaw, [Geom("box", (jl - 0.04, 0.012, 0.03), ((jl - 0.04) / 2, 0, 0), color="metal")]))
         joints.append(Joint(f"{jaw}_fixed", "fixed", "gripper", jaw, (0.04, side * (w / 2 + 0.006), 0)))
         pt = f"gripper_point_{k}"
-        links.append(Link(pt, [Geom("sphere", (0.006,), color="red")]))
+        # a marker, not a body: the jaw carries the collision geometry (and may touch the object)
+        links.append(Link(pt, [Geom("sphere", (0.006,), color="red", collision=False)]))
         joints.append(Joint(f"{pt}_fixed", "fixed", jaw, pt, (jl - 0.04 - 0.015, -side * 0.006, 0)))
     return to_urdf("manus", links, joints,
                    "MANUS-like assistive arm (6 DOF + two-jaw gripper) on a 3-DOF mobile base (x, y, yaw).")

@@ -50,7 +50,28 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
-__all__ = ["CollisionProxy", "shape_spheres"]
+__all__ = ["CollisionProxy", "self_collision_spheres", "shape_spheres"]
+
+
+SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this get the covering model for self-collision
+
+
+def self_collision_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
+    """The coarser model of a link primitive for self-collision: a small box (longest half-extent
+    <= ``SMALL_BOX_M``: a gripper, its jaws) is covered by spheres along its longest axis, radius
+    the half-diagonal of its cross-section, at most a radius apart (conservative: it bulges by up
+    to that radius beyond the box), so that thin parts need a few spheres instead of hundreds;
+    anything else as :func:`shape_spheres`."""
+    if shape.kind != "box" or max(shape.size) / 2 > SMALL_BOX_M:
+        return shape_spheres(shape)
+    h = np.asarray(shape.size, dtype=np.float64) / 2
+    a = int(np.argmax(h))
+    r = float(np.sqrt(np.sum(np.delete(h, a) ** 2)))
+    k = max(1, math.ceil(2 * h[a] / r) + 1)
+    local = np.zeros((k, 3))
+    local[:, a] = np.linspace(-h[a], h[a], k) if k > 1 else 0.0
+    centres = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
+    return centres, np.full(k, r)
 
 
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
@@ -150,6 +171,10 @@ class CollisionProxy:
         robot: the robot (its URDF's collision primitives).
         problem: obstacles, object and contact fingers.
         object_tolerance: penetration of the object (m) that counts (INTERFACE.md: 2 mm).
+        clearance: a safety margin (m): obstacles and the robot's own links count as hit from
+            this distance on, and the object from ``clearance - object_tolerance`` (0: the
+            count itself); the floor has none (the platform stands on it). A search that keeps the count at zero with a margin stays clear of
+            the proxy's approximation error (FCL, with no margin, has the last word).
 
     Call :meth:`count` with the palm frame, the body joints (robots with an arm) and every
     finger's joints. Two phases, as FCL: each link's spheres are cut into clusters of at most
@@ -161,8 +186,8 @@ class CollisionProxy:
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = 0.002,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu"):
-        from graspnet_torch.collision.scene import CollisionScene
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0):
+        from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, self_collision_pairs
 
         self.robot = robot
         shapes = link_shapes(robot.urdf, "collision")
@@ -172,9 +197,12 @@ class CollisionProxy:
         by_link: dict[str, list] = {}
         attach: dict[str, tuple] = {}
         self.link_spheres: dict[str, list[np.ndarray]] = {}
+        self_by_link: dict[str, list] = {}  # the coarser model for the robot's own links
         for shape in shapes:
             where, G = self._attachment(robot, shape.link, frames)
             attach[shape.link] = where
+            for c, r in zip(*self_collision_spheres(shape), strict=True):
+                self_by_link.setdefault(shape.link, []).append((G[:3, :3] @ c + G[:3, 3], float(r)))
             centres, radii_ = shape_spheres(shape)
             self.link_spheres.setdefault(shape.link, []).append(centres)  # in the link frame
             for c, r in zip(centres, radii_, strict=True):
@@ -233,12 +261,13 @@ class CollisionProxy:
         self._bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], **kw)
         self._eye34 = torch.eye(4, **kw)[:3]
         # the environment: obstacles, then the object (its own threshold; touching links exempt)
-        elements = list(problem.obstacles)
-        margin = [0.0] * len(elements)
+        elements = environment_obstacles(robot, problem)  # the problem's, then the robot's floor
+        margin = [-clearance] * len(problem.obstacles) + [0.0] * (len(elements) - len(problem.obstacles))  # the
+        # platform stands 1 mm above the floor slab: no margin there
         exempt: list[set] = [set()] * len(elements)
         if problem.object is not None:
             elements.append(problem.object)
-            margin.append(object_tolerance)
+            margin.append(object_tolerance - clearance)
             exempt.append(touching)
         self.n_elements = len(elements)
         self._groups = _primitive_groups(elements, kw)
@@ -261,6 +290,55 @@ class CollisionProxy:
             g["R_cols"] = g["R"].permute(1, 0, 2).reshape(3, -1)  # [R_1 .. R_O]
             g["Rt"] = torch.einsum("oji,oj->oi", g["R"], g["t"]).reshape(-1)  # [R_o^T t_o]
         self._true = torch.ones((), dtype=torch.bool, device=device)
+        # the robot's own links (self_collision: true): their own clusters (self_collision_spheres),
+        # every cluster of one link of a pair against every cluster of the other
+        self.self_pairs = self_collision_pairs(robot)
+        self.proxy_unchecked: list[tuple[str, str]] = []
+        involved = list(dict.fromkeys(link for pair in self.self_pairs for link in pair))
+        s_clusters, clusters_of = [], {}
+        for link in involved:
+            spheres = self_by_link[link]
+            for start in range(0, len(spheres), CLUSTER):
+                chunk = spheres[start:start + CLUSTER]
+                clusters_of.setdefault(link, []).append(len(s_clusters))
+                s_clusters.append((frame_id(attach[link]), np.stack([c for c, _ in chunk]),
+                                   np.array([r for _, r in chunk])))
+        S = len(s_clusters)
+        s_local, s_radii = np.zeros((S, 4, CLUSTER)), np.full((S, CLUSTER), -np.inf)
+        s_bound, s_bound_r = np.zeros((S, 4, 1)), np.zeros(S)
+        for k, (_f, c, r) in enumerate(s_clusters):
+            s_local[k, :3, :len(r)], s_local[k, 3, :len(r)], s_radii[k, :len(r)] = c.T, 1.0, r
+            centre = (c.min(0) + c.max(0)) / 2
+            s_bound[k, :3, 0], s_bound[k, 3, 0] = centre, 1.0
+            s_bound_r[k] = float(np.max(np.linalg.norm(c - centre, axis=1) + r))
+        ca, cb, pid = [], [], []
+        for p, (a, b) in enumerate(self.self_pairs):
+            for i in clusters_of[a]:
+                for j in clusters_of[b]:
+                    ca.append(i)
+                    cb.append(j)
+                    pid.append(p)
+        self._self_frame = torch.tensor([f for f, *_ in s_clusters], dtype=torch.long, device=device)
+        self._self_local = torch.as_tensor(s_local, **kw)
+        self._self_bound = torch.as_tensor(s_bound, **kw)
+        self._self_a = torch.tensor(ca, dtype=torch.long, device=device)
+        self._self_b = torch.tensor(cb, dtype=torch.long, device=device)
+        self._self_pair = torch.tensor(pid, dtype=torch.long, device=device)
+        self._self_bound_sq = torch.as_tensor((s_bound_r[ca] + s_bound_r[cb] + clearance) ** 2, **kw)
+        if ca:
+            thr = s_radii[ca][:, :, None] + s_radii[cb][:, None, :] + clearance  # (N, K, K); padding: -inf
+            self._self_thr_sq = torch.as_tensor(np.where(thr > 0, thr, 0.0) ** 2, **kw)
+            # pairs that this coarser model (with its clearance) finds touching at the home posture
+            # are joints' neighbours it cannot resolve (a wrist housing and the gripper): it leaves
+            # them to FCL, which checks every pair of self_collision_pairs
+            home = robot.home_posture(dtype).body.to(device).unsqueeze(0)
+            levels, palm_home = self.body_levels_and_palm(home)
+            touching_home = self.self_hits(palm_home, torch.zeros(1, 0, 0, **kw), home, levels)[0]
+            keep = ~touching_home[self._self_pair]
+            self._self_a, self._self_b = self._self_a[keep], self._self_b[keep]
+            self._self_bound_sq, self._self_thr_sq = self._self_bound_sq[keep], self._self_thr_sq[keep]
+            self._self_pair = self._self_pair[keep]
+            self.proxy_unchecked = [pair for pair, t in zip(self.self_pairs, touching_home.tolist(), strict=True) if t]
 
     @staticmethod
     def _frames_at_zero(robot: Robot) -> dict[str, np.ndarray]:
@@ -374,10 +452,36 @@ class CollisionProxy:
 
     def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
               body_levels: list[Tensor] | None = None) -> Tensor:
-        """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object."""
-        if self.n_elements == 0:
-            return torch.zeros(palm[0].shape[0], dtype=torch.long, device=palm[0].device)
-        return self.pairs(palm, fingers, body, body_levels).sum(dim=(1, 2))
+        """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object +
+        colliding pairs of the robot's own links."""
+        T = palm[0].shape[0]
+        out = torch.zeros(T, dtype=torch.long, device=palm[0].device)
+        if self.n_elements:
+            out = self.pairs(palm, fingers, body, body_levels).sum(dim=(1, 2))
+        if self.self_pairs:
+            out = out + self.self_hits(palm, fingers, body, body_levels).sum(-1)
+        return out
+
+    def self_hits(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
+                  body_levels: list[Tensor] | None = None) -> Tensor:
+        """(T, P) bool: pair p of ``self.self_pairs`` collides: some sphere of one link within reach
+        of some sphere of the other, |c_i - c_j| < r_i + r_j + clearance. Broad phase on the
+        clusters' bounding spheres, then every sphere of the near cluster pairs."""
+        frames = self.frames(palm, fingers, body, body_levels)[self._self_frame]  # (S, T, 3, 4)
+        C, T = frames.shape[:2]
+        out = torch.zeros(T, len(self.self_pairs), dtype=torch.bool, device=frames.device)
+        bound = torch.bmm(frames.reshape(C, T * 3, 4), self._self_bound).view(C, T, 3)
+        near = (bound[self._self_a] - bound[self._self_b]).square().sum(-1) < self._self_bound_sq.unsqueeze(1)
+        n, t = near.nonzero(as_tuple=True)  # (cluster pair, trial)
+        if n.numel() == 0:
+            return out
+        a, b = self._self_a[n], self._self_b[n]
+        pa = torch.bmm(frames[a, t], self._self_local[a]).transpose(1, 2)  # (N, K, 3)
+        pb = torch.bmm(frames[b, t], self._self_local[b]).transpose(1, 2)
+        d2 = (pa.unsqueeze(2) - pb.unsqueeze(1)).square().sum(-1)  # (N, K, K)
+        hit = (d2 < self._self_thr_sq[n]).flatten(1).any(-1)
+        out.index_put_((t[hit], self._self_pair[n[hit]]), self._true)
+        return out
 
 
 def _local(g: dict, points: Tensor) -> Tensor:

@@ -5,7 +5,14 @@ problem's environment: its obstacles and the grasped object. For a posture it co
 
 - the distinct (robot link, obstacle) pairs whose geometries intersect, and
 - the robot links that penetrate the object by more than ``object_tolerance`` (2 mm), except the
-  distal links of the fingers that touch it at their contacts,
+  distal links of the fingers that touch it at their contacts (a gripper's jaws),
+- for a robot with ``self_collision: true``, the pairs of its own links that intersect, among the
+  pairs that are neither adjacent (one joint apart, links without geometry skipped) nor already
+  intersecting at the home posture (joint housings that overlap by construction): the arm
+  against its own platform,
+
+and for a robot with a ``floor`` (a mobile base), the floor is an obstacle of every problem: a
+slab whose top lies 1 mm below that height (the platform stands on it without touching),
 
 with a broad phase (FCL's dynamic AABB tree over the links, one per environment element) and a
 narrow phase (FCL's primitive-primitive tests; penetration depth by GJK/EPA).
@@ -13,7 +20,7 @@ narrow phase (FCL's primitive-primitive tests; penetration depth by GJK/EPA).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,7 +28,79 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
-__all__ = ["CollisionReport", "CollisionScene", "fcl_geometry"]
+__all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "fcl_geometry", "has_environment",
+           "self_collision_pairs"]
+
+FLOOR_SIZE = (100.0, 100.0, 1.0)  # m: the floor slab (centred under the world origin)
+FLOOR_GAP = 0.001  # m: its top lies this far below the robot's floor height
+
+
+def environment_obstacles(robot: Robot, problem: GraspProblem) -> list[Shape]:
+    """The problem's obstacles, then the robot's floor (when it has one) as a box obstacle."""
+    obstacles = list(problem.obstacles)
+    if robot.cfg.floor is not None:
+        top = robot.cfg.floor - FLOOR_GAP
+        pose = np.array([0.0, 0.0, top - FLOOR_SIZE[2] / 2, 0.0, 0.0, 0.0])
+        obstacles.append(Shape("box", FLOOR_SIZE, pose))
+    return obstacles
+
+
+def has_environment(robot: Robot, problem: GraspProblem) -> bool:
+    """Whether there is anything to collide with: an object, obstacles, a floor or own links."""
+    return bool(problem.object is not None or problem.obstacles or robot.cfg.floor is not None
+                or robot.cfg.self_collision)
+
+
+def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
+    """The (link, link) pairs checked for self-collision (empty unless ``self_collision: true``):
+    links with collision geometry, not adjacent (a joint apart, geometry-less links in between
+    skipped), not rigidly joined (no movable joint between them) and not intersecting at the
+    home posture (FCL). Computed once per robot."""
+    cached = getattr(robot, "_self_collision_pairs", None)
+    if cached is not None:
+        return cached
+    pairs: list[tuple[str, str]] = []
+    if robot.cfg.self_collision:
+        import fcl
+
+        shapes = link_shapes(robot.urdf, "collision")
+        with_geometry = list(dict.fromkeys(s.link for s in shapes))
+
+        def carrier(link: str) -> str | None:  # the nearest ancestor (or itself) with geometry
+            while link not in with_geometry and link in robot.urdf.parent_joint:
+                link = robot.urdf.parent_joint[link].parent
+            return link if link in with_geometry else None
+
+        def moved_by(link: str) -> frozenset:  # the movable joints between the root and the link
+            joints = set()
+            while link in robot.urdf.parent_joint:
+                joint = robot.urdf.parent_joint[link]
+                if joint.type != "fixed":
+                    joints.add(joint.name)
+                link = joint.parent
+            return frozenset(joints)
+
+        adjacent = set()
+        for link in with_geometry:
+            if link in robot.urdf.parent_joint:
+                parent = carrier(robot.urdf.parent_joint[link].parent)
+                if parent is not None:
+                    adjacent.add(frozenset((link, parent)))
+        frames = robot.link_frames(robot.home_posture())
+        objects: dict[str, list] = {}
+        for shape in shapes:
+            obj = fcl.CollisionObject(fcl_geometry(shape.kind, shape.size), _transform(frames[shape.link] @ shape.origin))
+            objects.setdefault(shape.link, []).append(obj)
+        for i, a in enumerate(with_geometry):
+            for b in with_geometry[i + 1:]:
+                if frozenset((a, b)) in adjacent or moved_by(a) == moved_by(b):  # adjacent or rigidly joined
+                    continue
+                if any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
+                       for oa in objects[a] for ob in objects[b]):
+                    continue
+                pairs.append((a, b))
+    robot._self_collision_pairs = pairs
+    return pairs
 
 OBJECT_TOLERANCE_M = 0.002
 
@@ -71,11 +150,14 @@ def _environment_object(shape: Shape):
 @dataclass
 class CollisionReport:
     """What :meth:`CollisionScene.check` found: ``count`` (INTERFACE.md's number), the colliding
-    (link, obstacle index) pairs and the links that penetrate the object (with depths in metres)."""
+    (link, obstacle index) pairs (obstacles in problem order, then the robot's floor), the links
+    that penetrate the object (with depths in metres) and the colliding pairs of the robot's own
+    links."""
 
     count: int
     obstacle_pairs: list[tuple[str, int]]
     object_links: dict[str, float]
+    self_pairs: list[tuple[str, str]] = field(default_factory=list)
 
 
 class CollisionScene:
@@ -93,7 +175,8 @@ class CollisionScene:
         self.robot, self.problem, self.object_tolerance = robot, problem, object_tolerance
         self.shapes = link_shapes(robot.urdf, "collision")
         self.link_objects = [fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl.Transform()) for s in self.shapes]
-        self.obstacles = [_environment_object(o) for o in problem.obstacles]
+        self.obstacles = [_environment_object(o) for o in environment_obstacles(robot, problem)]
+        self.self_pairs = self_collision_pairs(robot)
         self.object = _environment_object(problem.object) if problem.object is not None else None
         self.touching = self.distal_links(robot, self.shapes, problem.fingers)
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
@@ -154,7 +237,15 @@ class CollisionScene:
                     depth = max((c.penetration_depth for c in result.contacts), default=0.0)
                     if depth > self.object_tolerance:
                         depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
-        return CollisionReport(len(pairs) + len(depths), sorted(pairs), depths)
+        own = [(a, b) for a, b in self.self_pairs if self._links_collide(a, b)]
+        return CollisionReport(len(pairs) + len(depths) + len(own), sorted(pairs), depths, own)
+
+    def _links_collide(self, a: str, b: str) -> bool:
+        import fcl
+
+        return any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
+                   for oa, sa in zip(self.link_objects, self.shapes, strict=True) if sa.link == a
+                   for ob, sb in zip(self.link_objects, self.shapes, strict=True) if sb.link == b)
 
     def _pairwise(self) -> set[tuple[str, int]]:
         import fcl

@@ -207,11 +207,14 @@ def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) 
     else:
         contacts = problem.contacts_world()
     red: frozenset[str] = frozenset()
-    if problem.object is not None or problem.obstacles:
+    from graspnet_torch.collision.scene import has_environment
+
+    if has_environment(robot, problem):
         from graspnet_torch.collision import CollisionScene
 
         report = CollisionScene(robot, problem).check(posture)
-        red = frozenset({link for link, _ in report.obstacle_pairs} | set(report.object_links))
+        red = frozenset({link for link, _ in report.obstacle_pairs} | set(report.object_links)
+                        | {link for pair in report.self_pairs for link in pair})
     caption = (f"{problem.name or 'problem'}: best trial, error {result.best.error_mm:.2f} mm, "
                f"{result.best.collisions} collision(s){' (red)' if red else ''}")
     panels = [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),

@@ -85,6 +85,10 @@ class RobotCfg:
             for prismatic ones), for pictures; missing joints are 0.
         checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
             (``arm_hand`` reuses the hand's: same finger chains).
+        floor: height (m, world z) of the floor the robot stands on, an obstacle of every problem
+            (a mobile robot: ``manus``), or None.
+        self_collision: count collisions between the robot's own links (pairs that are neither
+            adjacent nor already touching at the home posture; :mod:`graspnet_torch.collision`).
         solver_defaults: group ('srv', 'reward', 'solver') -> settings this robot uses unless the
             user sets them (the ACNN's section 6.3 parameters for ``arm_hand``); checked against
             the groups' dataclasses.
@@ -101,6 +105,8 @@ class RobotCfg:
     gripper_points: tuple[str, ...] = ()
     home: dict[str, float] = field(default_factory=dict)
     checkpoint: Path | None = None
+    floor: float | None = None
+    self_collision: bool = False
     solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
 
@@ -116,7 +122,8 @@ class RobotCfg:
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
-                 "gripper_points", "home", "description", "checkpoint", "solver_defaults"}
+                 "gripper_points", "home", "description", "checkpoint", "solver_defaults",
+                 "floor", "self_collision"}
         unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
@@ -159,9 +166,16 @@ class RobotCfg:
             if not isinstance(raw, str) or not raw or len(raw) > 4096:
                 raise ConfigError(f"{source}: 'checkpoint' must be a file path, got {short(raw)}")
             checkpoint = Path(raw) if Path(raw).is_absolute() else bases[0] / raw
+        floor = data.get("floor")
+        if floor is not None:
+            floor = number_list([floor], 1, f"{source}: floor", ConfigError, -100.0, 100.0, "number (m)")[0]
+        self_collision = data.get("self_collision", False)
+        if not isinstance(self_collision, bool):
+            raise ConfigError(f"{source}: 'self_collision' must be true or false, got {short(self_collision)}")
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
-                   home=home, checkpoint=checkpoint, solver_defaults=_solver_defaults(data, source), source=source)
+                   home=home, checkpoint=checkpoint, floor=floor, self_collision=self_collision,
+                   solver_defaults=_solver_defaults(data, source), source=source)
 
 
 def _chain(value: Any, where: str) -> ChainCfg:

@@ -49,7 +49,7 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
     return built, (load_finger_ik(built) if built.n_fingers else None)
 
 
-KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points")
+KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
 
 
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
@@ -108,7 +108,8 @@ def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, 
     if robot.n_fingers == 0:  # a gripper with two marked points (MANUS)
         from graspnet_torch.solver.gripper import GripperEnvironment
 
-        return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg)
+        return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg,
+                                  solver.refine)
     cls = ArmHandEnvironment if robot.has_body else HandEnvironment
     return cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
 
@@ -166,7 +167,9 @@ def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: S
     or obstacles."""
     fields = env.report(outcome.config, outcome.evaluation)
     problem = env.problem
-    if problem.object is not None or problem.obstacles:
+    from graspnet_torch.collision.scene import has_environment
+
+    if has_environment(env.robot, problem):
         from graspnet_torch.collision import CollisionScene
 
         scene = CollisionScene(env.robot, problem)

@@ -39,6 +39,8 @@ class Evaluation:
         collisions: (T,) collision count, or None when the environment has no collision component.
         alignment: (T,) a gripper's |n_gripper . n_object| (eq. 24), or None; then ``error`` is d
             (eq. 26) and the reinforcement's base is (R1 + R2) / 2 (eq. 29).
+        config: (T, n) the configuration that was evaluated when the environment refined the
+            proposal (a gripper's ``solver.refine`` steps), or None (the proposal itself).
     """
 
     error: Tensor
@@ -46,6 +48,7 @@ class Evaluation:
     joints: Tensor | None = None
     collisions: Tensor | None = None
     alignment: Tensor | None = None
+    config: Tensor | None = None
 
     def tensors(self) -> dict[str, Tensor]:
         """The parts that are present, by name."""
@@ -107,7 +110,9 @@ class FingerEnvironment:
         self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
-        if collisions and (problem.object is not None or problem.obstacles):
+        from graspnet_torch.collision.scene import has_environment
+
+        if collisions and has_environment(robot, problem):
             from graspnet_torch.collision.proxy import CollisionProxy
 
             self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device)

@@ -16,13 +16,16 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["GripperEnvironment", "gripper_bounds"]
+__all__ = ["CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
+
+CLEARANCE_M = 0.005  # the loop and the polish keep 5 mm from obstacles, floor and own links (proxy margin)
 
 
 def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
@@ -61,33 +64,64 @@ class GripperEnvironment:
 
     def __init__(self, robot: Robot, problem: GraspProblem, dtype: torch.dtype = torch.float32,
                  device: torch.device | str = "cpu", collisions: bool = False, approach_m: float = 0.2,
-                 approach_deg: float = 30.0):
+                 approach_deg: float = 30.0, refine: int = 0):
         if robot.gripper_kernel is None or problem.points is None:
             raise ProblemError(f"{problem.source}: robot '{robot.name}' has no gripper points or the problem no "
                                f"'points'")
         self.robot, self.problem = robot, problem
         self.n = len(robot.body_joint_names)
+        self.refine = refine
         self._bounds = gripper_bounds(robot, problem, approach_m, approach_deg)
         self.lower = torch.as_tensor(self._bounds[0], dtype=dtype, device=device)
         self.upper = torch.as_tensor(self._bounds[1], dtype=dtype, device=device)
         self.targets = torch.as_tensor(problem.points_world(), dtype=dtype, device=device)  # (2, 3)
         self.proxy = None
-        if collisions and (problem.object is not None or problem.obstacles):
+        if collisions and has_environment(robot, problem):
             from graspnet_torch.collision.proxy import CollisionProxy
 
-            self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device)
+            self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, dtype=dtype, device=device)
 
     def evaluate(self, config: Tensor) -> Evaluation:
         """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
         proxy, the collision count."""
+        proposal = config
+        if self.refine > 0:
+            config = self._refine(config, self.refine)
         points = self.robot.gripper_points(config)  # (T, 2, 3)
         _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
         collisions = None
         if self.proxy is not None:
             levels, palm = self.proxy.body_levels_and_palm(config)
             collisions = self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels)
-        return Evaluation(error=d, alignment=alignment, collisions=collisions)
+        return Evaluation(error=d, alignment=alignment, collisions=collisions,
+                          config=config if config is not proposal else None)
+
+    def _refine(self, q: Tensor, steps: int) -> Tensor:
+        """``steps`` damped least-squares steps (lambda = 0.05, forward differences h = 1e-3 in the
+        loop's dtype, no collision test) towards each trial's nearer pairing, within the bounds,
+        each kept where it lowers the point error: the learner proposes, a few local steps
+        settle the proposal, and the settled configuration is what is evaluated and reported."""
+        T = q.shape[0]
+        tg = self.targets
+        pts = self.robot.gripper_points(q)
+        swap = _pairing(pts, tg)
+        goal = torch.where(swap.view(-1, 1, 1), tg.flip(0), tg).reshape(T, 6)
+        pts = pts.reshape(T, 6)
+        err = (goal - pts).norm(dim=-1)
+        h = 1e-3
+        eye = torch.eye(self.n, dtype=q.dtype, device=q.device)
+        eye6 = torch.eye(6, dtype=q.dtype, device=q.device)
+        lam = torch.full((T, 1, 1), 0.05, dtype=q.dtype, device=q.device)
+        for _ in range(steps):
+            J = (self.robot.gripper_points(q.unsqueeze(1) + h * eye).reshape(T, self.n, 6)
+                 - pts.unsqueeze(1)).transpose(1, 2) / h
+            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts, lam, eye6), self.lower), self.upper)
+            new_pts = self.robot.gripper_points(new).reshape(T, 6)
+            new_err = (goal - new_pts).norm(dim=-1)
+            better = (new_err < err).unsqueeze(1)
+            q, pts, err = torch.where(better, new, q), torch.where(better, new_pts, pts), torch.minimum(new_err, err)
+        return q
 
     def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
         """Polish the reported configurations: ``iterations`` damped least-squares steps (float64)
@@ -99,26 +133,60 @@ class GripperEnvironment:
         """
         if iterations <= 0:
             return config, evaluation
-        lo, hi = (torch.as_tensor(a) for a in self._bounds)
         q = self.clamp(config)
+        T = q.shape[0]
         targets = torch.as_tensor(self.problem.points_world(), dtype=torch.float64)
-        swap = _pairing(self.robot.gripper_points(q), targets)  # (T,) True: point 1 -> target 2
-        goal = torch.where(swap.view(-1, 1, 1), targets.flip(0), targets).reshape(-1, 6)
-        lam, h = 1e-3, 1e-6
-        eye = torch.eye(self.n, dtype=torch.float64)
-        for _ in range(iterations):
-            pts = self.robot.gripper_points(q).reshape(-1, 6)
-            e = goal - pts
-            shifted = q.unsqueeze(1) + h * eye  # (T, n, n): one joint moved per row
-            J = (self.robot.gripper_points(shifted).reshape(q.shape[0], self.n, 6)
-                 - pts.reshape(-1, 1, 6)).transpose(1, 2) / h  # (T, 6, n)
-            A = J @ J.transpose(1, 2) + lam ** 2 * torch.eye(6, dtype=torch.float64)
-            dq = (J.transpose(1, 2) @ torch.linalg.solve(A, e.unsqueeze(-1))).squeeze(-1)
-            new = torch.clamp(q + dq, lo, hi)
-            better = (goal - self.robot.gripper_points(new).reshape(-1, 6)).norm(dim=-1) < e.norm(dim=-1)
-            q = torch.where(better.unsqueeze(1), new, q)
+        goal = torch.cat([targets.reshape(1, 6).expand(T, 6), targets.flip(0).reshape(1, 6).expand(T, 6)])
+        q2, err = self._least_squares(q.repeat(2, 1), goal, iterations)  # both pairings (eq. 26-28) at once
+        crossed = err[T:] < err[:T]
+        q = torch.where(crossed.unsqueeze(1), q2[T:], q2[:T])
         ev = self.evaluate(q.to(config))
         return q.to(config), ev
+
+    def _least_squares(self, q: Tensor, goal: Tensor, iterations: int) -> tuple[Tensor, Tensor]:
+        """Levenberg-Marquardt on the gripper points, float64, within the bounds.
+
+        q: (B, n) start; goal: (B, 6) the two object points in the chosen pairing. Per row, a step
+        dq = J^T (J J^T + lambda^2 I)^-1 e is kept only where it lowers |e| (then lambda / 3), else
+        lambda * 4. Returns the configurations (B, n) and their |e| (B,).
+        """
+        lo, hi = (torch.as_tensor(a) for a in self._bounds)
+        h = 1e-6
+        lam = torch.full((q.shape[0], 1, 1), 1e-2, dtype=torch.float64)
+        eye6 = torch.eye(6, dtype=torch.float64)
+        eye = torch.eye(self.n, dtype=torch.float64)
+        pts = self.robot.gripper_points(q).reshape(-1, 6)
+        err = (goal - pts).norm(dim=-1)
+        collisions = self._count(q) if self.proxy is not None else None
+        for _ in range(iterations):
+            e = goal - pts
+            shifted = q.unsqueeze(1) + h * eye  # (B, n, n): one joint moved per row
+            J = (self.robot.gripper_points(shifted).reshape(q.shape[0], self.n, 6)
+                 - pts.reshape(-1, 1, 6)).transpose(1, 2) / h  # (B, 6, n), forward differences
+            dq = _dls(J, e, lam, eye6)
+            # joints at a bound that the step pushes outward leave the Jacobian (an active set)
+            blocked = ((q <= lo + 1e-9) & (dq < 0)) | ((q >= hi - 1e-9) & (dq > 0))
+            if bool(blocked.any()):
+                dq = _dls(J * (~blocked).unsqueeze(1), e, lam, eye6)
+            new = torch.clamp(q + dq, lo, hi)
+            new_pts = self.robot.gripper_points(new).reshape(-1, 6)
+            new_err = (goal - new_pts).norm(dim=-1)
+            better = new_err < err
+            if collisions is not None:  # never into a collision: a step may not raise the proxy's count
+                new_c = self._count(new)
+                better &= new_c <= collisions
+                collisions = torch.where(better, new_c, collisions)
+            q = torch.where(better.unsqueeze(1), new, q)
+            pts = torch.where(better.unsqueeze(1), new_pts, pts)
+            err = torch.where(better, new_err, err)
+            lam = torch.where(better.view(-1, 1, 1), (lam / 3).clamp(min=1e-4), (lam * 4).clamp(max=10.0))
+        return q, err
+
+    def _count(self, q: Tensor) -> Tensor:
+        """(B,) the proxy's collision count of float64 configurations (B, n)."""
+        config = q.to(self.lower)
+        levels, palm = self.proxy.body_levels_and_palm(config)
+        return self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels).cpu()
 
     def clamp(self, config: Tensor) -> Tensor:
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
@@ -149,6 +217,11 @@ class GripperEnvironment:
                 "error": float(d[k]),
             })
         return out
+
+
+def _dls(J: Tensor, e: Tensor, lam: Tensor, eye: Tensor) -> Tensor:
+    """dq = J^T (J J^T + lambda^2 I)^-1 e: J (B, 6, n), e (B, 6), lam (B, 1, 1) -> (B, n)."""
+    return (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + lam ** 2 * eye, e.unsqueeze(-1))).squeeze(-1)
 
 
 def _pairing(points: Tensor, targets: Tensor) -> Tensor:

@@ -134,12 +134,19 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
         config = torch.addcmul(env.lower, span, step.o)  # (13)
         ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
+        if ev.config is not None:  # the environment settled the proposal (a gripper's refine steps)
+            config = ev.config
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
         net.reinforce(observed, None if all_active else active)  # (16)-(19)
         if best_config is None:
             best_config, best_ev, best_r, best_obs = config, ev, r, observed
         else:
+            if best_ev.collisions is not None and reward.cfg.kind in ("r3", "r4"):
+                # shaping grows with i (eq. 22-23): the kept configuration is scored as it would be
+                # now (its noise draw kept), so an early colliding one does not outrank later clear ones
+                rescored = reward(best_ev, k + 1)
+                best_obs, best_r = best_obs + (rescored - best_r), rescored
             better = (observed > best_obs) if solver.report == "best" else torch.ones_like(active)
             if not all_active:
                 better &= active
