@@ -173,7 +173,8 @@ class CollisionProxy:
         object_tolerance: penetration of the object (m) that counts (INTERFACE.md: 2 mm).
         clearance: a safety margin (m): obstacles and the robot's own links count as hit from
             this distance on, and the object from ``clearance - object_tolerance`` (0: the
-            count itself); the floor has none (the platform stands on it). A search that keeps the count at zero with a margin stays clear of
+            count itself); the floor has none (the platform stands on it). A search that keeps
+            the count at zero with a margin stays clear of
             the proxy's approximation error (FCL, with no margin, has the last word).
 
     Call :meth:`count` with the palm frame, the body joints (robots with an arm) and every

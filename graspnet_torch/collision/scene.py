@@ -89,7 +89,8 @@ def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
         frames = robot.link_frames(robot.home_posture())
         objects: dict[str, list] = {}
         for shape in shapes:
-            obj = fcl.CollisionObject(fcl_geometry(shape.kind, shape.size), _transform(frames[shape.link] @ shape.origin))
+            placed = _transform(frames[shape.link] @ shape.origin)
+            obj = fcl.CollisionObject(fcl_geometry(shape.kind, shape.size), placed)
             objects.setdefault(shape.link, []).append(obj)
         for i, a in enumerate(with_geometry):
             for b in with_geometry[i + 1:]:
