@@ -157,7 +157,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
                                ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
-                               ("collisions", ev.collisions)):
+                               ("collisions", ev.collisions), ("alignment", ev.alignment)):
                 if value is not None:
                     hist.setdefault(key, []).append(value)
             hist.setdefault("time", []).append(time.perf_counter() - t0)
