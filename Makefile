@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm report-arm fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -35,7 +35,10 @@ lint: $(STAMP)  ## ruff check
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
 	$(PY) benchmarks/bench_kinematics.py
 
-bench-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
+bench-report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, Fig. 12 -> reports/manus_protocol.md (~12 min)
+	$(PY) benchmarks/manus_protocol.py
+
+fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
 	$(PY) benchmarks/bench_fcnn.py
 
 bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from scratch

@@ -53,8 +53,9 @@ class SolverCfg:
         max_iterations: iteration budget per trial.
         threshold: a trial stops once its (noise-free) reinforcement exceeds this (paper: 0.99);
             ``None`` or > 1 (at most 2) never stops early (fixed-length runs such as the noise study).
-        refine: FCNN refinement iterations (eq. 5) inside the loop, per evaluation (0: the
-            paper's FCNN, competition among experts only).
+        refine: steps inside the loop, per evaluation: FCNN refinement iterations (eq. 5) for a
+            hand (0: the paper's FCNN, competition among experts only); for a gripper (MANUS),
+            damped least-squares steps that settle each proposal before it is evaluated.
         final_refine: refinement iterations applied after the loop to the reported configuration's
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
