@@ -21,7 +21,7 @@ from graspnet_torch.robot import (
     load_robot,
     load_robot_cfg,
 )
-from graspnet_torch.solver import GraspResult, NoiseCfg, RewardCfg, SolverCfg, TrialResult, solve
+from graspnet_torch.solver import GraspResult, NoiseCfg, RewardCfg, SolverCfg, TrialResult, solve, solve_many
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
 from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks
 
@@ -62,4 +62,5 @@ __all__ = [
     "load_robot",
     "load_robot_cfg",
     "solve",
+    "solve_many",
 ]

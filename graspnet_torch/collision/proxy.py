@@ -39,6 +39,7 @@ obstacle) pairs plus links penetrating the object, the touching fingers' distal 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -186,11 +187,14 @@ class CollisionProxy:
     once: fewer operations, the same answer (tests compare the two).
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = 0.002,
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], object_tolerance: float = 0.002,
                  dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0):
         from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, self_collision_pairs
 
         self.robot = robot
+        problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
+        problem = problems[0]
+        self.n_problems = len(problems)
         shapes = link_shapes(robot.urdf, "collision")
         touching = CollisionScene.distal_links(robot, shapes, problem.fingers)
         frames = self._frames_at_zero(robot)
@@ -265,13 +269,16 @@ class CollisionProxy:
         elements = environment_obstacles(robot, problem)  # the problem's, then the robot's floor
         margin = [-clearance] * len(problem.obstacles) + [0.0] * (len(elements) - len(problem.obstacles))  # the
         # platform stands 1 mm above the floor slab: no margin there
-        exempt: list[set] = [set()] * len(elements)
+        exempt: list[set] = [set()] * len(problem.obstacles)
+        if robot.cfg.floor is not None:  # links that only ride the mobile base stand on the floor: never tested
+            exempt.append(self._riding_base(robot, attach))
         if problem.object is not None:
             elements.append(problem.object)
             margin.append(object_tolerance - clearance)
             exempt.append(touching)
         self.n_elements = len(elements)
-        self._groups = _primitive_groups(elements, kw)
+        batch = [elements] + [_elements_like(robot, p, elements, k) for k, p in enumerate(problems[1:], 1)]
+        self._groups = _primitive_groups(batch, kw)
         for g in self._groups:
             # a sphere (c, rho) hits element o when sd_o(c) < rho - margin_o; padding never hits
             thr = radii[:, :, None] - np.array([margin[k] for k in g["index"]])  # (C, CLUSTER, O_g)
@@ -285,11 +292,12 @@ class CollisionProxy:
             # broad phase: the cluster's bounding sphere within reach
             bthr = np.broadcast_to(bound_r[:, None, None] - np.array([margin[k] for k in g["index"]]),
                                    (C, 1, len(g["index"])))[:, 0]  # (C, O_g)
-            g["bound_pos"] = torch.as_tensor(bthr > 0, device=device).unsqueeze(1)  # (C, 1, O_g)
+            g["bound_pos"] = (torch.as_tensor(bthr > 0, device=device) & g["pos"].any(1)).unsqueeze(1)  # (C, 1, O_g)
             g["bound_thr_sq"] = torch.as_tensor(np.where(bthr > 0, bthr, 0.0) ** 2, **kw).unsqueeze(1)
             g["columns"] = torch.as_tensor(g["index"], device=device)
-            g["R_cols"] = g["R"].permute(1, 0, 2).reshape(3, -1)  # [R_1 .. R_O]
-            g["Rt"] = torch.einsum("oji,oj->oi", g["R"], g["t"]).reshape(-1)  # [R_o^T t_o]
+            P = g["R"].shape[0]
+            g["R_cols"] = g["R"].permute(0, 2, 1, 3).reshape(P, 3, -1)  # per problem [R_1 .. R_O]
+            g["Rt"] = torch.einsum("poji,poj->poi", g["R"], g["t"]).reshape(P, -1)  # per problem [R_o^T t_o]
         self._true = torch.ones((), dtype=torch.bool, device=device)
         # the robot's own links (self_collision: true): their own clusters (self_collision_spheres),
         # every cluster of one link of a pair against every cluster of the other
@@ -340,6 +348,29 @@ class CollisionProxy:
             self._self_bound_sq, self._self_thr_sq = self._self_bound_sq[keep], self._self_thr_sq[keep]
             self._self_pair = self._self_pair[keep]
             self.proxy_unchecked = [pair for pair, t in zip(self.self_pairs, touching_home.tolist(), strict=True) if t]
+
+    @staticmethod
+    def _riding_base(robot: Robot, attach: dict[str, tuple]) -> set[str]:
+        """Links that only the mobile base's joints move, when those joints keep them at their
+        height and upright (a planar base: x, y, yaw; checked at random base configurations):
+        they stand on the floor, so the floor is never tested against them (FCL still is)."""
+        if robot.cfg.mobile_base is None or robot.body is None:
+            return set()
+        m = len(robot.urdf.chain_spec(robot.cfg.mobile_base.base, robot.cfg.mobile_base.tip, "mobile_base").joint_names)
+        tip = robot.cfg.mobile_base.tip
+        lo, hi = robot.body_limits
+        rng = np.random.default_rng(0)
+        rows = []
+        for _ in range(4):
+            q = np.zeros(len(lo))
+            q[:m] = rng.uniform(lo[:m], hi[:m])
+            posture = Posture(palm_pose=torch.zeros(6, dtype=torch.float64),
+                              fingers=torch.zeros(robot.n_fingers, robot.joints_per_finger, dtype=torch.float64),
+                              body=torch.as_tensor(q))
+            rows.append(robot.link_frames(posture)[tip][2])  # the tip frame's z row: height and tilt
+        if not np.allclose(rows, rows[0], atol=1e-9):
+            return set()
+        return {link for link, w in attach.items() if w[0] == "body" and w[1] <= m}
 
     @staticmethod
     def _frames_at_zero(robot: Robot) -> dict[str, np.ndarray]:
@@ -424,41 +455,47 @@ class CollisionProxy:
         return (frames @ self._cluster_local.unsqueeze(1)).permute(1, 0, 3, 2)
 
     def pairs(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
-              body_levels: list[Tensor] | None = None) -> Tensor:
+              body_levels: list[Tensor] | None = None, problem_index: Tensor | None = None) -> Tensor:
         """(T, L, O) bool: link l (``self.links``) collides with element o (the obstacles in problem
-        order, then the object)."""
+        order, the floor, then the object). ``problem_index`` (T,): each configuration's problem
+        when the proxy holds a batch of problems (None: the first)."""
         frames = self.frames(palm, fingers, body, body_levels)[self._cluster_frame]  # (C, T, 3, 4)
         T = frames.shape[1]
         out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
         C = frames.shape[0]
         flat = frames.reshape(C, T * 3, 4)
+        pid = problem_index if self.n_problems > 1 else None
         if T * C * CLUSTER * self.n_elements <= DENSE_LIMIT:  # small batches: every sphere, no gathers
             centres = torch.bmm(flat, self._cluster_local).view(C, T, 3, CLUSTER).transpose(2, 3)  # (C, T, K, 3)
             for g in self._groups:
-                hit = _hit(g, _local(g, centres), g["pos"].unsqueeze(1), g["thr_sq"].unsqueeze(1)).any(2)  # (C, T, O_g)
+                size = None if pid is None else g["size"][pid].unsqueeze(1)  # (T, 1, O_g, s)
+                hit = _hit(g, _local(g, centres, pid), g["pos"].unsqueeze(1), g["thr_sq"].unsqueeze(1),
+                           size).any(2)  # (C, T, O_g)
                 per_link = torch.einsum("cto,cl->tlo", hit.to(self._link_of_cluster.dtype), self._link_of_cluster)
                 out[..., g["columns"]] |= per_link > 0
             return out
-        bound = torch.bmm(flat, self._cluster_bound).view(C, T, 3)  # bounding-sphere centres
+        bound = torch.bmm(flat, self._cluster_bound).view(C, T, 1, 3)  # bounding-sphere centres
         for g in self._groups:
-            near = _hit(g, _local(g, bound), g["bound_pos"], g["bound_thr_sq"])  # (C, T, O_g)
+            size = None if pid is None else g["size"][pid]  # (T, O_g, s)
+            near = _hit(g, _local(g, bound, pid).squeeze(2), g["bound_pos"], g["bound_thr_sq"], size)  # (C, T, O_g)
             c, t, o = near.nonzero(as_tuple=True)
             if c.numel() == 0:
                 continue
+            p_of = torch.zeros_like(t) if pid is None else pid[t]
             centres = torch.bmm(frames[c, t], self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
-            p = torch.bmm(centres - g["t"][o].unsqueeze(1), g["R"][o])  # rows: R^T (x - t)
-            hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][o].unsqueeze(1)).any(-1)  # (N,)
+            p = torch.bmm(centres - g["t"][p_of, o].unsqueeze(1), g["R"][p_of, o])  # rows: R^T (x - t)
+            hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][p_of, o].unsqueeze(1)).any(-1)  # (N,)
             out.index_put_((t[hit], self._cluster_link[c[hit]], g["columns"][o[hit]]), self._true)
         return out
 
     def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
-              body_levels: list[Tensor] | None = None) -> Tensor:
+              body_levels: list[Tensor] | None = None, problem_index: Tensor | None = None) -> Tensor:
         """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object +
         colliding pairs of the robot's own links."""
         T = palm[0].shape[0]
         out = torch.zeros(T, dtype=torch.long, device=palm[0].device)
         if self.n_elements:
-            out = self.pairs(palm, fingers, body, body_levels).sum(dim=(1, 2))
+            out = self.pairs(palm, fingers, body, body_levels, problem_index).sum(dim=(1, 2))
         if self.self_pairs:
             out = out + self.self_hits(palm, fingers, body, body_levels).sum(-1)
         return out
@@ -477,25 +514,29 @@ class CollisionProxy:
         if n.numel() == 0:
             return out
         a, b = self._self_a[n], self._self_b[n]
-        pa = torch.bmm(frames[a, t], self._self_local[a]).transpose(1, 2)  # (N, K, 3)
-        pb = torch.bmm(frames[b, t], self._self_local[b]).transpose(1, 2)
-        d2 = (pa.unsqueeze(2) - pb.unsqueeze(1)).square().sum(-1)  # (N, K, K)
+        pa = torch.bmm(frames[a, t], self._self_local[a])  # (N, 3, K)
+        pb = torch.bmm(frames[b, t], self._self_local[b])
+        # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b: one batched product instead of an (N, K, K, 3) difference
+        d2 = pa.square().sum(1).unsqueeze(2) + pb.square().sum(1).unsqueeze(1) - 2 * torch.bmm(pa.transpose(1, 2), pb)
         hit = (d2 < self._self_thr_sq[n]).flatten(1).any(-1)
         out.index_put_((t[hit], self._self_pair[n[hit]]), self._true)
         return out
 
 
-def _local(g: dict, points: Tensor) -> Tensor:
-    """(..., 3) world points -> (..., O_g, 3) in each element's frame of a group: R_o^T (x - t_o)
-    for every element at once as x @ [R_1 .. R_O] - [R_o^T t_o]."""
-    return (points @ g["R_cols"] - g["Rt"]).view(*points.shape[:-1], -1, 3)
+def _local(g: dict, points: Tensor, pid: Tensor | None = None) -> Tensor:
+    """(..., T, K, 3) world points -> (..., T, K, O_g, 3) in each element's frame of a group:
+    R_o^T (x - t_o) for every element at once as x @ [R_1 .. R_O] - [R_o^T t_o]; ``pid`` (T,)
+    each trial's problem of a batch (None: the first)."""
+    if pid is None:
+        return (points @ g["R_cols"][0] - g["Rt"][0]).view(*points.shape[:-1], -1, 3)
+    return (points @ g["R_cols"][pid] - g["Rt"][pid].unsqueeze(-2)).view(*points.shape[:-1], -1, 3)
 
 
 def _hit(g: dict, p: Tensor, positive: Tensor, thr_sq: Tensor, size: Tensor | None = None) -> Tensor:
     """sd(p) < thr for points p (..., 3) in their element's frame, with thr > 0 (``positive``;
     otherwise never) and ``thr_sq`` = thr^2: outside a primitive |max(d, 0)|^2 < thr^2, inside
     always. d: box |p| - h; cylinder (|p_xy| - r, |p_z| - h); sphere |p| - r."""
-    size = g["size"] if size is None else size
+    size = g["size"][0] if size is None else size
     if g["kind"] == "sphere":
         d = (torch.linalg.vector_norm(p, dim=-1) - size[..., 0]).unsqueeze(-1)
     elif g["kind"] == "box":
@@ -506,37 +547,59 @@ def _hit(g: dict, p: Tensor, positive: Tensor, thr_sq: Tensor, size: Tensor | No
     return positive & ((outside < thr_sq) | (d.amax(-1) <= 0))
 
 
-def _primitive_groups(elements: list[Shape], kw: dict) -> list[dict]:
-    """Elements grouped by kind: rotations (O, 3, 3), origins (O, 3), half sizes; a mesh becomes its
-    bounding box in its own frame."""
+def _primitive_groups(batch: list[list[Shape]], kw: dict) -> list[dict]:
+    """Elements grouped by kind, stacked over the problems of a batch (the same kinds in the same
+    order in each): rotations (P, O, 3, 3), origins (P, O, 3), half sizes (P, O, s); a mesh becomes
+    its bounding box in its own frame."""
     from graspnet_torch.robot.chain import rpy_matrix_np
 
     groups: dict[str, dict] = {}
-    for k, e in enumerate(elements):
-        R, t = rpy_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
-        if e.kind == "mesh":
-            import trimesh
+    for p, elements in enumerate(batch):
+        for k, e in enumerate(elements):
+            R, t = rpy_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
+            if e.kind == "mesh":
+                import trimesh
 
-            mesh = trimesh.load(e.mesh, force="mesh")
-            lo, hi = np.asarray(mesh.bounds[0]), np.asarray(mesh.bounds[1])
-            kind, half = "box", (hi - lo) / 2
-            t = t + R @ ((hi + lo) / 2)
-        elif e.kind == "box":
-            kind, half = "box", np.asarray(e.size) / 2
-        elif e.kind == "cylinder":
-            kind, half = "cylinder", np.array([e.size[0], e.size[1] / 2, 0.0])
-        else:
-            kind, half = "sphere", np.array([e.size[0], 0.0, 0.0])
-        g = groups.setdefault(kind, {"kind": kind, "index": [], "R": [], "t": [], "size": []})
-        g["index"].append(k)
-        g["R"].append(R)
-        g["t"].append(t)
-        g["size"].append(half)
+                mesh = trimesh.load(e.mesh, force="mesh")
+                lo, hi = np.asarray(mesh.bounds[0]), np.asarray(mesh.bounds[1])
+                kind, half = "box", (hi - lo) / 2
+                t = t + R @ ((hi + lo) / 2)
+            elif e.kind == "box":
+                kind, half = "box", np.asarray(e.size) / 2
+            elif e.kind == "cylinder":
+                kind, half = "cylinder", np.array([e.size[0], e.size[1] / 2, 0.0])
+            else:
+                kind, half = "sphere", np.array([e.size[0], 0.0, 0.0])
+            g = groups.setdefault(kind, {"kind": kind, "index": [], "R": [], "t": [], "size": []})
+            if p == 0:
+                g["index"].append(k)
+                g["R"].append([])
+                g["t"].append([])
+                g["size"].append([])
+            col = g["index"].index(k)
+            g["R"][col].append(R)
+            g["t"][col].append(t)
+            g["size"][col].append(half)
     out = []
     for kind in ("box", "cylinder", "sphere"):
         if kind in groups:
             g = groups[kind]
-            size = np.asarray(g["size"])[:, :3 if kind == "box" else 2]
-            out.append({"kind": kind, "index": g["index"], "R": torch.as_tensor(np.stack(g["R"]), **kw),
-                        "t": torch.as_tensor(np.stack(g["t"]), **kw), "size": torch.as_tensor(size, **kw)})
+            size = np.asarray(g["size"]).transpose(1, 0, 2)[..., :3 if kind == "box" else 2]
+            out.append({"kind": kind, "index": g["index"],
+                        "R": torch.as_tensor(np.asarray(g["R"]).transpose(1, 0, 2, 3), **kw),
+                        "t": torch.as_tensor(np.asarray(g["t"]).transpose(1, 0, 2), **kw),
+                        "size": torch.as_tensor(size, **kw)})
     return out
+
+
+def _elements_like(robot: Robot, problem: GraspProblem, first: list[Shape], k: int) -> list[Shape]:
+    """The elements of the k-th problem of a batch, checked to match the first's kinds and order."""
+    from graspnet_torch.collision.scene import environment_obstacles
+    from graspnet_torch.errors import ProblemError
+
+    elements = environment_obstacles(robot, problem) + ([problem.object] if problem.object is not None else [])
+    kinds = ["box" if e.kind == "mesh" else e.kind for e in elements]
+    if kinds != ["box" if e.kind == "mesh" else e.kind for e in first]:
+        raise ProblemError(f"{problem.source}: problem {k} of the batch has obstacles and object {kinds}; the "
+                           f"batch's first has {[e.kind for e in first]} (one batch needs the same kinds in order)")
+    return elements

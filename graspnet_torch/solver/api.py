@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
 
 import torch
 
+from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.checkpoint import load_finger_ik
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
@@ -23,7 +25,7 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "reference_posture", "robot_and_ik", "solve", "trial_posture"]
+__all__ = ["build_environment", "reference_posture", "robot_and_ik", "solve", "solve_many", "trial_posture"]
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -52,6 +54,37 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
 
 
+def _as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
+    if isinstance(problem, GraspProblem):
+        return problem
+    p = Path(str(problem))
+    return GraspProblem.from_file(p) if p.suffix or p.exists() else GraspProblem.from_task(str(problem))
+
+
+def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, reward: RewardCfg | None,
+              max_iterations: int | None) -> tuple[SolverCfg, SRVNetCfg, RewardCfg]:
+    """The settings of a solve: the given ones, else the robot's ``solver_defaults``, else the paper's."""
+    defaults = robot.cfg.solver_defaults
+    solver = with_defaults(SolverCfg, solver, defaults.get("solver"), "solver")
+    if max_iterations is not None:
+        solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
+    srv = with_defaults(SRVNetCfg, srv, defaults.get("srv"), "srv")
+    reward = with_defaults(RewardCfg, reward, defaults.get("reward"), "reward")
+    return solver, srv, reward
+
+
+def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
+            solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
+    settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
+                "enough": solver.enough,
+                "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
+                "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
+                "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
+                "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
+    return GraspResult(robot=robot.name, trials=_report(env, outcome, reward, solver),
+                       problem=problem.name or problem.source, seed=seed, settings=settings, outcome=outcome)
+
+
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
           solver: SolverCfg | None = None, srv: SRVNetCfg | None = None, reward: RewardCfg | None = None,
           noise: NoiseCfg | float | None = None, robot: Robot | None = None, finger_ik: FingerIK | None = None,
@@ -68,33 +101,59 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
             paper's defaults; ``noise`` may be sigma_n.
         robot, finger_ik: override the shipped robot and its trained FCNN.
     """
-    if not isinstance(problem, GraspProblem):
-        p = Path(str(problem))
-        problem = GraspProblem.from_file(p) if p.suffix or p.exists() else GraspProblem.from_task(str(problem))
+    problem = _as_problem(problem)
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
     if robot is None or (finger_ik is None and problem.points is None):
         shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
-    defaults = robot.cfg.solver_defaults
-    solver = with_defaults(SolverCfg, solver, defaults.get("solver"), "solver")
-    if max_iterations is not None:
-        solver = SolverCfg(**{**solver.__dict__, "max_iterations": int(max_iterations)})
-    srv = with_defaults(SRVNetCfg, srv, defaults.get("srv"), "srv")
-    reward = with_defaults(RewardCfg, reward, defaults.get("reward"), "reward")
+    solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
     if solver.final_refine > 0:
         outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
-    trial_results = _report(env, outcome, reward, solver)
-    settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
-                "enough": solver.enough,
-                "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
-                "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
-                "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
-                "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
-    return GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source, seed=seed,
-                       settings=settings, outcome=outcome)
+    return _result(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
+
+
+def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,
+               max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
+               reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
+               device: str | torch.device = "cpu") -> list[GraspResult]:
+    """Solve P problems of one robot, ``trials`` learners each: one result per problem, in order.
+
+    For a gripper robot (the MANUS) the P x ``trials`` learners run as one vectorised loop (one
+    network batch, one collision proxy holding every problem's table and object; the problems
+    need the same kinds of obstacles in the same order); other robots solve one problem after
+    another (``seed + k`` for the k-th). Settings as :func:`solve`; one ``seed`` for the batch, so
+    a problem's result differs from its single solve with the same seed.
+    """
+    batch = [_as_problem(p) for p in problems]
+    if not batch:
+        return []
+    noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
+    robot, _ = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
+    for p in batch[1:]:
+        if (p.robot_cfg or p.robot) != (batch[0].robot_cfg or batch[0].robot):
+            raise ProblemError(f"{p.source}: robot '{p.robot}' differs from the batch's '{batch[0].robot}' "
+                               f"(one batch, one robot)")
+    if robot.n_fingers or len(batch) == 1:
+        return [solve(p, trials=trials, seed=seed + k, max_iterations=max_iterations, solver=solver, srv=srv,
+                      reward=reward, noise=noise, device=device) for k, p in enumerate(batch)]
+    from graspnet_torch.solver.gripper import GripperEnvironment
+
+    solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
+    dtype = DTYPES[solver.dtype]
+    env = GripperEnvironment(robot, batch, dtype, device, reward.kind != "r1", solver.approach_m,
+                             solver.approach_deg, solver.refine, runs=trials)
+    outcome = run_loop(env, trials * len(batch), seed, solver, srv, reward, noise)
+    if solver.final_refine > 0:
+        outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
+    results = []
+    for k, problem in enumerate(batch):
+        one = GripperEnvironment(robot, problem, dtype, device, False, solver.approach_m, solver.approach_deg)
+        part = outcome.select(slice(k * trials, (k + 1) * trials))
+        results.append(_result(robot, problem, one, part, trials, seed, solver, srv, reward, noise))
+    return results
 
 
 def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, solver: SolverCfg,

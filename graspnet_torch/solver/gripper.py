@@ -11,6 +11,7 @@ or obstacles. No FCNN.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -55,32 +56,47 @@ def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
 
 
 class GripperEnvironment:
-    """Evaluates body configurations of a gripper robot for one two-point problem, batched.
+    """Evaluates body configurations of a gripper robot for one two-point problem, or for a batch
+    of problems (``runs`` trials each, trial t on problem t // runs), batched.
 
     Attributes:
         n: body joints (9 for ``manus``: base x, y, yaw + 6 arm joints).
-        lower, upper: (n,) search bounds (m / rad).
+        lower, upper: (n,) search bounds (m / rad), or (T, n) for a batch of problems.
+        problem_index: (T,) each trial's problem in a batch, or None (one problem).
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem, dtype: torch.dtype = torch.float32,
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
                  device: torch.device | str = "cpu", collisions: bool = False, approach_m: float = 0.2,
-                 approach_deg: float = 30.0, refine: int = 0):
-        if robot.gripper_kernel is None or problem.points is None:
-            raise ProblemError(f"{problem.source}: robot '{robot.name}' has no gripper points or the problem no "
-                               f"'points'")
-        self.robot, self.problem = robot, problem
+                 approach_deg: float = 30.0, refine: int = 0, runs: int = 1):
+        problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
+        for p in problems:
+            if robot.gripper_kernel is None or p.points is None:
+                raise ProblemError(f"{p.source}: robot '{robot.name}' has no gripper points or the problem no "
+                                   f"'points'")
+        self.robot, self.problems, self.problem = robot, problems, problems[0]
         self.n = len(robot.body_joint_names)
         self.refine = refine
-        self._bounds = gripper_bounds(robot, problem, approach_m, approach_deg)
-        self.lower = torch.as_tensor(self._bounds[0], dtype=dtype, device=device)
-        self.upper = torch.as_tensor(self._bounds[1], dtype=dtype, device=device)
-        self.targets = torch.as_tensor(problem.points_world(), dtype=dtype, device=device)  # (2, 3)
+        bounds = [gripper_bounds(robot, p, approach_m, approach_deg) for p in problems]
+        targets = np.stack([p.points_world() for p in problems])  # (P, 2, 3)
+        kw = {"dtype": dtype, "device": device}
+        self.problem_index = None
+        if len(problems) > 1:
+            self.problem_index = torch.arange(len(problems), device=device).repeat_interleave(runs)
+            rep = np.repeat(np.arange(len(problems)), runs)
+            self._bounds = (np.stack([b[0] for b in bounds])[rep], np.stack([b[1] for b in bounds])[rep])
+            targets = targets[rep]
+        else:
+            self._bounds = bounds[0]
+        self.lower = torch.as_tensor(self._bounds[0], **kw)
+        self.upper = torch.as_tensor(self._bounds[1], **kw)
+        self._targets64 = torch.as_tensor(targets, dtype=torch.float64)  # (T or 1, 2, 3)
+        self.targets = self._targets64.to(**kw)
         self.proxy = None
-        if collisions and has_environment(robot, problem):
+        if collisions and has_environment(robot, self.problem):
             from graspnet_torch.collision.proxy import CollisionProxy
 
-            self.proxy = CollisionProxy(robot, problem, dtype=dtype, device=device, clearance=CLEARANCE_M)
-            self._no_fingers = torch.zeros(1, 0, 0, dtype=dtype, device=device)
+            self.proxy = CollisionProxy(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
+            self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
     def evaluate(self, config: Tensor) -> Evaluation:
         """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
@@ -90,10 +106,7 @@ class GripperEnvironment:
             config = self._refine(config, self.refine)
         points = self.robot.gripper_points(config)  # (T, 2, 3)
         _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
-        collisions = None
-        if self.proxy is not None:
-            levels, palm = self.proxy.body_levels_and_palm(config)
-            collisions = self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels)
+        collisions = self._count(config) if self.proxy is not None else None
         return Evaluation(error=d, alignment=alignment, collisions=collisions,
                           config=config if config is not proposal else None)
 
@@ -103,10 +116,10 @@ class GripperEnvironment:
         each kept where it lowers the point error: the learner proposes, a few local steps
         settle the proposal, and the settled configuration is what is evaluated and reported."""
         T = q.shape[0]
-        tg = self.targets
+        tg = self.targets.expand(T, 2, 3)
         pts = self.robot.gripper_points(q)
         swap = _pairing(pts, tg)
-        goal = torch.where(swap.view(-1, 1, 1), tg.flip(0), tg).reshape(T, 6)
+        goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
         pts = pts.reshape(T, 6)
         err = (goal - pts).norm(dim=-1)
         h = 1e-3
@@ -135,8 +148,8 @@ class GripperEnvironment:
             return config, evaluation
         q = self.clamp(config)
         T = q.shape[0]
-        targets = torch.as_tensor(self.problem.points_world(), dtype=torch.float64)
-        goal = torch.cat([targets.reshape(1, 6).expand(T, 6), targets.flip(0).reshape(1, 6).expand(T, 6)])
+        targets = self._targets64.expand(T, 2, 3)
+        goal = torch.cat([targets.reshape(T, 6), targets.flip(1).reshape(T, 6)])
         q2, err = self._least_squares(q.repeat(2, 1), goal, iterations)  # both pairings (eq. 26-28) at once
         crossed = err[T:] < err[:T]
         q = torch.where(crossed.unsqueeze(1), q2[T:], q2[:T])
@@ -151,6 +164,8 @@ class GripperEnvironment:
         lambda * 4. Returns the configurations (B, n) and their |e| (B,).
         """
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
+        if lo.dim() == 2:  # a batch of problems: q holds both pairings of every trial
+            lo, hi = lo.repeat(q.shape[0] // lo.shape[0], 1), hi.repeat(q.shape[0] // hi.shape[0], 1)
         h = 1e-6
         lam = torch.full((q.shape[0], 1, 1), 1e-2, dtype=torch.float64)
         eye6 = torch.eye(6, dtype=torch.float64)
@@ -183,12 +198,17 @@ class GripperEnvironment:
         return q, err
 
     def _count(self, q: Tensor) -> Tensor:
-        """(B,) the proxy's collision count of float64 configurations (B, n)."""
+        """(B,) the proxy's collision count of configurations (B, n): B = T, or a multiple of T
+        (trial t's copies at t, t + T, ...)."""
         config = q.to(self.lower)
+        pid = self.problem_index
+        if pid is not None and config.shape[0] != pid.shape[0]:
+            pid = pid.repeat(config.shape[0] // pid.shape[0])
         levels, palm = self.proxy.body_levels_and_palm(config)
-        return self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels).cpu()
+        return self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels, pid).to(q.device)
 
     def clamp(self, config: Tensor) -> Tensor:
+        """(T, n) configurations clipped to the bounds, float64 on the CPU."""
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
         return torch.clamp(config.detach().to(torch.float64).cpu(), lo, hi)
 
@@ -199,8 +219,7 @@ class GripperEnvironment:
 
         q = self.clamp(config)
         points = self.robot.gripper_points(q)
-        targets = torch.as_tensor(self.problem.points_world(), dtype=torch.float64)
-        _r, alignment, _r2, d = manus_reward(points, targets.expand_as(points))
+        _r, alignment, _r2, d = manus_reward(points, self._targets64.expand_as(points))
         palm = rt_to_pose(*self.robot.palm_frame(q))
         deg = 180.0 / math.pi
         scale = [deg if kind == "revolute" else 1.0 for kind in self.robot.body.joint_types]
@@ -225,7 +244,8 @@ def _dls(J: Tensor, e: Tensor, lam: Tensor, eye: Tensor) -> Tensor:
 
 
 def _pairing(points: Tensor, targets: Tensor) -> Tensor:
-    """(T,) True where the crossed pairing (eq. 28) is the nearer: gripper point 1 -> object point 2."""
+    """(T,) True where the crossed pairing (eq. 28) is the nearer: gripper point 1 -> object point 2.
+    points, targets: (T, 2, 3)."""
     d1 = (targets - points).norm(dim=-1).sum(-1)
-    d2 = (targets.flip(0) - points).norm(dim=-1).sum(-1)
+    d2 = (targets.flip(-2) - points).norm(dim=-1).sum(-1)
     return d2 < d1

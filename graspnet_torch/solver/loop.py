@@ -21,7 +21,7 @@ one seeded generator.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import Tensor
@@ -59,6 +59,17 @@ class LoopOutcome:
     wall_time_s: float
     history: dict[str, Tensor] | None
     start: Tensor | None = None
+
+    def select(self, trials: slice) -> LoopOutcome:
+        """The outcome of a range of trials (a batch of problems: one problem's trials)."""
+        ev = replace(self.evaluation, **{k: v[trials] for k, v in self.evaluation.tensors().items()})
+        history = None
+        if self.history is not None:
+            history = {k: v if k == "time" else v[:, trials] for k, v in self.history.items()}
+        return LoopOutcome(config=self.config[trials], evaluation=ev, reinforcement=self.reinforcement[trials],
+                           iterations=self.iterations[trials], success=self.success[trials],
+                           wall_time_s=self.wall_time_s, history=history,
+                           start=None if self.start is None else self.start[trials])
 
     @property
     def joints(self) -> Tensor | None:
