@@ -66,6 +66,10 @@ class SolverCfg:
         enough: stop the whole batch once this many trials have succeeded, the others reported as
             they stand (``None``: every trial runs to its own stop, the paper's independent runs;
             a number: "give me a grasp", when the trials are restarts of one search).
+        stop_clear: a trial stops only at a configuration the collision proxy finds clear (the
+            paper stops on the reinforcement alone, so an early colliding configuration, weakly
+            shaped by R3/R4 while i << p, can end a trial; the MANUS defaults to true: a grasp
+            through the table is not a success).
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
@@ -82,6 +86,7 @@ class SolverCfg:
     refine: int = setting(0, lo=0, hi=1000)
     final_refine: int = setting(3, lo=0, hi=1000)
     candidates: int = setting(1, lo=1, hi=64)
+    stop_clear: bool = False
     report: str = setting("best", choices=("best", "final"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))

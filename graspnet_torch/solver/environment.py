@@ -62,6 +62,19 @@ class Evaluation:
             out[name] = torch.where(mask.view(-1, *([1] * (mine.dim() - 1))), mine, theirs)
         return replace(self, **out)
 
+    def put(self, trials: Tensor, part: Evaluation, config: Tensor) -> Evaluation:
+        """This evaluation with rows ``trials`` (B,) replaced by ``part`` (an evaluation of B
+        trials); ``config`` (T, n): the proposals, the evaluated configuration of the rows a
+        part without ``config`` leaves unrefined."""
+        out = {}
+        for name, theirs in part.tensors().items():
+            mine = getattr(self, name)
+            base = (config if name == "config" else None) if mine is None else mine
+            out[name] = base.index_copy(0, trials, theirs)
+        if part.config is None:
+            out["config"] = None
+        return replace(self, **out)
+
     def clone(self) -> Evaluation:
         return replace(self, **{k: v.clone() for k, v in self.tensors().items()})
 
@@ -70,11 +83,13 @@ class Environment(Protocol):
     """What the loop needs from a robot-specific environment."""
 
     n: int
-    lower: Tensor  # (n,)
-    upper: Tensor  # (n,)
+    lower: Tensor  # (n,) or (T, n)
+    upper: Tensor  # (n,) or (T, n)
+    subsets: bool  # evaluate(config[idx], idx) allowed: once most trials stopped, the loop evaluates the rest only
 
-    def evaluate(self, config: Tensor) -> Evaluation:
-        """(T, n) configurations -> their evaluation."""
+    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
+        """(T, n) configurations -> their evaluation; ``trials`` (B,): the trials that rows of a
+        (B, n) ``config`` belong to when only some are evaluated (None: all, in order)."""
         ...
 
 
@@ -90,6 +105,7 @@ class FingerEnvironment:
     n: int
     lower: Tensor
     upper: Tensor
+    subsets = False  # every trial evaluated every iteration: fixed-seed results stay bit-for-bit what they were
 
     def __init__(self, robot, problem, ik, refine: int, candidates: int, dtype: torch.dtype,
                  device: torch.device | str, collisions: bool = False):
@@ -146,10 +162,10 @@ class FingerEnvironment:
         q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
         return self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
 
-    def evaluate(self, config: Tensor) -> Evaluation:
+    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
         """config: (T, n) -> E (T,) of eq. 3, per-finger errors (T, F), finger joints (T, F, j) and,
         with a collision proxy, the collision count (T,) of the whole posture (the fingers without
-        a contact at home)."""
+        a contact at home). Every trial has the same problem, so ``trials`` changes nothing."""
         levels = None
         if self.proxy is not None and self.robot.has_body:  # the proxy's arm chain gives the palm too
             levels, palm = self.proxy.body_levels_and_palm(config)

@@ -63,7 +63,10 @@ class GripperEnvironment:
         n: body joints (9 for ``manus``: base x, y, yaw + 6 arm joints).
         lower, upper: (n,) search bounds (m / rad), or (T, n) for a batch of problems.
         problem_index: (T,) each trial's problem in a batch, or None (one problem).
+        subsets: True: once most trials have stopped, the loop evaluates only the others.
     """
+
+    subsets = True
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
                  device: torch.device | str = "cpu", collisions: bool = False, approach_m: float = 0.2,
@@ -98,25 +101,33 @@ class GripperEnvironment:
             self.proxy = CollisionProxy(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
-    def evaluate(self, config: Tensor) -> Evaluation:
+    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
         """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
-        proxy, the collision count."""
+        proxy, the collision count. ``trials`` (B,): the trials the rows of ``config`` (B, n)
+        belong to, when the loop evaluates only its active trials (None: all, in order)."""
         proposal = config
+        targets, lower, upper, pid = self._per_trial(trials)
         if self.refine > 0:
-            config = self._refine(config, self.refine)
+            config = self._refine(config, self.refine, targets, lower, upper)
         points = self.robot.gripper_points(config)  # (T, 2, 3)
-        _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
-        collisions = self._count(config) if self.proxy is not None else None
+        _r, alignment, _r2, d = manus_reward(points, targets.expand_as(points))
+        collisions = self._count(config, pid) if self.proxy is not None else None
         return Evaluation(error=d, alignment=alignment, collisions=collisions,
                           config=config if config is not proposal else None)
 
-    def _refine(self, q: Tensor, steps: int) -> Tensor:
+    def _per_trial(self, trials: Tensor | None) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+        """Targets (B or 1, 2, 3), bounds (B or 1, n) and problem indices (B,) of some trials."""
+        if trials is None or self.problem_index is None:
+            return self.targets, self.lower, self.upper, self.problem_index
+        return self.targets[trials], self.lower[trials], self.upper[trials], self.problem_index[trials]
+
+    def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor) -> Tensor:
         """``steps`` damped least-squares steps (lambda = 0.05, forward differences h = 1e-3 in the
         loop's dtype, no collision test) towards each trial's nearer pairing, within the bounds,
         each kept where it lowers the point error: the learner proposes, a few local steps
         settle the proposal, and the settled configuration is what is evaluated and reported."""
         T = q.shape[0]
-        tg = self.targets.expand(T, 2, 3)
+        tg = targets.expand(T, 2, 3)
         pts = self.robot.gripper_points(q)
         swap = _pairing(pts, tg)
         goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
@@ -129,7 +140,7 @@ class GripperEnvironment:
         for _ in range(steps):
             J = (self.robot.gripper_points(q.unsqueeze(1) + h * eye).reshape(T, self.n, 6)
                  - pts.unsqueeze(1)).transpose(1, 2) / h
-            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts, lam, eye6), self.lower), self.upper)
+            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts, lam, eye6), lower), upper)
             new_pts = self.robot.gripper_points(new).reshape(T, 6)
             new_err = (goal - new_pts).norm(dim=-1)
             better = (new_err < err).unsqueeze(1)
@@ -154,7 +165,7 @@ class GripperEnvironment:
         crossed = err[T:] < err[:T]
         q = torch.where(crossed.unsqueeze(1), q2[T:], q2[:T])
         ev = self.evaluate(q.to(config))
-        return q.to(config), ev
+        return (q.to(config) if ev.config is None else ev.config), ev
 
     def _least_squares(self, q: Tensor, goal: Tensor, iterations: int) -> tuple[Tensor, Tensor]:
         """Levenberg-Marquardt on the gripper points, float64, within the bounds.
@@ -197,11 +208,12 @@ class GripperEnvironment:
             lam = torch.where(better.view(-1, 1, 1), (lam / 3).clamp(min=1e-4), (lam * 4).clamp(max=10.0))
         return q, err
 
-    def _count(self, q: Tensor) -> Tensor:
-        """(B,) the proxy's collision count of configurations (B, n): B = T, or a multiple of T
-        (trial t's copies at t, t + T, ...)."""
+    def _count(self, q: Tensor, pid: Tensor | None = None) -> Tensor:
+        """(B,) the proxy's collision count of configurations (B, n) of the trials of problems
+        ``pid`` (B,); None: all trials (B = T) or copies of them (trial t's at t, t + T, ...)."""
         config = q.to(self.lower)
-        pid = self.problem_index
+        if pid is None:
+            pid = self.problem_index
         if pid is not None and config.shape[0] != pid.shape[0]:
             pid = pid.repeat(config.shape[0] // pid.shape[0])
         levels, palm = self.proxy.body_levels_and_palm(config)

@@ -140,11 +140,16 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     all_active = True
     iterations = torch.full((T,), solver.max_iterations, dtype=torch.long, device=device)
     best_config = best_ev = best_r = best_obs = None
+    n_active = T
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
         step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
         config = torch.addcmul(env.lower, span, step.o)  # (13)
-        ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
+        if all_active or n_active * 2 > T or not getattr(env, "subsets", False):
+            ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
+        else:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
+            idx = active.nonzero().squeeze(1)
+            ev = ev.put(idx, env.evaluate(config[idx], idx), config)
         if ev.config is not None:  # the environment settled the proposal (a gripper's refine steps)
             config = ev.config
         r = reward(ev, k + 1)  # (14), (20)-(23)
@@ -179,10 +184,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             break
         if threshold is not None:
             done = active & (observed > threshold)
+            if solver.stop_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
+                done &= ev.collisions == 0
             if bool(done.any()):
                 iterations = torch.where(done, torch.full_like(iterations, k + 1), iterations)
                 active = active & ~done
                 all_active = False
+                n_active = int(active.sum())
                 if not bool(active.any()):
                     break
                 if solver.enough is not None and int((~active).sum()) >= solver.enough:  # the batch has its grasps
