@@ -7,9 +7,10 @@ reachable checks of issue 10, and Fig. 12 (criteria against iteration, one confi
 The protocol: 64 cube positions on an 8 x 8 grid over a 0.6 m (x: 0.6 to 1.2 m) x 1 m (y: -0.5
 to 0.5 m) workspace in front of the mobile base's origin; at each, the 70 mm cube of task
 ``cube`` stands on a table 0.72 m high (0.6 m x 1.2 m) whose near edge is 0.1 m in front of the
-cube, and ``--runs`` learners start from random configurations (one solve per position, its
-runs batched; seed = position index). Every run is counted, not the best of each solve: d and
-the orientation error acos(alignment) are per run. Writes ``<out>/manus_protocol.md``,
+cube, and ``--runs`` learners start from random configurations: the 64 x runs learners run as one
+vectorised loop (``gt.solve_many``, seed 0; each has its own network, start, cube and table).
+Every run is counted, not the best of each solve: d and the orientation error acos(alignment)
+are per run. Writes ``<out>/manus_protocol.md``,
 ``fig12_criteria.png`` and ``fig12_posture.png``; ``--check`` exits 1 when a target is missed.
 """
 
@@ -63,10 +64,9 @@ def summary(d_mm: np.ndarray, align: np.ndarray, coll: np.ndarray) -> dict:
 def protocol(runs: int) -> tuple[dict, list]:
     """The paper's method (the robot's defaults) at every position; returns its summary and the
     per-position results."""
-    d, al, co, results = [], [], [], []
-    for k, (x, y) in enumerate(positions()):
-        res = gt.solve(cube_problem(x, y), trials=runs, seed=k)
-        results.append(res)
+    d, al, co = [], [], []
+    results = gt.solve_many([cube_problem(x, y) for x, y in positions()], trials=runs, seed=0)
+    for res in results:
         d += [t.distance_mm for t in res.trials]
         al += [t.alignment for t in res.trials]
         co += [t.collisions for t in res.trials]
@@ -114,7 +114,7 @@ def approach_check(results: list, trials: int, seed: int = 7) -> dict:
     default search window (+-0.2 m, +-30 degrees); the result's best counts."""
     robot, _ = robot_and_ik("manus")
     rng = np.random.default_rng(seed)
-    solved = tried = 0
+    problems = []
     for (x, y), res in zip(positions(), results, strict=True):
         good = [t for t in res.trials if t.collisions == 0 and t.distance_mm < 1]
         if not good:
@@ -127,10 +127,9 @@ def approach_check(results: list, trials: int, seed: int = 7) -> dict:
             scale = 180 / math.pi if kind == "revolute" else 1.0
             lo, hi = lower[j] * scale, upper[j] * scale
             approach[name] = float(np.clip(q[name] + step, lo, hi))
-        best = gt.solve(cube_problem(x, y, approach), trials=trials, seed=seed).best
-        tried += 1
-        solved += best.distance_mm < 1 and best.collisions == 0
-    return {"solved": solved, "tried": tried}
+        problems.append(cube_problem(x, y, approach))
+    bests = [r.best for r in gt.solve_many(problems, trials=trials, seed=seed)]
+    return {"solved": sum(b.distance_mm < 1 and b.collisions == 0 for b in bests), "tried": len(problems)}
 
 
 def random_check(n: int, trials: int, seed: int = 11) -> dict:
@@ -139,16 +138,16 @@ def random_check(n: int, trials: int, seed: int = 11) -> dict:
     robot, _ = robot_and_ik("manus")
     lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
     gen = torch.Generator().manual_seed(seed)
-    solved = 0
+    problems = []
     for k in range(n):
         q = lo + (hi - lo) * torch.rand(1, len(lo), generator=gen, dtype=torch.float64)
         pts = robot.gripper_points(q)[0].tolist()
         if k % 2:
             pts = pts[::-1]
-        problem = GraspProblem.from_mapping({"name": f"random{k}", "robot": "manus", "points": pts}, f"<random {k}>")
-        best = gt.solve(problem, trials=trials, seed=k).best
-        solved += best.distance_mm < 5 and best.alignment > 0.999
-    return {"solved": solved, "tried": n}
+        problems.append(GraspProblem.from_mapping({"name": f"random{k}", "robot": "manus", "points": pts},
+                                                  f"<random {k}>"))
+    bests = [r.best for r in gt.solve_many(problems, trials=trials, seed=seed)]
+    return {"solved": sum(b.distance_mm < 5 and b.alignment > 0.999 for b in bests), "tried": n}
 
 
 def figure12(out: Path) -> list[Path]:

@@ -51,7 +51,7 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
-__all__ = ["CollisionProxy", "self_collision_spheres", "shape_spheres"]
+__all__ = ["ChainLevels", "CollisionProxy", "motion_terms", "self_collision_spheres", "shape_spheres"]
 
 
 SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this get the covering model for self-collision
@@ -115,7 +115,7 @@ def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
     return centres, radii
 
 
-def _motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(n, 4, 4) A and B of M(q) = I + s(q) A + c(q) B, and (n,) revolute mask."""
     n = len(types)
     A, B = np.zeros((n, 4, 4)), np.zeros((n, 4, 4))
@@ -128,7 +128,7 @@ def _motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray,
     return A, B, np.array([t == "revolute" for t in types])
 
 
-class _Chain:
+class ChainLevels:
     """Torch constants of one (batch of) serial chain(s). With M(q) = I + s(q) A + c(q) B,
 
         F_k M_k(q_k) = F_k + s(q_k) (F_k A_k) + c(q_k) (F_k B_k),
@@ -252,12 +252,12 @@ class CollisionProxy:
         self._cluster_local = torch.as_tensor(local, **kw)  # (C, 4, CLUSTER) homogeneous sphere centres
         self._cluster_bound = torch.as_tensor(bound, **kw)  # (C, 4, 1) bounding-sphere centres
         if robot.body is not None:
-            A, B, rev = _motion_terms(robot.body.axes, robot.body.joint_types)
-            self.body = _Chain(A, B, rev, robot.body.offsets, kw)
+            A, B, rev = motion_terms(robot.body.axes, robot.body.joint_types)
+            self.body = ChainLevels(A, B, rev, robot.body.offsets, kw)
             self._palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)
         if robot.n_fingers:
-            terms = [_motion_terms(f.chain.axes, f.chain.joint_types) for f in robot.fingers.values()]
-            self.fingers = _Chain(np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]),
+            terms = [motion_terms(f.chain.axes, f.chain.joint_types) for f in robot.fingers.values()]
+            self.fingers = ChainLevels(np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]),
                                   np.stack([t[2] for t in terms]),
                                   np.stack([f.chain.offsets for f in robot.fingers.values()]), kw)
             base = np.stack([f.base_in_palm for f in robot.fingers.values()])  # (F, 4, 4)

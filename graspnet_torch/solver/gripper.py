@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.proxy import ChainLevels, motion_terms
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward
@@ -94,6 +95,17 @@ class GripperEnvironment:
         self.upper = torch.as_tensor(self._bounds[1], **kw)
         self._targets64 = torch.as_tensor(targets, dtype=torch.float64)  # (T or 1, 2, 3)
         self.targets = self._targets64.to(**kw)
+        # the body chain's frames P_1..P_n as batched products (collision/proxy.py), from which the
+        # gripper points and their Jacobian follow in closed form (see :meth:`_kinematics`)
+        A, B, revolute = motion_terms(robot.body.axes, robot.body.joint_types)
+        self._chain = ChainLevels(A, B, revolute, robot.body.offsets, kw)
+        self._axes = torch.as_tensor(robot.body.axes, **kw).unsqueeze(-1)  # (n, 3, 1)
+        self._revolute = torch.as_tensor(revolute, device=device).view(1, -1, 1, 1)
+        self._palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)
+        zero = robot.link_frames(robot.home_posture())
+        palm_inv = np.linalg.inv(zero[robot.cfg.palm_link])
+        self._points_local = torch.as_tensor(np.stack([(palm_inv @ zero[name])[:, 3] for name in
+                                                       robot.cfg.gripper_points], axis=1), **kw)  # (4, 2)
         self.proxy = None
         if collisions and has_environment(robot, self.problem):
             from graspnet_torch.collision.proxy import CollisionProxy
@@ -108,12 +120,41 @@ class GripperEnvironment:
         proposal = config
         targets, lower, upper, pid = self._per_trial(trials)
         if self.refine > 0:
-            config = self._refine(config, self.refine, targets, lower, upper)
-        points = self.robot.gripper_points(config)  # (T, 2, 3)
+            config, levels, points = self._refine(config, self.refine, targets, lower, upper)
+        else:
+            levels, points, _ = self._kinematics(config)
         _r, alignment, _r2, d = manus_reward(points, targets.expand_as(points))
-        collisions = self._count(config, pid) if self.proxy is not None else None
+        collisions = None
+        if self.proxy is not None:
+            end = levels[:, -1] @ self._palm_offset
+            none = self._no_fingers.expand(config.shape[0], 0, 0)
+            collisions = self.proxy.count((end[:, :3, :3], end[:, :3, 3]), none, config, list(levels.unbind(1)), pid)
         return Evaluation(error=d, alignment=alignment, collisions=collisions,
                           config=config if config is not proposal else None)
+
+    def _kinematics(self, q: Tensor, jacobian: bool = False) -> tuple[Tensor, Tensor, Tensor | None]:
+        """q (T, n) -> the chain's frames P_1..P_n (T, n, 4, 4), the gripper points (T, 2, 3) and,
+        if asked, their Jacobian (T, 6, n). Joint k turns about (or slides along) its axis a_k,
+        which P_{k+1} carries into the world (M_k(q) leaves a_k and, revolute, the origin fixed):
+
+            w_k = R(P_{k+1}) a_k,  o_k = t(P_{k+1});  dp/dq_k = w_k x (p - o_k) (revolute), w_k (prismatic)
+        """
+        levels = torch.stack(self._chain.levels(q, self.n), dim=1)  # (T, n, 4, 4)
+        points = self._points(levels)
+        if not jacobian:
+            return levels, points, None
+        return levels, points, self._jacobian(levels, points)
+
+    def _points(self, levels: Tensor) -> Tensor:
+        end = levels[:, -1] @ self._palm_offset  # the palm (gripper) frame
+        return (end[:, :3, :] @ self._points_local).transpose(1, 2)  # (T, 2, 3)
+
+    def _jacobian(self, levels: Tensor, points: Tensor) -> Tensor:
+        T = levels.shape[0]
+        w = (levels[:, :, :3, :3] @ self._axes).squeeze(-1)  # (T, n, 3) joint axes in the world
+        arm = points.unsqueeze(1) - levels[:, :, None, :3, 3]  # (T, n, 2, 3): p - o_k
+        col = torch.where(self._revolute, torch.linalg.cross(w.unsqueeze(2).expand_as(arm), arm), w.unsqueeze(2))
+        return col.reshape(T, self.n, 6).transpose(1, 2)
 
     def _per_trial(self, trials: Tensor | None) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
         """Targets (B or 1, 2, 3), bounds (B or 1, n) and problem indices (B,) of some trials."""
@@ -121,31 +162,33 @@ class GripperEnvironment:
             return self.targets, self.lower, self.upper, self.problem_index
         return self.targets[trials], self.lower[trials], self.upper[trials], self.problem_index[trials]
 
-    def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor) -> Tensor:
-        """``steps`` damped least-squares steps (lambda = 0.05, forward differences h = 1e-3 in the
-        loop's dtype, no collision test) towards each trial's nearer pairing, within the bounds,
-        each kept where it lowers the point error: the learner proposes, a few local steps
-        settle the proposal, and the settled configuration is what is evaluated and reported."""
+    def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor
+                ) -> tuple[Tensor, Tensor, Tensor]:
+        """``steps`` damped least-squares steps (lambda = 0.05, the closed-form Jacobian of
+        :meth:`_kinematics`, no collision test) towards each trial's nearer pairing, within the
+        bounds, each kept where it lowers the point error: the learner proposes, a few local steps
+        settle the proposal, and the settled configuration is what is evaluated and reported.
+        Returns it (T, n) with its chain frames (T, n, 4, 4) and gripper points (T, 2, 3)."""
         T = q.shape[0]
         tg = targets.expand(T, 2, 3)
-        pts = self.robot.gripper_points(q)
+        levels, pts, J = self._kinematics(q, jacobian=True)
         swap = _pairing(pts, tg)
         goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
-        pts = pts.reshape(T, 6)
-        err = (goal - pts).norm(dim=-1)
-        h = 1e-3
-        eye = torch.eye(self.n, dtype=q.dtype, device=q.device)
+        err = (goal - pts.reshape(T, 6)).norm(dim=-1)
         eye6 = torch.eye(6, dtype=q.dtype, device=q.device)
         lam = torch.full((T, 1, 1), 0.05, dtype=q.dtype, device=q.device)
-        for _ in range(steps):
-            J = (self.robot.gripper_points(q.unsqueeze(1) + h * eye).reshape(T, self.n, 6)
-                 - pts.unsqueeze(1)).transpose(1, 2) / h
-            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts, lam, eye6), lower), upper)
-            new_pts = self.robot.gripper_points(new).reshape(T, 6)
-            new_err = (goal - new_pts).norm(dim=-1)
-            better = (new_err < err).unsqueeze(1)
-            q, pts, err = torch.where(better, new, q), torch.where(better, new_pts, pts), torch.minimum(new_err, err)
-        return q
+        for step in range(steps):
+            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts.reshape(T, 6), lam, eye6), lower), upper)
+            new_levels, new_pts, _ = self._kinematics(new)
+            new_err = (goal - new_pts.reshape(T, 6)).norm(dim=-1)
+            better = new_err < err
+            q = torch.where(better.unsqueeze(1), new, q)
+            levels = torch.where(better.view(-1, 1, 1, 1), new_levels, levels)
+            pts = torch.where(better.view(-1, 1, 1), new_pts, pts)
+            err = torch.minimum(new_err, err)
+            if step + 1 < steps:
+                J = self._jacobian(levels, pts)
+        return q, levels, pts
 
     def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
         """Polish the reported configurations: ``iterations`` damped least-squares steps (float64)

@@ -95,3 +95,26 @@ def test_bad_floor_and_self_collision_are_refused(key, value, message):
     raw[key] = value
     with pytest.raises(ConfigError, match=message):
         RobotCfg.from_mapping(raw, "manus.yaml")
+
+
+def test_links_riding_the_planar_base_are_not_tested_against_the_floor(manus):
+    """The platform and the arm's mount move only with the base (x, y, yaw): the proxy skips them
+    against the floor (their clusters never reach the narrow phase), and FCL agrees that they
+    never touch it anywhere in the base's range."""
+    problem = gt.GraspProblem.from_mapping(POINTS, source="points")
+    proxy = CollisionProxy(manus, problem, dtype=torch.float64)
+    attach = {link: ("body", 3) for link in ("platform", "arm_mount")} | {"gripper": ("body", 9)}
+    assert proxy._riding_base(manus, attach) == {"platform", "arm_mount"}
+    floor = len(problem.obstacles)  # the floor follows the problem's obstacles
+    for g in proxy._groups:
+        if floor in g["index"]:
+            col = g["index"].index(floor)
+            riding = [k for k, li in enumerate(proxy._cluster_link.tolist()) if proxy.links[li] == "platform"]
+            assert not bool(g["bound_pos"][riding, 0, col].any())
+    scene = CollisionScene(manus, problem)
+    lo, hi = manus.body_limits
+    g = torch.Generator().manual_seed(9)
+    for _ in range(10):
+        q = manus.home_posture().body.clone()
+        q[:3] = torch.as_tensor(lo[:3]) + torch.as_tensor(hi[:3] - lo[:3]) * torch.rand(3, generator=g, dtype=torch.float64)
+        assert not any(link in ("platform", "arm_mount") for link, _o in scene.check(_posture(manus, q)).obstacle_pairs)

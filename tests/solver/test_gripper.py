@@ -147,3 +147,72 @@ def test_refine_steps_are_evaluated_and_reported(manus):
     assert ev0.config is None and ev2.config is not None
     assert bool((ev2.error <= ev0.error + 1e-6).all()) and float(ev2.error.mean()) < 0.7 * float(ev0.error.mean())
     assert torch.allclose(plain.evaluate(ev2.config).error, ev2.error, atol=1e-6)
+
+
+def _cube_at(x: float, y: float) -> gt.GraspProblem:
+    """The cube of task ``cube`` moved to (x, y) with its table (the protocol's layout)."""
+    return gt.GraspProblem.from_mapping({
+        "robot": "manus", "object": {"shape": "box", "size": [0.07, 0.07, 0.07], "pose": [x, y, 0.755, 0, 0, 0]},
+        "points": [[0.0, 0.035, 0.0], [0.0, -0.035, 0.0]],
+        "obstacles": [{"shape": "box", "size": [0.6, 1.2, 0.72], "pose": [x + 0.2, y, 0.36, 0, 0, 0]}]},
+        source=f"cube@{x},{y}")
+
+
+def test_a_batch_of_problems_evaluates_as_each_problem_alone(manus):
+    """A batch environment (3 problems x 4 trials, one proxy holding every table and cube) gives
+    each trial the evaluation its own problem's environment gives; a subset of trials (the loop's
+    active ones) gives the same rows."""
+    problems = [_cube_at(0.7, -0.3), _cube_at(0.9, 0.1), _cube_at(1.1, 0.4)]
+    batch = GripperEnvironment(manus, problems, dtype=torch.float64, collisions=True, refine=2, runs=4)
+    assert batch.lower.shape == (12, 9) and batch.problem_index.tolist() == [0] * 4 + [1] * 4 + [2] * 4
+    g = torch.Generator().manual_seed(8)
+    q = batch.lower + (batch.upper - batch.lower) * torch.rand(12, 9, generator=g, dtype=torch.float64)
+    q[:, 0] = 0.3  # the base near the tables: some collide
+    ev = batch.evaluate(q)
+    for k, problem in enumerate(problems):
+        alone = GripperEnvironment(manus, problem, dtype=torch.float64, collisions=True, refine=2)
+        rows = slice(4 * k, 4 * k + 4)
+        one = alone.evaluate(q[rows])
+        assert torch.allclose(one.error, ev.error[rows]) and torch.equal(one.collisions, ev.collisions[rows])
+        assert torch.allclose(one.config, ev.config[rows])
+    assert int((ev.collisions > 0).sum()) > 0
+    idx = torch.tensor([1, 6, 11])
+    part = batch.evaluate(q[idx], idx)
+    assert torch.allclose(part.error, ev.error[idx]) and torch.equal(part.collisions, ev.collisions[idx])
+
+
+def test_solve_many_gives_each_problem_its_result(manus):
+    """One vectorised loop over two problems: a result per problem, in order, whose distance is
+    recomputed from its own problem's points and the reported joints."""
+    problems = [_cube_at(0.8, -0.2), _cube_at(1.0, 0.3)]
+    results = gt.solve_many(problems, trials=3, seed=0, max_iterations=40)
+    assert [len(r.trials) for r in results] == [3, 3]
+    for problem, result in zip(problems, results, strict=True):
+        assert result.problem == problem.source
+        for trial in result.trials:
+            q = torch.tensor([v * (math.pi / 180 if kind == "revolute" else 1.0) for v, kind in
+                              zip(trial.arm_joints.values(), manus.body.joint_types, strict=True)], dtype=torch.float64)
+            points = manus.gripper_points(q)
+            target = torch.as_tensor(problem.points_world())
+            d = min(float((target - points).norm(dim=-1).sum()), float((target.flip(0) - points).norm(dim=-1).sum()))
+            assert trial.distance_mm == pytest.approx(d * 1000, abs=1e-6)
+
+
+def test_solve_many_refuses_mixed_robots():
+    with pytest.raises(gt.ProblemError, match="one batch, one robot"):
+        gt.solve_many([_cube_at(0.8, 0.0), "glass3"], trials=1, max_iterations=1)
+
+
+def test_closed_form_points_and_jacobian_match_the_kernel_and_finite_differences(manus):
+    """The gripper points from the chain frames equal the URDF kernel's, and the closed-form
+    Jacobian (w x (p - o) per revolute joint, w per prismatic one) equals central differences
+    (float64)."""
+    env = GripperEnvironment(manus, gt.GraspProblem.from_mapping(CUBE, source="cube"), dtype=torch.float64)
+    g = torch.Generator().manual_seed(10)
+    q = env.lower + (env.upper - env.lower) * torch.rand(6, 9, generator=g, dtype=torch.float64)
+    _levels, points, J = env._kinematics(q, jacobian=True)
+    assert torch.allclose(points, manus.gripper_points(q), atol=1e-7)
+    h, eye = 1e-6, torch.eye(9, dtype=torch.float64)
+    fd = torch.stack([(manus.gripper_points(q + h * eye[k]) - manus.gripper_points(q - h * eye[k])).reshape(6, 6)
+                      / (2 * h) for k in range(9)], dim=-1)
+    assert torch.allclose(J, fd, atol=1e-7)

@@ -114,3 +114,32 @@ def test_fixed_seed_glass3_matches_the_recorded_result():
         assert got["total_error_mm"] == pytest.approx(want["total_error_mm"], abs=1e-3)
         for f, q in want["joints"].items():
             assert got["joints"][f] == pytest.approx(q, abs=1e-3)
+
+
+class _Colliding:
+    """A one-joint environment whose every configuration is on target (E = 0) but collides during
+    the first five evaluations."""
+
+    n, subsets = 1, False
+
+    def __init__(self):
+        self.lower, self.upper = torch.zeros(1), torch.ones(1)
+        self.calls = 0
+
+    def evaluate(self, config, trials=None):
+        from graspnet_torch.solver.environment import Evaluation
+
+        self.calls += 1
+        hits = torch.full((config.shape[0],), 1 if self.calls <= 5 else 0, dtype=torch.long)
+        return Evaluation(error=torch.zeros(config.shape[0]), collisions=hits)
+
+
+@pytest.mark.parametrize("stop_clear, stops_at", [(False, 1), (True, 6)])
+def test_stop_clear_waits_for_a_clear_configuration(stop_clear, stops_at):
+    """R3 at i << p barely shapes a collision, so the paper's rule stops on the first (colliding)
+    evaluation; with ``stop_clear`` the trial goes on until the proxy finds it clear."""
+    from graspnet_torch.solver.loop import run_loop
+
+    out = run_loop(_Colliding(), 2, 0, SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0),
+                   reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
+    assert out.iterations.tolist() == [stops_at, stops_at]
