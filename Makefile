@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -35,10 +35,7 @@ lint: $(STAMP)  ## ruff check
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
 	$(PY) benchmarks/bench_kinematics.py
 
-bench-report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, Fig. 12 -> reports/manus_protocol.md (~12 min)
-	$(PY) benchmarks/manus_protocol.py
-
-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
+bench-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
 	$(PY) benchmarks/bench_fcnn.py
 
 bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from scratch
@@ -52,6 +49,12 @@ bench-validation: $(STAMP)  ## start-up time the input checks add to a solve (ta
 
 bench-arm: $(STAMP)  ## the arm loop with collision checking vs without (targets 1,000 it/s, 30,000 at T=1000)
 	$(PY) benchmarks/bench_arm.py --check
+
+bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (targets 2,000 it/s, 100,000 at T=1000)
+	$(PY) benchmarks/bench_manus.py --check
+
+report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~4 min)
+	$(PY) benchmarks/manus_protocol.py --check
 
 report-arm: $(STAMP)  ## paper Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES -> reports/acnn_obstacles.md (~6 min)
 	$(PY) benchmarks/acnn_obstacles.py
