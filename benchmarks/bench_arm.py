@@ -10,38 +10,25 @@ T = 1000 with collisions; ``--check`` exits 1 when one is missed.
 
 from __future__ import annotations
 
-import argparse
 import sys
+from collections.abc import Callable
 
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.solver import SolverCfg
+from graspnet_torch.benchmarking import bench_args, loop_rate, rate_rows
 from graspnet_torch.table import format_table
 
 
-def rate(kind: str, trials: int, iterations: int, repeats: int) -> float:
-    """Best of ``repeats`` runs: trial-iterations per second of the loop (set-up excluded)."""
-    best = 0.0
-    for seed in range(repeats):
-        res = gt.solve("env1", trials=trials, seed=seed, reward=gt.RewardCfg(kind=kind, a=1.5, p=2000),
-                       solver=SolverCfg(threshold=None, max_iterations=iterations, history=False, final_refine=0))
-        best = max(best, trials * iterations / res.outcome.wall_time_s)
-    return best
-
-
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--check", action="store_true")
-    args = ap.parse_args()
-    torch.set_num_threads(args.threads)
-    rate("r3", 1, 50, 1)  # warm-up
-    rows = []
-    for T, iterations, repeats in ((1, 2000, 3), (1000, 60, 2)):
-        with_c = rate("r3", T, iterations, repeats)
-        without = rate("r1", T, iterations, repeats)
-        rows.append([T, with_c, without, with_c / without])
+    args = bench_args(__doc__)
+
+    def rate(kind: str) -> Callable[[int, int, int], float]:
+        return lambda T, iterations, repeats: loop_rate("env1", T, iterations, repeats,
+                                                        gt.RewardCfg(kind=kind, a=1.5, p=2000))
+
+    rate("r3")(1, 50, 1)  # warm-up
+    rows = rate_rows(rate("r3"), rate("r1"), ((1, 2000, 3), (1000, 60, 2)))
     print(f"arm_hand on env1 (1 obstacle + the glass), torch threads: {torch.get_num_threads()}")
     print(format_table(["trials T", "trial-it/s with collisions (R3)", "without (R1)", "ratio"], rows,
                        floatfmt=".4g"))

@@ -11,40 +11,25 @@ T = 1000 with the defaults; ``--check`` exits 1 when one is missed.
 
 from __future__ import annotations
 
-import argparse
 import sys
+from collections.abc import Callable
 
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.solver import SolverCfg
+from graspnet_torch.benchmarking import bench_args, loop_rate, rate_rows
 from graspnet_torch.table import format_table
 
 
-def rate(bare: bool, trials: int, iterations: int, repeats: int) -> float:
-    """Best of ``repeats`` runs: trial-iterations per second of the loop (set-up excluded)."""
-    best = 0.0
-    for seed in range(repeats):
-        solver = SolverCfg(threshold=None, max_iterations=iterations, history=False, final_refine=0,
-                           refine=0 if bare else 2)
-        reward = gt.RewardCfg(kind="r1" if bare else "r3", a=1.0, p=50)
-        res = gt.solve("cube", trials=trials, seed=seed, solver=solver, reward=reward)
-        best = max(best, trials * iterations / res.outcome.wall_time_s)
-    return best
-
-
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--check", action="store_true")
-    args = ap.parse_args()
-    torch.set_num_threads(args.threads)
-    rate(False, 1, 50, 1)  # warm-up
-    rows = []
-    for T, iterations, repeats in ((1, 1000, 3), (1000, 30, 2)):
-        full = rate(False, T, iterations, repeats)
-        bare = rate(True, T, iterations, repeats)
-        rows.append([T, full, bare, full / bare])
+    args = bench_args(__doc__)
+
+    def rate(bare: bool) -> Callable[[int, int, int], float]:
+        reward = gt.RewardCfg(kind="r1" if bare else "r3", a=1.0, p=50)
+        return lambda T, iterations, repeats: loop_rate("cube", T, iterations, repeats, reward, 0 if bare else 2)
+
+    rate(False)(1, 50, 1)  # warm-up
+    rows = rate_rows(rate(False), rate(True), ((1, 1000, 3), (1000, 30, 2)))
     print(f"manus on cube (table, cube, floor, self-collision), torch threads: {torch.get_num_threads()}")
     print(format_table(["trials T", "trial-it/s defaults (refine 2, collisions, R3)", "bare loop (R1)", "ratio"],
                        rows, floatfmt=".4g"))

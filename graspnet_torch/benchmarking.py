@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import argparse
 import time
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
-__all__ = ["time_interleaved"]
+if TYPE_CHECKING:
+    from graspnet_torch.solver.config import RewardCfg
+
+__all__ = ["bench_args", "loop_rate", "rate_rows", "time_interleaved"]
 
 
 def time_interleaved(fns: Sequence[Callable[[], object]], min_time: float = 0.3, rounds: int = 5) -> list[float]:
@@ -29,3 +34,43 @@ def time_interleaved(fns: Sequence[Callable[[], object]], min_time: float = 0.3,
                     break
             best[k] = min(best[k], elapsed / n)
     return best
+
+
+def bench_args(doc: str) -> argparse.Namespace:
+    """``--threads`` (default 1, pinned here: on a busy 2-core machine 2 threads ran 10-90x slower)
+    and ``--check`` (exit 1 when a target is missed), the options every speed benchmark takes."""
+    import torch
+
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--check", action="store_true")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    return args
+
+
+def loop_rate(task: str, trials: int, iterations: int, repeats: int, reward: RewardCfg,
+              refine: int | None = None) -> float:
+    """Best of ``repeats`` solves of a task: trial-iterations per second of the loop (set-up
+    excluded), a fixed budget with no early stop and no polish; ``refine`` None: the robot's."""
+    import graspnet_torch as gt
+    from graspnet_torch.solver import SolverCfg
+
+    best = 0.0
+    for seed in range(repeats):
+        solver = SolverCfg(threshold=None, max_iterations=iterations, history=False, final_refine=0,
+                           **({} if refine is None else {"refine": refine}))
+        res = gt.solve(task, trials=trials, seed=seed, solver=solver, reward=reward)
+        best = max(best, trials * iterations / res.outcome.wall_time_s)
+    return best
+
+
+def rate_rows(full: Callable[[int, int, int], float], peer: Callable[[int, int, int], float],
+              sizes: Sequence[tuple[int, int, int]]) -> list[list[float]]:
+    """[T, full, peer, full / peer] for each (trials T, iterations, repeats), the two measured side
+    by side."""
+    rows = []
+    for T, iterations, repeats in sizes:
+        a, b = full(T, iterations, repeats), peer(T, iterations, repeats)
+        rows.append([T, a, b, a / b])
+    return rows

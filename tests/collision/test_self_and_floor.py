@@ -112,9 +112,9 @@ def test_links_riding_the_planar_base_are_not_tested_against_the_floor(manus):
             riding = [k for k, li in enumerate(proxy._cluster_link.tolist()) if proxy.links[li] == "platform"]
             assert not bool(g["bound_pos"][riding, 0, col].any())
     scene = CollisionScene(manus, problem)
-    lo, hi = manus.body_limits
+    lo, hi = (torch.as_tensor(a[:3]) for a in manus.body_limits)
     g = torch.Generator().manual_seed(9)
     for _ in range(10):
         q = manus.home_posture().body.clone()
-        q[:3] = torch.as_tensor(lo[:3]) + torch.as_tensor(hi[:3] - lo[:3]) * torch.rand(3, generator=g, dtype=torch.float64)
+        q[:3] = lo + (hi - lo) * torch.rand(3, generator=g, dtype=torch.float64)
         assert not any(link in ("platform", "arm_mount") for link, _o in scene.check(_posture(manus, q)).obstacle_pairs)
