@@ -143,3 +143,8 @@ def test_stop_clear_waits_for_a_clear_configuration(stop_clear, stops_at):
     out = run_loop(_Colliding(), 2, 0, SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0),
                    reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
     assert out.iterations.tolist() == [stops_at, stops_at]
+
+
+def test_stop_clear_must_be_a_boolean():
+    with pytest.raises(gt.ConfigError, match=r"solver\.stop_clear='yes': expected true or false"):
+        SolverCfg.from_mapping({"stop_clear": "yes"})
