@@ -31,9 +31,19 @@ box, cylinder and sphere; a mesh is approximated by its bounding box in its own 
     cylinder (r, half-height):  d = (|p_xy| - r, |p_z| - h);  same formula in 2-D
     sphere (r):                 sd = |p| - r
 
+    the floor (a half-space):   sd = p_z - top
+
 A sphere (c, rho) intersects an obstacle when sd(c) < rho, and penetrates the object by more
 than the tolerance tau when sd(c) < rho - tau. The count is INTERFACE.md's: distinct (link,
 obstacle) pairs plus links penetrating the object, the touching fingers' distal links excepted.
+
+The robot's own links (``self_collision: true``) are capsules (a segment and a radius: spheres,
+cylinders, small boxes; :func:`self_collision_primitive`) and boxes (the rest), tested pair by
+pair for every configuration at once:
+
+    capsule-capsule:  |closest points of the two segments| < r_1 + r_2 + clearance  (exact)
+    capsule-box:      the segment meets the box grown by r + clearance (slab test; conservative
+                      by up to (sqrt(3) - 1) r at the box's corners)
 """
 
 from __future__ import annotations
@@ -51,28 +61,17 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
-__all__ = ["ChainLevels", "CollisionProxy", "motion_terms", "self_collision_spheres", "shape_spheres"]
+__all__ = [
+    "ChainLevels",
+    "CollisionProxy",
+
+    "motion_terms",
+    "self_collision_primitive",
+    "shape_spheres",
+]
 
 
-SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this get the covering model for self-collision
-
-
-def self_collision_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
-    """The coarser model of a link primitive for self-collision: a small box (longest half-extent
-    <= ``SMALL_BOX_M``: a gripper, its jaws) is covered by spheres along its longest axis, radius
-    the half-diagonal of its cross-section, at most a radius apart (conservative: it bulges by up
-    to that radius beyond the box), so that thin parts need a few spheres instead of hundreds;
-    anything else as :func:`shape_spheres`."""
-    if shape.kind != "box" or max(shape.size) / 2 > SMALL_BOX_M:
-        return shape_spheres(shape)
-    h = np.asarray(shape.size, dtype=np.float64) / 2
-    a = int(np.argmax(h))
-    r = float(np.sqrt(np.sum(np.delete(h, a) ** 2)))
-    k = max(1, math.ceil(2 * h[a] / r) + 1)
-    local = np.zeros((k, 3))
-    local[:, a] = np.linspace(-h[a], h[a], k) if k > 1 else 0.0
-    centres = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
-    return centres, np.full(k, r)
+SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this are capsules for self-collision
 
 
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
@@ -202,12 +201,9 @@ class CollisionProxy:
         by_link: dict[str, list] = {}
         attach: dict[str, tuple] = {}
         self.link_spheres: dict[str, list[np.ndarray]] = {}
-        self_by_link: dict[str, list] = {}  # the coarser model for the robot's own links
         for shape in shapes:
             where, G = self._attachment(robot, shape.link, frames)
             attach[shape.link] = where
-            for c, r in zip(*self_collision_spheres(shape), strict=True):
-                self_by_link.setdefault(shape.link, []).append((G[:3, :3] @ c + G[:3, 3], float(r)))
             centres, radii_ = shape_spheres(shape)
             self.link_spheres.setdefault(shape.link, []).append(centres)  # in the link frame
             for c, r in zip(centres, radii_, strict=True):
@@ -278,7 +274,7 @@ class CollisionProxy:
             exempt.append(touching)
         self.n_elements = len(elements)
         batch = [elements] + [_elements_like(robot, p, elements, k) for k, p in enumerate(problems[1:], 1)]
-        self._groups = _primitive_groups(batch, kw)
+        self._groups = _primitive_groups(batch, kw, len(problem.obstacles) if robot.cfg.floor is not None else None)
         for g in self._groups:
             # a sphere (c, rho) hits element o when sd_o(c) < rho - margin_o; padding never hits
             thr = radii[:, :, None] - np.array([margin[k] for k in g["index"]])  # (C, CLUSTER, O_g)
@@ -299,55 +295,77 @@ class CollisionProxy:
             g["R_cols"] = g["R"].permute(0, 2, 1, 3).reshape(P, 3, -1)  # per problem [R_1 .. R_O]
             g["Rt"] = torch.einsum("poji,poj->poi", g["R"], g["t"]).reshape(P, -1)  # per problem [R_o^T t_o]
         self._true = torch.ones((), dtype=torch.bool, device=device)
-        # the robot's own links (self_collision: true): their own clusters (self_collision_spheres),
-        # every cluster of one link of a pair against every cluster of the other
+        # the robot's own links (self_collision: true): capsules and boxes (self_collision_primitives),
+        # every primitive of one link of a pair against every primitive of the other
         self.self_pairs = self_collision_pairs(robot)
-        self.proxy_unchecked: list[tuple[str, str]] = []
-        involved = list(dict.fromkeys(link for pair in self.self_pairs for link in pair))
-        s_clusters, clusters_of = [], {}
-        for link in involved:
-            spheres = self_by_link[link]
-            for start in range(0, len(spheres), CLUSTER):
-                chunk = spheres[start:start + CLUSTER]
-                clusters_of.setdefault(link, []).append(len(s_clusters))
-                s_clusters.append((frame_id(attach[link]), np.stack([c for c, _ in chunk]),
-                                   np.array([r for _, r in chunk])))
-        S = len(s_clusters)
-        s_local, s_radii = np.zeros((S, 4, CLUSTER)), np.full((S, CLUSTER), -np.inf)
-        s_bound, s_bound_r = np.zeros((S, 4, 1)), np.zeros(S)
-        for k, (_f, c, r) in enumerate(s_clusters):
-            s_local[k, :3, :len(r)], s_local[k, 3, :len(r)], s_radii[k, :len(r)] = c.T, 1.0, r
-            centre = (c.min(0) + c.max(0)) / 2
-            s_bound[k, :3, 0], s_bound[k, 3, 0] = centre, 1.0
-            s_bound_r[k] = float(np.max(np.linalg.norm(c - centre, axis=1) + r))
-        ca, cb, pid = [], [], []
-        for p, (a, b) in enumerate(self.self_pairs):
-            for i in clusters_of[a]:
-                for j in clusters_of[b]:
-                    ca.append(i)
-                    cb.append(j)
-                    pid.append(p)
-        self._self_frame = torch.tensor([f for f, *_ in s_clusters], dtype=torch.long, device=device)
-        self._self_local = torch.as_tensor(s_local, **kw)
-        self._self_bound = torch.as_tensor(s_bound, **kw)
-        self._self_a = torch.tensor(ca, dtype=torch.long, device=device)
-        self._self_b = torch.tensor(cb, dtype=torch.long, device=device)
-        self._self_pair = torch.tensor(pid, dtype=torch.long, device=device)
-        self._self_bound_sq = torch.as_tensor((s_bound_r[ca] + s_bound_r[cb] + clearance) ** 2, **kw)
-        if ca:
-            thr = s_radii[ca][:, :, None] + s_radii[cb][:, None, :] + clearance  # (N, K, K); padding: -inf
-            self._self_thr_sq = torch.as_tensor(np.where(thr > 0, thr, 0.0) ** 2, **kw)
-            # pairs that this coarser model (with its clearance) finds touching at the home posture
-            # are joints' neighbours it cannot resolve (a wrist housing and the gripper): it leaves
-            # them to FCL, which checks every pair of self_collision_pairs
-            home = robot.home_posture(dtype).body.to(device).unsqueeze(0)
+        self._self_model(robot, shapes, attach, frame_id, clearance, kw)
+
+    def _self_model(self, robot: Robot, shapes: list[LinkShape], attach: dict[str, tuple], frame_id,
+                    clearance: float, kw: dict) -> None:
+        """Tensors of the self-collision test: capsules (ends in their frame, radius), boxes (pose
+        in their frame, half extents), and the primitive pairs of each link pair: capsule-capsule
+        (exact: segment distance) and capsule-box (the segment against the box grown by the
+        radius: conservative by up to (sqrt(3) - 1) r at the box's corners). A pair of two boxes
+        has no test here: it is left to FCL (``proxy_unchecked``), as are pairs this model finds
+        touching at the home posture (joints' neighbours it cannot resolve, e.g. a wrist housing
+        and the gripper's covering capsule)."""
+        device = kw["device"]
+        involved = set(link for pair in self.self_pairs for link in pair)
+        caps, boxes = [], []  # (link, frame id, ...)
+        frames = self._frames_at_zero(robot)
+        for shape in shapes:
+            if shape.link not in involved:
+                continue
+            _where, G = self._attachment(robot, shape.link, frames)
+            kind, a, b = self_collision_primitive(shape)
+            if kind == "capsule":
+                ends = G[:3, :3] @ a.T + G[:3, 3:4]  # (3, 2)
+                caps.append((shape.link, frame_id(attach[shape.link]), ends, float(b)))
+            else:
+                boxes.append((shape.link, frame_id(attach[shape.link]), G @ a, b))
+        cc, cb, unchecked = [], [], []  # (i, j, link pair) index triples
+        for p, (la, lb) in enumerate(self.self_pairs):
+            ca = [i for i, c in enumerate(caps) if c[0] == la]
+            cb_ = [i for i, c in enumerate(caps) if c[0] == lb]
+            ba = [i for i, x in enumerate(boxes) if x[0] == la]
+            bb = [i for i, x in enumerate(boxes) if x[0] == lb]
+            cc += [(i, j, p) for i in ca for j in cb_]
+            cb += [(i, j, p) for i in ca for j in bb] + [(i, j, p) for i in cb_ for j in ba]
+            if ba and bb:
+                unchecked.append(p)
+        ends = np.zeros((len(caps), 4, 2))
+        for k, (_l, _f, e, _r) in enumerate(caps):
+            ends[k, :3], ends[k, 3] = e, 1.0
+        radius = np.array([c[3] for c in caps])
+        self._cap_frame = torch.tensor([c[1] for c in caps], dtype=torch.long, device=device)
+        self._cap_ends = torch.as_tensor(ends, **kw)  # (N_cap, 4, 2): homogeneous end points
+        self._box_frame = torch.tensor([x[1] for x in boxes], dtype=torch.long, device=device)
+        self._box_pose = torch.as_tensor(np.stack([x[2] for x in boxes]) if boxes else np.zeros((0, 4, 4)), **kw)
+        n_pairs = len(self.self_pairs)
+
+        def index(rows: list[tuple[int, int, int]], col: int) -> Tensor:
+            return torch.tensor([r[col] for r in rows], dtype=torch.long, device=device)
+
+        self._cc_i, self._cc_j = index(cc, 0), index(cc, 1)
+        self._cc_thr_sq = torch.as_tensor([(radius[i] + radius[j] + clearance) ** 2 for i, j, _p in cc], **kw)
+        self._cb_cap, self._cb_box = index(cb, 0), index(cb, 1)
+        grow = [boxes[j][3] + radius[i] + clearance for i, j, _p in cb]
+        self._cb_grow = torch.as_tensor(np.array(grow).reshape(-1, 3), **kw)  # (N_cb, 3): grown half extents
+        # (N, P) which link pair each primitive pair belongs to: hits (T, N) @ it > 0 -> (T, P)
+        self._cc_pair = torch.zeros(len(cc), n_pairs, **kw)
+        self._cc_pair[torch.arange(len(cc)), index(cc, 2)] = 1
+        self._cb_pair = torch.zeros(len(cb), n_pairs, **kw)
+        self._cb_pair[torch.arange(len(cb)), index(cb, 2)] = 1
+        self.proxy_unchecked = [self.self_pairs[p] for p in unchecked]
+        self._self_tested = bool(len(cc) or len(cb))
+        if self.self_pairs:
+            home = robot.home_posture(kw["dtype"]).body.to(device).unsqueeze(0)
             levels, palm_home = self.body_levels_and_palm(home)
-            touching_home = self.self_hits(palm_home, torch.zeros(1, 0, 0, **kw), home, levels)[0]
-            keep = ~touching_home[self._self_pair]
-            self._self_a, self._self_b = self._self_a[keep], self._self_b[keep]
-            self._self_bound_sq, self._self_thr_sq = self._self_bound_sq[keep], self._self_thr_sq[keep]
-            self._self_pair = self._self_pair[keep]
-            self.proxy_unchecked = [pair for pair, t in zip(self.self_pairs, touching_home.tolist(), strict=True) if t]
+            touching = self.self_hits(palm_home, torch.zeros(1, 0, 0, **kw), home, levels)[0]
+            if bool(touching.any()):
+                keep = (~touching).to(self._cc_pair.dtype)
+                self._cc_pair, self._cb_pair = self._cc_pair * keep, self._cb_pair * keep
+                self.proxy_unchecked += [pair for pair, t in zip(self.self_pairs, touching.tolist(), strict=True) if t]
 
     @staticmethod
     def _riding_base(robot: Robot, attach: dict[str, tuple]) -> set[str]:
@@ -459,7 +477,11 @@ class CollisionProxy:
         """(T, L, O) bool: link l (``self.links``) collides with element o (the obstacles in problem
         order, the floor, then the object). ``problem_index`` (T,): each configuration's problem
         when the proxy holds a batch of problems (None: the first)."""
-        frames = self.frames(palm, fingers, body, body_levels)[self._cluster_frame]  # (C, T, 3, 4)
+        return self._pairs(self.frames(palm, fingers, body, body_levels), problem_index)
+
+    def _pairs(self, every: Tensor, problem_index: Tensor | None) -> Tensor:
+        """:meth:`pairs` from every frame (n_frames, T, 3, 4)."""
+        frames = every[self._cluster_frame]  # (C, T, 3, 4)
         T = frames.shape[1]
         out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
         C = frames.shape[0]
@@ -483,7 +505,10 @@ class CollisionProxy:
                 continue
             p_of = torch.zeros_like(t) if pid is None else pid[t]
             centres = torch.bmm(frames[c, t], self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
-            p = torch.bmm(centres - g["t"][p_of, o].unsqueeze(1), g["R"][p_of, o])  # rows: R^T (x - t)
+            if g["kind"] == "plane":  # the height above the floor's top
+                p = centres[..., 2:3] - g["top"]
+            else:
+                p = torch.bmm(centres - g["t"][p_of, o].unsqueeze(1), g["R"][p_of, o])  # rows: R^T (x - t)
             hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][p_of, o].unsqueeze(1)).any(-1)  # (N,)
             out.index_put_((t[hit], self._cluster_link[c[hit]], g["columns"][o[hit]]), self._true)
         return out
@@ -494,39 +519,56 @@ class CollisionProxy:
         colliding pairs of the robot's own links."""
         T = palm[0].shape[0]
         out = torch.zeros(T, dtype=torch.long, device=palm[0].device)
+        if not self.n_elements and not self._self_tested:
+            return out
+        frames = self.frames(palm, fingers, body, body_levels)  # once for both tests
         if self.n_elements:
-            out = self.pairs(palm, fingers, body, body_levels, problem_index).sum(dim=(1, 2))
-        if self.self_pairs:
-            out = out + self.self_hits(palm, fingers, body, body_levels).sum(-1)
+            out = self._pairs(frames, problem_index).sum(dim=(1, 2))
+        if self._self_tested:
+            out = out + self._self_hits(frames).sum(-1)
         return out
 
     def self_hits(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
                   body_levels: list[Tensor] | None = None) -> Tensor:
-        """(T, P) bool: pair p of ``self.self_pairs`` collides: some sphere of one link within reach
-        of some sphere of the other, |c_i - c_j| < r_i + r_j + clearance. Broad phase on the
-        clusters' bounding spheres, then every sphere of the near cluster pairs."""
-        frames = self.frames(palm, fingers, body, body_levels)[self._self_frame]  # (S, T, 3, 4)
-        C, T = frames.shape[:2]
-        out = torch.zeros(T, len(self.self_pairs), dtype=torch.bool, device=frames.device)
-        bound = torch.bmm(frames.reshape(C, T * 3, 4), self._self_bound).view(C, T, 3)
-        near = (bound[self._self_a] - bound[self._self_b]).square().sum(-1) < self._self_bound_sq.unsqueeze(1)
-        n, t = near.nonzero(as_tuple=True)  # (cluster pair, trial)
-        if n.numel() == 0:
-            return out
-        a, b = self._self_a[n], self._self_b[n]
-        pa = torch.bmm(frames[a, t], self._self_local[a])  # (N, 3, K)
-        pb = torch.bmm(frames[b, t], self._self_local[b])
-        # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b: one batched product instead of an (N, K, K, 3) difference
-        d2 = pa.square().sum(1).unsqueeze(2) + pb.square().sum(1).unsqueeze(1) - 2 * torch.bmm(pa.transpose(1, 2), pb)
-        hit = (d2 < self._self_thr_sq[n]).flatten(1).any(-1)
-        out.index_put_((t[hit], self._self_pair[n[hit]]), self._true)
-        return out
+        """(T, P) bool: pair p of ``self.self_pairs`` collides (with the clearance): some capsule
+        of one link within reach of a capsule of the other (segment distance < r_1 + r_2 +
+        clearance), or of a box (the segment meets the box grown by r + clearance). Dense: every
+        primitive pair of every configuration, a few elementwise operations each."""
+        if not self._self_tested:
+            return torch.zeros(palm[0].shape[0], len(self.self_pairs), dtype=torch.bool, device=palm[0].device)
+        return self._self_hits(self.frames(palm, fingers, body, body_levels))
+
+    def _self_hits(self, frames: Tensor) -> Tensor:
+        """:meth:`self_hits` from every frame (n_frames, T, 3, 4)."""
+        T = frames.shape[1]
+        n = len(self._cap_frame)
+        ends = torch.bmm(frames[self._cap_frame].reshape(n, T * 3, 4), self._cap_ends).view(n, T, 3, 2)
+        start, end = ends[..., 0], ends[..., 1]  # (N_cap, T, 3)
+        hits = torch.zeros(T, len(self.self_pairs), dtype=self._cc_pair.dtype, device=frames.device)
+        if len(self._cc_i):
+            i, j = self._cc_i, self._cc_j
+            d2 = _segment_distance_sq(start[i], end[i], start[j], end[j])  # (N_cc, T)
+            hits = hits + (d2 < self._cc_thr_sq.unsqueeze(1)).to(hits.dtype).T @ self._cc_pair
+        if len(self._cb_cap):
+            W = frames[self._box_frame]  # (N_box, T, 3, 4) each box's link frame -> its pose
+            R = W[..., :3] @ self._box_pose[:, None, :3, :3]
+            t = (W[..., :3] @ self._box_pose[:, None, :3, 3:]).squeeze(-1) + W[..., 3]
+            Rb, tb = R[self._cb_box], t[self._cb_box]  # (N_cb, T, ...)
+            c = self._cb_cap
+            p0 = ((start[c] - tb).unsqueeze(-2) @ Rb).squeeze(-2)  # rows: R^T (x - t), in the box frame
+            p1 = ((end[c] - tb).unsqueeze(-2) @ Rb).squeeze(-2)
+            hit = _segment_meets_box(p0, p1, self._cb_grow.unsqueeze(1))  # (N_cb, T)
+            hits = hits + hit.to(hits.dtype).T @ self._cb_pair
+        return hits > 0
 
 
 def _local(g: dict, points: Tensor, pid: Tensor | None = None) -> Tensor:
     """(..., T, K, 3) world points -> (..., T, K, O_g, 3) in each element's frame of a group:
     R_o^T (x - t_o) for every element at once as x @ [R_1 .. R_O] - [R_o^T t_o]; ``pid`` (T,)
-    each trial's problem of a batch (None: the first)."""
+    each trial's problem of a batch (None: the first). The floor (a half-space) needs only the
+    height above its top: (..., T, K, 1, 1)."""
+    if g["kind"] == "plane":
+        return (points[..., 2:3] - g["top"]).unsqueeze(-2)  # the floor's top: one height for every problem
     if pid is None:
         return (points @ g["R_cols"][0] - g["Rt"][0]).view(*points.shape[:-1], -1, 3)
     return (points @ g["R_cols"][pid] - g["Rt"][pid].unsqueeze(-2)).view(*points.shape[:-1], -1, 3)
@@ -535,22 +577,90 @@ def _local(g: dict, points: Tensor, pid: Tensor | None = None) -> Tensor:
 def _hit(g: dict, p: Tensor, positive: Tensor, thr_sq: Tensor, size: Tensor | None = None) -> Tensor:
     """sd(p) < thr for points p (..., 3) in their element's frame, with thr > 0 (``positive``;
     otherwise never) and ``thr_sq`` = thr^2: outside a primitive |max(d, 0)|^2 < thr^2, inside
-    always. d: box |p| - h; cylinder (|p_xy| - r, |p_z| - h); sphere |p| - r."""
-    size = g["size"][0] if size is None else size
-    if g["kind"] == "sphere":
-        d = (torch.linalg.vector_norm(p, dim=-1) - size[..., 0]).unsqueeze(-1)
+    always. d: box |p| - h; cylinder (|p_xy| - r, |p_z| - h); sphere |p| - r; the floor (a
+    half-space, p its height above the top) p."""
+    if g["kind"] == "plane":
+        d = p
+    elif g["kind"] == "sphere":
+        d = (torch.linalg.vector_norm(p, dim=-1) - _size(g, size)[..., 0]).unsqueeze(-1)
     elif g["kind"] == "box":
-        d = p.abs() - size
+        d = p.abs() - _size(g, size)
     else:
-        d = torch.stack([torch.linalg.vector_norm(p[..., :2], dim=-1), p[..., 2].abs()], dim=-1) - size
+        d = torch.stack([torch.linalg.vector_norm(p[..., :2], dim=-1), p[..., 2].abs()], dim=-1) - _size(g, size)
     outside = d.clamp(min=0).square().sum(-1)
     return positive & ((outside < thr_sq) | (d.amax(-1) <= 0))
 
 
-def _primitive_groups(batch: list[list[Shape]], kw: dict) -> list[dict]:
+
+def self_collision_primitive(shape: LinkShape) -> tuple[str, np.ndarray, np.ndarray | float]:
+    """A link primitive for the self-collision test, in its link's frame: ``("capsule", ends (2, 3),
+    radius)`` or ``("box", pose (4, 4), half extents (3,))``. A sphere is a capsule of length 0; a
+    cylinder (r, L) the capsule of radius r whose segment runs along its axis to (L/2 - e) of each
+    end, e = min(r/4, L/2) (it overshoots the flat ends by 3r/4 on the axis, where the URDF's joints
+    sit); a small box (longest half-extent <= ``SMALL_BOX_M``: a gripper, its jaws) the capsule
+    along its longest axis with the half-diagonal of its cross-section as radius (it bulges by
+    up to that radius beyond the box); any other box is itself."""
+    R, t = shape.origin[:3, :3], shape.origin[:3, 3]
+    if shape.kind == "sphere":
+        return "capsule", np.stack([t, t]), float(shape.size[0])
+    if shape.kind == "cylinder":
+        r, length = shape.size
+        half = length / 2 - min(r / 4, length / 2)
+        return "capsule", np.stack([t - half * R[:, 2], t + half * R[:, 2]]), float(r)
+    if shape.kind == "box":
+        h = np.asarray(shape.size, dtype=np.float64) / 2
+        if h.max() > SMALL_BOX_M:
+            return "box", shape.origin.copy(), h
+        k = int(np.argmax(h))
+        radius = float(np.sqrt(np.sum(np.delete(h, k) ** 2)))
+        return "capsule", np.stack([t - h[k] * R[:, k], t + h[k] * R[:, k]]), radius
+    raise ConfigError(f"link '{shape.link}': no self-collision model for {shape.kind}")  # pragma: no cover
+
+
+def _segment_distance_sq(p1: Tensor, q1: Tensor, p2: Tensor, q2: Tensor, eps: float = 1e-12) -> Tensor:
+    """Squared distance between segments [p1, q1] and [p2, q2], all (..., 3) -> (...): the closest
+    points p1 + s d1 and p2 + t d2 (Ericson, Real-Time Collision Detection, 5.1.9):
+
+        s = clamp((b f - c e) / (a e - b^2)),  t = (b s + f) / e;  t < 0: t = 0, s = clamp(-c / a);
+        t > 1: t = 1, s = clamp((b - c) / a)
+        a = d1.d1, b = d1.d2, c = d1.r, e = d2.d2, f = d2.r, r = p1 - p2, clamp to [0, 1];
+
+    a point (a or e ~ 0) takes the point-segment branch."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e = (d1 * d1).sum(-1), (d2 * d2).sum(-1)
+    b, c, f = (d1 * d2).sum(-1), (d1 * r).sum(-1), (d2 * r).sum(-1)
+    a_, e_ = a.clamp(min=eps), e.clamp(min=eps)
+    denom = a * e - b * b
+    s = torch.where(denom > eps, ((b * f - c * e) / denom.clamp(min=eps)).clamp(0, 1), torch.zeros_like(a))
+    t = (b * s + f) / e_
+    s = torch.where(t < 0, (-c / a_).clamp(0, 1), torch.where(t > 1, ((b - c) / a_).clamp(0, 1), s))
+    t = t.clamp(0, 1)
+    s = torch.where(e <= eps, (-c / a_).clamp(0, 1), s)  # the second is a point
+    t = torch.where(e <= eps, torch.zeros_like(t), t)
+    s = torch.where(a <= eps, torch.zeros_like(s), s)  # the first is a point
+    t = torch.where(a <= eps, (f / e_).clamp(0, 1), t)
+    return (r + d1 * s.unsqueeze(-1) - d2 * t.unsqueeze(-1)).square().sum(-1)
+
+
+def _segment_meets_box(p0: Tensor, p1: Tensor, half: Tensor) -> Tensor:
+    """Whether segments [p0, p1] (..., 3), in a box's frame, meet the box |x_i| <= half_i (..., 3):
+    the slab test, t in [0, 1] within every slab -h_i <= p0_i + t (p1_i - p0_i) <= h_i."""
+    d = p1 - p0
+    d = torch.where(d.abs() < 1e-12, torch.full_like(d, 1e-12), d)  # parallel to a slab: +-inf-like bounds
+    lo, hi = (-half - p0) / d, (half - p0) / d
+    enter = torch.minimum(lo, hi).amax(-1).clamp(min=0)
+    leave = torch.maximum(lo, hi).amin(-1).clamp(max=1)
+    return enter <= leave
+
+def _size(g: dict, size: Tensor | None) -> Tensor:
+    return g["size"][0] if size is None else size
+
+
+def _primitive_groups(batch: list[list[Shape]], kw: dict, floor: int | None = None) -> list[dict]:
     """Elements grouped by kind, stacked over the problems of a batch (the same kinds in the same
     order in each): rotations (P, O, 3, 3), origins (P, O, 3), half sizes (P, O, s); a mesh becomes
-    its bounding box in its own frame."""
+    its bounding box in its own frame. Element ``floor`` (the robot's floor slab, the same in
+    every problem) becomes a half-space, kind ``plane``: only a height is compared."""
     from graspnet_torch.robot.chain import rpy_matrix_np
 
     groups: dict[str, dict] = {}
@@ -564,6 +674,9 @@ def _primitive_groups(batch: list[list[Shape]], kw: dict) -> list[dict]:
                 lo, hi = np.asarray(mesh.bounds[0]), np.asarray(mesh.bounds[1])
                 kind, half = "box", (hi - lo) / 2
                 t = t + R @ ((hi + lo) / 2)
+            elif k == floor:
+                kind, half = "plane", np.zeros(3)
+                t = t + R @ np.array([0.0, 0.0, e.size[2] / 2])  # the slab's top
             elif e.kind == "box":
                 kind, half = "box", np.asarray(e.size) / 2
             elif e.kind == "cylinder":
@@ -581,14 +694,16 @@ def _primitive_groups(batch: list[list[Shape]], kw: dict) -> list[dict]:
             g["t"][col].append(t)
             g["size"][col].append(half)
     out = []
-    for kind in ("box", "cylinder", "sphere"):
+    for kind in ("box", "cylinder", "sphere", "plane"):
         if kind in groups:
             g = groups[kind]
-            size = np.asarray(g["size"]).transpose(1, 0, 2)[..., :3 if kind == "box" else 2]
+            size = np.asarray(g["size"]).transpose(1, 0, 2)[..., :{"box": 3, "plane": 1}.get(kind, 2)]
             out.append({"kind": kind, "index": g["index"],
                         "R": torch.as_tensor(np.asarray(g["R"]).transpose(1, 0, 2, 3), **kw),
                         "t": torch.as_tensor(np.asarray(g["t"]).transpose(1, 0, 2), **kw),
                         "size": torch.as_tensor(size, **kw)})
+            if kind == "plane":
+                out[-1]["top"] = float(g["t"][0][0][2])
     return out
 
 

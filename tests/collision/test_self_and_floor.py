@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 import yaml
@@ -118,3 +119,94 @@ def test_links_riding_the_planar_base_are_not_tested_against_the_floor(manus):
         q = manus.home_posture().body.clone()
         q[:3] = lo + (hi - lo) * torch.rand(3, generator=g, dtype=torch.float64)
         assert not any(link in ("platform", "arm_mount") for link, _o in scene.check(_posture(manus, q)).obstacle_pairs)
+
+
+def test_segment_distance_matches_a_dense_search():
+    """The closed-form segment-segment distance (Ericson) against the minimum over a 301 x 301
+    grid of both segments' points, float64, with points (zero-length segments) and parallel pairs
+    among them: never above the grid's minimum, and below it by no more than the grid's spacing."""
+    from graspnet_torch.collision.proxy import _segment_distance_sq
+
+    g = torch.Generator().manual_seed(5)
+    p1, q1, p2, q2 = (torch.rand(60, 3, generator=g, dtype=torch.float64) for _ in range(4))
+    q1[:10] = p1[:10]  # the first is a point
+    q2[10:20] = p2[10:20]  # the second is a point
+    q2[20:25], p2[20:25] = p2[25:30], p2[25:30]  # both points
+    q2[30:40] = p2[30:40] + (q1[30:40] - p1[30:40]) * 0.7  # parallel
+    got = _segment_distance_sq(p1, q1, p2, q2).sqrt()
+    s = torch.linspace(0, 1, 301, dtype=torch.float64)
+    a = p1[:, None] + s[None, :, None] * (q1 - p1)[:, None]  # (N, 301, 3)
+    b = p2[:, None] + s[None, :, None] * (q2 - p2)[:, None]
+    grid = torch.cdist(a, b).flatten(1).amin(1)
+    step = ((q1 - p1).norm(dim=1) + (q2 - p2).norm(dim=1)) / 300
+    assert bool((got <= grid + 1e-12).all())
+    assert bool((grid - got <= step).all()), (grid - got).max()
+
+
+def test_segment_meets_box_matches_sampling():
+    """The slab test against points sampled along each segment (2001 of them): a segment whose
+    samples enter the box shrunk by 1e-3 meets it; one whose samples miss the box grown by 1e-3
+    does not."""
+    from graspnet_torch.collision.proxy import _segment_meets_box
+
+    g = torch.Generator().manual_seed(6)
+    p0, p1 = (torch.rand(400, 3, generator=g, dtype=torch.float64) * 2 - 1 for _ in range(2))
+    p1[:40] = p0[:40]  # points
+    p1[40:80, 1] = p0[40:80, 1]  # parallel to a slab
+    half = torch.tensor([0.3, 0.2, 0.4], dtype=torch.float64)
+    got = _segment_meets_box(p0, p1, half)
+    t = torch.linspace(0, 1, 2001, dtype=torch.float64)
+    x = (p0[:, None] + t[None, :, None] * (p1 - p0)[:, None]).abs()  # (N, 2001, 3)
+    inner = (x <= half - 1e-3).all(-1).any(-1)
+    outer = (x <= half + 1e-3).all(-1).any(-1)
+    assert bool((got | ~inner).all()) and bool((~got | outer).all())
+    assert 0.2 < float(got.double().mean()) < 0.8  # both verdicts present
+
+
+def test_the_floor_half_space_agrees_with_the_spheres_heights(manus):
+    """The proxy tests the floor as a half-space: link l hits it where one of its spheres (placed
+    by pytorch-kinematics' link frames, float64) dips below the floor's top by its radius."""
+    from graspnet_torch.collision.proxy import shape_spheres
+    from graspnet_torch.collision.scene import FLOOR_GAP
+    from graspnet_torch.robot.geometry import link_shapes
+
+    problem = gt.GraspProblem.from_mapping(POINTS, source="points")
+    proxy = CollisionProxy(manus, problem, dtype=torch.float64)
+    lo, hi = (torch.as_tensor(a) for a in manus.body_limits)
+    q = lo + (hi - lo) * torch.rand(200, 9, generator=torch.Generator().manual_seed(8), dtype=torch.float64)
+    levels, palm = proxy.body_levels_and_palm(q)
+    got = proxy.pairs(palm, torch.zeros(200, 0, 0, dtype=torch.float64), q, levels)[..., len(problem.obstacles)]
+    want = torch.zeros_like(got)
+    for k in range(200):
+        frames = manus.link_frames(_posture(manus, q[k]))
+        for shape in link_shapes(manus.urdf, "collision"):
+            if shape.link in ("platform", "arm_mount"):  # they ride the base (the test above)
+                continue
+            centres, radii = shape_spheres(shape)
+            z = (frames[shape.link][:3, :3] @ centres.T)[2] + frames[shape.link][2, 3]
+            if bool(np.any(z - radii < -FLOOR_GAP)):
+                want[k, proxy.links.index(shape.link)] = True
+    assert bool((got == want).all())
+    assert 0.05 < float(want.any(-1).double().mean()) < 0.95  # both verdicts present
+
+
+def test_self_collision_primitives_of_the_manus_links(manus):
+    """Cylinders become capsules along their axis (ends r/4 inside the flat faces), the wrist's
+    sphere a capsule of length 0, the thin jaws capsules along their longest side (radius the
+    half-diagonal of the cross-section), the platform stays a box."""
+    from graspnet_torch.collision.proxy import self_collision_primitive
+    from graspnet_torch.robot.geometry import link_shapes
+
+    shapes = {s.link: s for s in link_shapes(manus.urdf, "collision")}
+    kind, ends, r = self_collision_primitive(shapes["elbow_pitch_link"])
+    radius, length = shapes["elbow_pitch_link"].size
+    axis = shapes["elbow_pitch_link"].origin[:3, 2]
+    assert kind == "capsule" and r == radius
+    assert np.allclose(ends[1] - ends[0], (length - radius / 2) * axis)
+    kind, ends, r = self_collision_primitive(shapes["wrist_yaw_link"])
+    assert kind == "capsule" and np.allclose(ends[0], ends[1]) and r == shapes["wrist_yaw_link"].size[0]
+    kind, ends, r = self_collision_primitive(shapes["jaw_1"])
+    assert kind == "capsule" and np.isclose(np.linalg.norm(ends[1] - ends[0]), 0.08)
+    assert np.isclose(r, np.hypot(0.006, 0.015))
+    kind, pose, half = self_collision_primitive(shapes["platform"])
+    assert kind == "box" and np.allclose(half, np.array(shapes["platform"].size) / 2)
