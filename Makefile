@@ -53,7 +53,7 @@ bench-arm: $(STAMP)  ## the arm loop with collision checking vs without (targets
 bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (targets 2,000 it/s, 100,000 at T=1000)
 	$(PY) benchmarks/bench_manus.py --check
 
-report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~4 min)
+report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~6.5 min)
 	$(PY) benchmarks/manus_protocol.py --check
 
 report-arm: $(STAMP)  ## paper Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES -> reports/acnn_obstacles.md (~6 min)

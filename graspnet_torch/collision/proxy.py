@@ -307,8 +307,7 @@ class CollisionProxy:
         (exact: segment distance) and capsule-box (the segment against the box grown by the
         radius: conservative by up to (sqrt(3) - 1) r at the box's corners). A pair of two boxes
         has no test here: it is left to FCL (``proxy_unchecked``), as are pairs this model finds
-        touching at the home posture (joints' neighbours it cannot resolve, e.g. a wrist housing
-        and the gripper's covering capsule)."""
+        touching at the home posture (none for ``manus``)."""
         device = kw["device"]
         involved = set(link for pair in self.self_pairs for link in pair)
         caps, boxes = [], []  # (link, frame id, ...)

@@ -210,3 +210,4 @@ def test_self_collision_primitives_of_the_manus_links(manus):
     assert np.isclose(r, np.hypot(0.006, 0.015))
     kind, pose, half = self_collision_primitive(shapes["platform"])
     assert kind == "box" and np.allclose(half, np.array(shapes["platform"].size) / 2)
+    assert np.allclose(pose, shapes["platform"].origin)
