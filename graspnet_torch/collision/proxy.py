@@ -74,13 +74,18 @@ __all__ = [
 SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this are capsules for self-collision
 
 
+def _axis_half(r: float, length: float) -> float:
+    """How far along a cylinder's axis (r, length) its model reaches: L/2 - e, e = min(r/4, L/2)."""
+    return length / 2 - min(r / 4, length / 2)
+
+
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
     """A link primitive as spheres in its link's frame: centres (k, 3), radii (k,)."""
     if shape.kind == "sphere":
         local, radii = np.zeros((1, 3)), np.array([shape.size[0]])
     elif shape.kind == "cylinder":
         r, length = shape.size
-        half = length / 2 - min(r / 4, length / 2)
+        half = _axis_half(r, length)
         k = max(1, math.ceil(2 * half / (r / 2)) + 1)
         z = np.linspace(-half, half, k) if k > 1 else np.zeros(1)
         local, radii = np.stack([np.zeros(k), np.zeros(k), z], axis=1), np.full(k, r)
@@ -604,7 +609,7 @@ def self_collision_primitive(shape: LinkShape) -> tuple[str, np.ndarray, np.ndar
         return "capsule", np.stack([t, t]), float(shape.size[0])
     if shape.kind == "cylinder":
         r, length = shape.size
-        half = length / 2 - min(r / 4, length / 2)
+        half = _axis_half(r, length)
         return "capsule", np.stack([t - half * R[:, 2], t + half * R[:, 2]]), float(r)
     if shape.kind == "box":
         h = np.asarray(shape.size, dtype=np.float64) / 2
