@@ -38,7 +38,7 @@ VARIANTS = [  # name, refinement iterations, candidates, fallback restarts
 def pk_solver(robot, finger: str, generator: torch.Generator):
     import pytorch_kinematics as pk
 
-    spec = robot.fingers[finger].chain
+    spec = robot.fingers[finger].chain.spec
     chain = robot.urdf.serial_chain(spec.root, spec.tip).to(dtype=torch.float32)
     lo = torch.tensor(spec.lower, dtype=torch.float32)
     hi = torch.tensor(spec.upper, dtype=torch.float32)
@@ -68,7 +68,7 @@ def main() -> None:
     rows, summary = [], []
     n_total = args.targets * args.sets
     for finger in args.fingers or robot.finger_names:
-        spec = robot.fingers[finger].chain
+        spec = robot.fingers[finger].chain.spec
         ref = ChainKernel(spec)
         lo, hi = torch.tensor(spec.lower), torch.tensor(spec.upper)
         errors = {name: [] for name, *_ in VARIANTS}

@@ -47,7 +47,7 @@ def main() -> None:
             print(f"  {label} B={B}: FK+J ours {B / t_j / 1e6:.2f} M/s, pytorch-kinematics {B / t_j_ref / 1e6:.3f} M/s",
                   flush=True)
     # all five fingers in one stacked call vs five pytorch-kinematics chains
-    specs = [f.chain for f in hand.fingers.values()]
+    specs = [f.chain.spec for f in hand.fingers.values()]
     stacked = ChainKernel(specs)
     refs = [hand.urdf.serial_chain(s.root, s.tip).to(dtype=torch.float32) for s in specs]
     lo, hi = (torch.tensor(a, dtype=torch.float32) for a in hand.finger_limits)

@@ -21,6 +21,7 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.io import atomic_path
 from graspnet_torch.paths import checkpoints_dir
 from graspnet_torch.robot.chain import ChainSpec
+from graspnet_torch.robot.fingers import FingerChain
 from graspnet_torch.robot.robot import Robot, load_robot
 
 __all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "non_finite_tensors",
@@ -29,13 +30,18 @@ __all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik"
 FORMAT = "graspnet_torch.fcnn/1"
 
 
-def chain_fingerprint(chain: ChainSpec) -> str:
+def chain_fingerprint(chain: ChainSpec | FingerChain) -> str:
     """A hash of what a finger's inverse kinematics depends on: joint types, axes, fixed
-    transforms and limits (rounded to 1e-9)."""
+    transforms (tip offset included) and limits (rounded to 1e-9), and the mimic couplings of a
+    finger that has any (a finger without is hashed as its plain chain, as before mimic support)."""
+    spec = chain.spec if isinstance(chain, FingerChain) else chain
     h = hashlib.sha256()
-    h.update(",".join(chain.joint_types).encode())
-    for arr in (chain.axes, chain.offsets, chain.lower, chain.upper):
+    h.update(",".join(spec.joint_types).encode())
+    for arr in (spec.axes, spec.offsets, spec.lower, spec.upper):
         h.update(np.round(np.asarray(arr, dtype=np.float64), 9).tobytes())
+    if isinstance(chain, FingerChain) and not chain.identity:
+        for arr in (chain.coupling, chain.coupling_offset, chain.lower, chain.upper):
+            h.update(np.round(np.asarray(arr, dtype=np.float64), 9).tobytes())
     return h.hexdigest()[:16]
 
 

@@ -6,7 +6,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.fcnn.ik import FingerIK
-from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.fingers import FingerKernel
 
 __all__ = ["error_stats", "heldout_targets"]
 
@@ -21,7 +21,7 @@ def heldout_targets(ik: FingerIK, finger: str, n: int = 10_000, seed: int = HELD
     hi = torch.tensor(chain.upper, dtype=dtype)
     gen = torch.Generator().manual_seed(seed + sum(map(ord, finger)))
     q = lo + (hi - lo) * torch.rand(n, chain.n_joints, generator=gen, dtype=dtype)
-    return q, ChainKernel(chain).position(q)
+    return q, FingerKernel(chain).position(q)
 
 
 def error_stats(error_m: Tensor) -> dict[str, float]:

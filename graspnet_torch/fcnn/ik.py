@@ -5,7 +5,8 @@ limits); forward kinematics scores them and the expert with the smallest fingert
 (paper section 3). Refinement runs ``refine`` steps of eq. 5 with the damped pseudo-inverse,
 clamped to the limits. All experts of all requested fingers are evaluated together: their
 weights are stacked (padded to the largest expert count) and the finger chains run as one
-stacked kernel.
+stacked kernel. Fingers with fewer free joints than the robot's widest are padded (outputs,
+limits and Jacobian columns of the padding are 0), so fingers of any sizes still run in one call.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.fcnn.experts import ExpertSet
+from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.ik import limited_step
-from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.robot import Robot
 
 __all__ = ["FingerIK"]
@@ -34,11 +35,11 @@ class _Bank:
     valid: Tensor  # (E, 1, F) experts that exist
     x_center: Tensor  # (F, 3)
     x_scale: Tensor
-    q_mid: Tensor  # (F, n)
+    q_mid: Tensor  # (F, n); padding: 0
     q_half: Tensor
-    lower: Tensor  # (F, n)
+    lower: Tensor  # (F, n); padding: 0
     upper: Tensor
-    kernel: ChainKernel
+    kernel: FingerKernel
 
 
 class FingerIK:
@@ -75,12 +76,15 @@ class FingerIK:
         sets = [self.experts[f] for f in fingers]
         E = max(s.n_active for s in sets)
         F = len(fingers)
+        n = self.robot.joints_per_finger
         names = ("W1", "b1", "W2", "b2", "W3", "b3")
         params = []
         for name in names:
             per = []
             for s in sets:
                 p = getattr(s, name).detach()[: s.n_active]
+                if name in ("W3", "b3"):  # a finger with fewer joints: zero outputs in the padding
+                    p = torch.nn.functional.pad(p, (0, n - p.shape[-1]))
                 pad = p.new_zeros((E - s.n_active, *p.shape[1:]))
                 per.append(torch.cat([p, pad]))
             params.append(torch.stack(per).reshape(F * E, *per[0].shape[1:]).to(dtype=dtype, device=device))
@@ -89,10 +93,11 @@ class FingerIK:
             valid[: s.n_active, 0, k] = True
 
         def stack(attr: str) -> Tensor:
-            return torch.stack([getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
+            return torch.stack([torch.nn.functional.pad(getattr(s, attr), (0, n - s.n_joints)) if attr.startswith("q_")
+                                else getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
 
         lower, upper = stack("q_lower"), stack("q_upper")
-        kernel = ChainKernel([self.robot.fingers[f].chain for f in fingers])
+        kernel = FingerKernel([self.robot.fingers[f].chain for f in fingers])
         bank = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
                      (lower + upper) / 2, (upper - lower) / 2, lower, upper, kernel)
         self._banks[key] = bank

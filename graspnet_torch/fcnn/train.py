@@ -31,7 +31,7 @@ from graspnet_torch.fcnn.dataset import TrainingSet
 from graspnet_torch.fcnn.experts import ExpertSet, ExpertSetCfg
 from graspnet_torch.fcnn.reach import ReachCfg, ReachResult, reach_motion
 from graspnet_torch.robot.chain import ChainSpec
-from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.fingers import FingerChain, FingerKernel
 from graspnet_torch.settings import build, setting
 
 __all__ = ["FCNNTrainCfg", "FingerTrainer", "sample_reachable"]
@@ -77,7 +77,7 @@ class FCNNTrainCfg:
         return build(cls, d, where)
 
 
-def sample_reachable(kernel: ChainKernel, lower: Tensor, upper: Tensor, n: int,
+def sample_reachable(kernel: FingerKernel, lower: Tensor, upper: Tensor, n: int,
                      generator: torch.Generator) -> tuple[Tensor, Tensor]:
     """n fingertip targets from joint angles uniform within limits: (q (n, j), x (n, 3))."""
     q = lower + (upper - lower) * torch.rand(n, lower.shape[0], generator=generator, dtype=lower.dtype)
@@ -87,12 +87,13 @@ def sample_reachable(kernel: ChainKernel, lower: Tensor, upper: Tensor, n: int,
 class FingerTrainer:
     """Learns one finger's expert set. ``epoch()`` runs one epoch and returns its statistics."""
 
-    def __init__(self, chain: ChainSpec, cfg: FCNNTrainCfg = FCNNTrainCfg(), seed: int = 0,
+    def __init__(self, chain: FingerChain | ChainSpec, cfg: FCNNTrainCfg = FCNNTrainCfg(), seed: int = 0,
                  name: str | None = None):
+        chain = chain if isinstance(chain, FingerChain) else FingerChain.from_spec(chain)
         self.cfg = cfg
         self.name = name or chain.tip
         self.chain = chain
-        self.kernel = ChainKernel(chain)
+        self.kernel = FingerKernel(chain)  # over the free joints (mimic joints follow)
         self.lower = torch.tensor(chain.lower, dtype=torch.float32)
         self.upper = torch.tensor(chain.upper, dtype=torch.float32)
         self.generator = torch.Generator().manual_seed(seed)

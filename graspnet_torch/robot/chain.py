@@ -110,6 +110,17 @@ class UrdfModel:
         self.joints: dict[str, object] = {j.name: j for j in self.robot.joints}
         self.parent_joint: dict[str, object] = {j.child: j for j in self.robot.joints}
 
+    @cached_property
+    def mimic_joints(self) -> dict[str, tuple[str, float, float]]:
+        """Mimic joint name -> (leader, multiplier, offset); URDF defaults 1 and 0."""
+        out = {}
+        for j in self.robot.joints:
+            m = getattr(j, "mimic", None)
+            if m is not None and j.type in ("revolute", "continuous", "prismatic"):
+                out[j.name] = (m.joint, 1.0 if m.multiplier is None else float(m.multiplier),
+                               0.0 if m.offset is None else float(m.offset))
+        return out
+
     @property
     def link_names(self) -> list[str]:
         return list(self.links)

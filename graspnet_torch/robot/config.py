@@ -26,10 +26,17 @@ __all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot
 
 @dataclass(frozen=True)
 class ChainCfg:
-    """A serial chain named by its first and last link."""
+    """A serial chain named by its first and last link.
+
+    Attributes:
+        base, tip: link names; a finger's ``base`` defaults to the palm link.
+        tip_offset: (x, y, z) of the tip point in the ``tip`` link's frame (m): a fingertip that is
+            not a URDF link (``tip: {link: <link>, offset: [x, y, z]}`` in the file).
+    """
 
     base: str
     tip: str
+    tip_offset: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -138,7 +145,7 @@ class RobotCfg:
         for fname, chain in raw_fingers.items():
             if not isinstance(fname, str) or not fname:
                 raise ConfigError(f"{source}: fingers: a finger name must be a string, got {short(fname)}")
-            fingers[fname] = _chain(chain, f"{source}: fingers.{clip(fname, 40)}")
+            fingers[fname] = _finger(chain, f"{source}: fingers.{clip(fname, 40)}", data["palm_link"])
         bounds = data.get("palm_bounds")
         palm_bounds = PoseBounds.from_degrees(bounds, f"{source}: palm_bounds") if bounds is not None else None
         arm = _chain(data["arm"], f"{source}: arm") if data.get("arm") is not None else None
@@ -176,6 +183,28 @@ class RobotCfg:
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
                    home=home, checkpoint=checkpoint, floor=floor, self_collision=self_collision,
                    solver_defaults=_solver_defaults(data, source), source=source)
+
+
+def _finger(value: Any, where: str, palm: str) -> ChainCfg:
+    """``{base: <link>, tip: <link>}``; ``base`` may be left out (the palm), ``tip`` may be
+    ``{link: <link>, offset: [x, y, z]}``."""
+    if not isinstance(value, Mapping) or "tip" not in value or not set(value) <= {"base", "tip"}:
+        raise ConfigError(f"{where}: expected {{base: <link>, tip: <link>}} or {{tip: {{link: <link>, offset: "
+                          f"[x, y, z]}}}}, got {short(value)}")
+    base = value.get("base", palm)
+    if not isinstance(base, str) or not base:
+        raise ConfigError(f"{where}: base must be a link name, got {short(base)}")
+    tip, offset = value["tip"], None
+    if isinstance(tip, Mapping):
+        if set(tip) != {"link", "offset"} or not isinstance(tip["link"], str) or not tip["link"]:
+            raise ConfigError(f"{where}.tip: expected a link name or {{link: <link>, offset: [x, y, z]}}, "
+                              f"got {short(tip)}")
+        xyz = number_list(tip["offset"], 3, f"{where}.tip.offset", ConfigError, -MAX_LENGTH_M, MAX_LENGTH_M,
+                          "numbers (m, in the tip link's frame)")
+        tip, offset = tip["link"], (float(xyz[0]), float(xyz[1]), float(xyz[2]))
+    elif not isinstance(tip, str) or not tip:
+        raise ConfigError(f"{where}: tip must be a link name or {{link: <link>, offset: [x, y, z]}}, got {short(tip)}")
+    return ChainCfg(base, tip, offset)
 
 
 def _chain(value: Any, where: str) -> ChainCfg:

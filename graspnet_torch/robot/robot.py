@@ -5,7 +5,10 @@ frame the palm pose is given in). The *palm* frame is ``palm_link``. Each finger
 *base* frame on the palm; the FCNN learns each finger's inverse kinematics in its base frame.
 
 Joint tensors. Finger joints are ``(..., F, n)``: F fingers in ``robot.finger_names`` order
-(thumb first), n joints each in chain order (abduction, MCP, PIP, DIP for the shipped hand).
+(thumb first), each finger's *free* joints in chain order (abduction, MCP, PIP, DIP for the shipped
+hand). Mimic joints are not free: they follow their leaders (:mod:`graspnet_torch.robot.fingers`).
+Fingers with fewer free joints than the largest, n, are padded: slots ``n_k..n-1`` of finger k
+have limits [0, 0] and do not move anything (``robot.finger_mask``).
 Body joints (the arm, or the mobile base then the arm) are ``(..., m)`` in
 ``robot.body_joint_names`` order. Angles in radians, lengths in metres. Every method follows the
 dtype and device of its inputs.
@@ -14,7 +17,8 @@ dtype and device of its inputs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -24,7 +28,8 @@ from torch import Tensor
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.chain import ChainSpec, UrdfModel
-from graspnet_torch.robot.config import PoseBounds, RobotCfg, load_robot_cfg
+from graspnet_torch.robot.config import ChainCfg, PoseBounds, RobotCfg, load_robot_cfg
+from graspnet_torch.robot.fingers import FingerChain, FingerKernel
 from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.transforms import pose_to_rt, transform_points, untransform_points
 
@@ -37,12 +42,13 @@ class Finger:
 
     Attributes:
         name: finger name.
-        chain: constants of the chain from the base link to the fingertip link.
+        chain: the chain from the base link to the fingertip (tip offset folded in), seen through
+            its free joints (``chain.spec``: every movable joint, mimic joints included).
         base_in_palm: (4, 4) float64 pose of the base frame in the palm frame.
     """
 
     name: str
-    chain: ChainSpec
+    chain: FingerChain
     base_in_palm: np.ndarray
 
     @property
@@ -83,26 +89,12 @@ class Robot:
         src = cfg.source
         self.urdf.check_link(cfg.palm_link, f"{src}: palm_link")
 
-        fingers = []
-        for fname, chain in cfg.fingers.items():
-            what = f"{src}: finger '{fname}'"
-            self.urdf.check_link(chain.base, f"{what} base")
-            self.urdf.check_link(chain.tip, f"{what} tip")
-            base_in_palm = self.urdf.fixed_transform(cfg.palm_link, chain.base, f"{what} base")
-            spec = self.urdf.chain_spec(chain.base, chain.tip, what)
-            if spec.n_joints == 0:
-                raise ConfigError(f"{what}: no movable joint between '{chain.base}' and '{chain.tip}'")
-            fingers.append(Finger(fname, spec, base_in_palm))
-        if fingers:
-            ref = fingers[0].chain.joint_types
-            for f in fingers[1:]:
-                if f.chain.joint_types != ref:
-                    raise ConfigError(f"{src}: finger '{f.name}' has joints {f.chain.joint_types} but "
-                                      f"'{fingers[0].name}' has {ref}; all fingers must have the same "
-                                      f"number and types of joints")
+        fingers = [self._finger(fname, chain) for fname, chain in cfg.fingers.items()]
         self.fingers: dict[str, Finger] = {f.name: f for f in fingers}
         self.finger_names: tuple[str, ...] = tuple(self.fingers)
-        self.finger_kernel: ChainKernel | None = ChainKernel([f.chain for f in fingers]) if fingers else None
+        self.finger_kernel: FingerKernel | None = FingerKernel([f.chain for f in fingers]) if fingers else None
+        for f in fingers:
+            self._check_tip_moves(f)
 
         self.body: ChainSpec | None = None
         self.body_kernel: ChainKernel | None = None
@@ -133,6 +125,49 @@ class Robot:
             raise ConfigError(f"{src}: gripper_points need an arm")
         self._consts: dict[tuple, dict[str, Tensor]] = {}
 
+    def _finger(self, fname: str, chain: ChainCfg) -> Finger:
+        """A finger from its config: the chain from its base (on the palm) to its tip (offset
+        folded in), its mimic joints and free joints."""
+        cfg, what = self.cfg, f"{self.cfg.source}: finger '{fname}'"
+        self.urdf.check_link(chain.base, f"{what} base")
+        self.urdf.check_link(chain.tip, f"{what} tip")
+        for joint in self.urdf.path_joints(cfg.palm_link, chain.base, f"{what} base") if chain.base != cfg.palm_link \
+                else []:
+            if joint.type != "fixed":
+                raise ConfigError(f"{what}: its chain must start at the palm, but joint '{joint.name}' between "
+                                  f"palm_link '{cfg.palm_link}' and base '{chain.base}' is {joint.type}; set base "
+                                  f"to '{cfg.palm_link}' (or leave it out) so that joint belongs to the finger")
+        base_in_palm = self.urdf.fixed_transform(cfg.palm_link, chain.base, f"{what} base")
+        spec = self.urdf.chain_spec(chain.base, chain.tip, what)
+        if chain.tip_offset is not None:
+            offsets = spec.offsets.copy()
+            offsets[-1] = offsets[-1] @ _translation(chain.tip_offset)
+            spec = replace(spec, offsets=offsets)
+        if spec.n_joints == 0:
+            raise ConfigError(f"{what}: no movable joint between '{chain.base}' and '{chain.tip}'")
+        try:
+            finger_chain = FingerChain.from_spec(spec, self.urdf.mimic_joints, what)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        if finger_chain.n_joints == 0:
+            raise ConfigError(f"{what}: every joint between '{chain.base}' and '{chain.tip}' is a mimic joint of a "
+                              f"joint outside the finger")
+        return Finger(fname, finger_chain, base_in_palm)
+
+    def _check_tip_moves(self, finger: Finger, samples: int = 64) -> None:
+        """Refuse a finger with a free joint that never moves its tip (the tip on that joint's axis,
+        e.g. a fingertip link at the distal joint): its inverse kinematics would be singular everywhere."""
+        chain = finger.chain
+        gen = np.random.default_rng(0)
+        q = chain.lower + (chain.upper - chain.lower) * gen.random((samples, chain.n_joints))
+        _, J = FingerKernel(chain).position_jacobian(torch.as_tensor(q, dtype=torch.float64))
+        reach = torch.linalg.vector_norm(J, dim=-2).amax(dim=0)  # (n_f,) m/rad, the most over samples
+        dead = [chain.joint_names[i] for i in torch.nonzero(reach < 1e-6).flatten().tolist()]
+        if dead:
+            raise ConfigError(f"{self.cfg.source}: finger '{finger.name}': joint(s) {', '.join(dead)} never move its "
+                              f"tip '{chain.tip}' (the tip lies on the joint axis); give the tip an offset: "
+                              f"tip: {{link: {chain.tip}, offset: [x, y, z]}} (m, in that link's frame)")
+
     @classmethod
     def from_config(cls, cfg: RobotCfg | str | Path) -> Robot:
         """From a :class:`RobotCfg`, a robot name (``configs/robot/<name>.yaml``) or a YAML path."""
@@ -149,7 +184,14 @@ class Robot:
 
     @property
     def n_finger_joints(self) -> int:
-        return self.n_fingers * self.joints_per_finger
+        """Free finger joints, all fingers together (padding not counted)."""
+        return sum(f.n_joints for f in self.fingers.values())
+
+    @cached_property
+    def finger_mask(self) -> np.ndarray:
+        """(F, n) bool: True for a finger's free joints, False for padding."""
+        n = self.joints_per_finger
+        return np.array([[i < f.n_joints for i in range(n)] for f in self.fingers.values()], dtype=bool).reshape(-1, n)
 
     @property
     def body_joint_names(self) -> tuple[str, ...]:
@@ -177,9 +219,12 @@ class Robot:
 
     @cached_property
     def finger_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """(F, n) lower and upper finger joint limits, radians."""
-        return (np.stack([f.chain.lower for f in self.fingers.values()]),
-                np.stack([f.chain.upper for f in self.fingers.values()]))
+        """(F, n) lower and upper limits of the free finger joints (rad or m); padding: [0, 0]."""
+        n = self.joints_per_finger
+        lower, upper = np.zeros((self.n_fingers, n)), np.zeros((self.n_fingers, n))
+        for k, f in enumerate(self.fingers.values()):
+            lower[k, : f.n_joints], upper[k, : f.n_joints] = f.chain.lower, f.chain.upper
+        return lower, upper
 
     @cached_property
     def body_limits(self) -> tuple[np.ndarray, np.ndarray]:
@@ -320,9 +365,10 @@ class Robot:
                 out.append(min(max(math.radians(v) if kind == "revolute" else v, lo), hi))
             return out
 
-        fingers = [values(f.joint_names, f.chain.lower, f.chain.upper, f.chain.joint_types)
-                   for f in self.fingers.values()]
-        finger_q = torch.tensor(fingers, dtype=dtype).reshape(self.n_fingers, self.joints_per_finger)
+        finger_q = torch.zeros(self.n_fingers, self.joints_per_finger, dtype=dtype)
+        for k, f in enumerate(self.fingers.values()):
+            finger_q[k, : f.n_joints] = torch.tensor(values(f.joint_names, f.chain.lower, f.chain.upper,
+                                                            f.chain.joint_types), dtype=dtype)
         if self.body is not None:
             body_q = torch.tensor(values(self.body.joint_names, self.body.lower, self.body.upper,
                                          self.body.joint_types), dtype=dtype)
@@ -335,11 +381,50 @@ class Robot:
             palm = torch.zeros(6, dtype=dtype)
         return Posture(palm_pose=palm, fingers=finger_q, body=body_q)
 
-    def joint_values(self, posture: Posture) -> dict[str, float]:
-        """Every movable URDF joint's value in a posture (radians / metres)."""
-        out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
+    def finger_joint_values(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
+        """Every movable joint of each finger, mimic joints at their coupled values, in chain order.
+
+        q: (F, n) free joints (padded) -> finger name -> values (rad or m), ``chain.all_joint_names`` order.
+        """
+        q = np.asarray(q.detach().cpu() if isinstance(q, Tensor) else q, dtype=np.float64)
+        return {f.name: f.chain.expand(q[k, : f.n_joints]).tolist() for k, f in enumerate(self.fingers.values())}
+
+    def free_finger_joints(self, values: dict[str, Sequence[float]], dtype: torch.dtype = torch.float64) -> Tensor:
+        """The inverse of :meth:`finger_joint_values`: every finger's listed joints (chain order,
+        mimic joints included) -> (F, n) free joints, padded."""
+        q = torch.zeros(self.n_fingers, self.joints_per_finger, dtype=dtype)
         for k, f in enumerate(self.fingers.values()):
-            out.update(zip(f.joint_names, posture.fingers[k].tolist(), strict=True))
+            row = list(values[f.name])
+            if len(row) != f.chain.spec.n_joints:
+                raise ValueError(f"finger '{f.name}' has {f.chain.spec.n_joints} joints "
+                                 f"({', '.join(f.chain.all_joint_names)}), got {len(row)} values")
+            q[k, : f.n_joints] = torch.tensor([row[i] for i in f.chain.free], dtype=dtype)
+        return q
+
+    def finger_joints_to_file(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
+        """:meth:`finger_joint_values` in file units: degrees (revolute), metres (prismatic)."""
+        out = {}
+        for name, values in self.finger_joint_values(q).items():
+            types = self.fingers[name].chain.spec.joint_types
+            out[name] = [math.degrees(v) if t == "revolute" else v for v, t in zip(values, types, strict=True)]
+        return out
+
+    def finger_joints_from_file(self, values: dict[str, Sequence[float]], dtype: torch.dtype = torch.float64) -> Tensor:
+        """The inverse of :meth:`finger_joints_to_file`: (F, n) free joints (rad or m), padded."""
+        si = {}
+        for name, f in self.fingers.items():
+            types = f.chain.spec.joint_types
+            row = list(values[name])
+            si[name] = [math.radians(v) if t == "revolute" else v for v, t in zip(row, types, strict=False)] + \
+                row[len(types):]
+        return self.free_finger_joints(si, dtype)
+
+    def joint_values(self, posture: Posture) -> dict[str, float]:
+        """Every movable URDF joint's value in a posture (radians / metres), mimic joints at their
+        coupled values."""
+        out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
+        for name, values in self.finger_joint_values(posture.fingers).items():
+            out.update(zip(self.fingers[name].chain.all_joint_names, values, strict=True))
         return out
 
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
@@ -363,6 +448,12 @@ class Robot:
     def __repr__(self) -> str:
         return (f"Robot('{self.name}': {len(self.urdf.links)} links, {len(self.urdf.movable_joint_names)} "
                 f"movable joints, {self.n_chains} chains, {self.dof} DOF)")
+
+
+def _translation(xyz) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = xyz
+    return T
 
 
 def load_robot(name: str | Path | RobotCfg) -> Robot:

@@ -181,8 +181,7 @@ def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:
     palm = get("palm_pose")
     pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
     joints = get("joints") or {}
-    q = torch.tensor([[a * d for a in joints[f]] for f in robot.finger_names], dtype=torch.float64)
-    q = q.reshape(robot.n_fingers, robot.joints_per_finger if robot.n_fingers else 0)
+    q = robot.finger_joints_from_file(joints) if robot.n_fingers else torch.zeros(0, 0, dtype=torch.float64)
     body = torch.zeros(0, dtype=torch.float64)
     if robot.has_body:
         arm = get("arm_joints")

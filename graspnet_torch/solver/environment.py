@@ -216,7 +216,7 @@ class FingerEnvironment:
             pose = palm[k].tolist()
             out.append({
                 "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
-                "joints": {f: [v * deg for v in q[k, j].tolist()] for j, f in enumerate(robot.finger_names)},
+                "joints": robot.finger_joints_to_file(q[k]),  # every joint, mimic joints at their coupled values
                 "fingertip_error_mm": {f: float(err[k, j]) * 1000 for j, f in enumerate(problem.fingers)},
                 "error": float(err[k].sum()),
             })

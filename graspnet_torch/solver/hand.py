@@ -32,9 +32,7 @@ def check_reach(robot: Robot, problem: GraspProblem) -> None:
     bounds = problem.bounds()
     lo, hi = bounds.lower[:3], bounds.upper[:3]
     for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
-        spec = robot.fingers[contact.finger]
-        offsets = spec.chain.offsets[:, :3, 3]
-        reach = float(np.linalg.norm(spec.base_in_palm[:3, 3]) + np.linalg.norm(offsets, axis=1).sum())
+        reach = _finger_reach(robot, contact.finger)
         gap = float(np.linalg.norm(point - np.clip(point, lo, hi)))
         if gap > reach:
             raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the palm's "
@@ -72,9 +70,13 @@ class HandEnvironment(FingerEnvironment):
 
 
 def _finger_reach(robot: Robot, finger: str) -> float:
-    """Upper bound of a fingertip's distance from the palm origin, whatever the joints."""
-    spec = robot.fingers[finger]
-    return float(np.linalg.norm(spec.base_in_palm[:3, 3]) + np.linalg.norm(spec.chain.offsets[:, :3, 3], axis=1).sum())
+    """Upper bound of a fingertip's distance from the palm origin, whatever the joints: its base
+    offset, the lengths of its links and the travel of its prismatic joints."""
+    f = robot.fingers[finger]
+    spec = f.chain.spec
+    travel = sum(max(abs(lo), abs(hi)) for lo, hi, t in zip(spec.lower, spec.upper, spec.joint_types, strict=True)
+                 if t == "prismatic")
+    return float(np.linalg.norm(f.base_in_palm[:3, 3]) + np.linalg.norm(spec.offsets[:, :3, 3], axis=1).sum() + travel)
 
 
 def _check_arm_reach(robot: Robot, problem: GraspProblem) -> None:

@@ -22,7 +22,7 @@ def planar_chain(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def index_chain(hand):
-    return hand.fingers["index"].chain
+    return hand.fingers["index"].chain.spec
 
 
 @pytest.fixture(scope="session")

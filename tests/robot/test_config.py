@@ -74,7 +74,8 @@ def test_finger_base_must_be_rigid_on_palm(tmp_path):
     fingers = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())["fingers"]
     fingers["index"] = {"base": "index_proximal", "tip": "index_tip"}
     with pytest.raises(gt.ConfigError,
-                       match=r"joint 'index_abd' between 'palm' and 'index_proximal' is revolute, expected only fixed"):
+                       match=r"finger 'index': its chain must start at the palm, but joint 'index_abd' between "
+                             r"palm_link 'palm' and base 'index_proximal' is revolute; set base to 'palm'"):
         gt.load_robot(_hand_yaml(tmp_path, fingers=fingers))
 
 

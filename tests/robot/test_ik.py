@@ -33,7 +33,7 @@ def test_damped_step_formula(gen):
 
 
 def test_refine_reduces_error_and_respects_limits(hand, gen):
-    spec = hand.fingers["index"].chain
+    spec = hand.fingers["index"].chain.spec
     kernel = ChainKernel(spec)
     lo, hi = torch.tensor(spec.lower), torch.tensor(spec.upper)
     q_true = uniform(spec.lower, spec.upper, 200, gen)

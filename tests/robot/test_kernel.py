@@ -58,7 +58,7 @@ def test_fk_finite_at_joint_limits(robots, name):
 
 
 def test_spec_reference_transform_matches_kernel(hand, gen):
-    spec = hand.fingers["thumb"].chain
+    spec = hand.fingers["thumb"].chain.spec
     q = uniform(spec.lower, spec.upper, 20, gen)
     R, p = ChainKernel(spec).pose(q)
     for k in range(20):
@@ -69,7 +69,7 @@ def test_spec_reference_transform_matches_kernel(hand, gen):
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "pinky"])
 def test_jacobian_matches_central_differences(hand, gen, finger):
-    spec = hand.fingers[finger].chain
+    spec = hand.fingers[finger].chain.spec
     kernel = ChainKernel(spec)
     q = uniform(spec.lower, spec.upper, 50, gen)
     _, J = kernel.position_jacobian(q)
@@ -80,7 +80,7 @@ def test_jacobian_matches_central_differences(hand, gen, finger):
 
 
 def test_jacobian_matches_autograd(hand, gen):
-    spec = hand.fingers["index"].chain
+    spec = hand.fingers["index"].chain.spec
     kernel = ChainKernel(spec)
     q = uniform(spec.lower, spec.upper, 1, gen)[0]
     auto = torch.autograd.functional.jacobian(kernel.position, q)
@@ -89,7 +89,7 @@ def test_jacobian_matches_autograd(hand, gen):
 
 
 def test_stacked_equals_separate_and_batched_equals_looped(hand, gen):
-    specs = [f.chain for f in hand.fingers.values()]
+    specs = [f.chain.spec for f in hand.fingers.values()]
     stacked = ChainKernel(specs)
     lo, hi = hand.finger_limits
     q = uniform(lo, hi, 64, gen)  # (64, F, 4)
@@ -148,7 +148,7 @@ def test_arbitrary_axes_and_prismatic_joints(tmp_path, gen, axis, prismatic):
 def test_constant_folding_removes_work(hand):
     """An axis-aligned finger needs far fewer ops than a dense 4x4 product would (sanity of the
     compiler, and a guard against regressions that would silently slow the hot path)."""
-    kernel = ChainKernel(hand.fingers["index"].chain)
+    kernel = ChainKernel(hand.fingers["index"].chain.spec)
     assert kernel.num_ops(("p",)) < kernel.num_ops(("p", "Jv")) < 80
     dense_fk_ops = 4 * (12 + 27 + 9)  # mixing + R C + R t per joint, without folding
     assert kernel.num_ops(("p",)) < dense_fk_ops / 3
@@ -156,13 +156,13 @@ def test_constant_folding_removes_work(hand):
 
 @pytest.mark.parametrize("bad", [(10, 3), (10, 5), (3,), (2, 5, 3)])
 def test_wrong_joint_shape_is_a_clear_error(hand, bad):
-    kernel = ChainKernel(hand.fingers["index"].chain)
+    kernel = ChainKernel(hand.fingers["index"].chain.spec)
     with pytest.raises(ValueError, match=r"shape \(\.\.\., 4\).*index_tip"):
         kernel.position(torch.zeros(bad))
 
 
 def test_non_tensor_and_integer_joints_are_refused(hand):
-    kernel = ChainKernel(hand.fingers["index"].chain)
+    kernel = ChainKernel(hand.fingers["index"].chain.spec)
     with pytest.raises(TypeError, match=r"torch.Tensor"):
         kernel.position([0.0, 0.0, 0.0, 0.0])
     with pytest.raises(TypeError, match=r"floating point"):
@@ -187,7 +187,7 @@ def test_closed_form_index_finger(hand, gen):
     """
     # segment lengths of the index finger: hand length 0.19 m x Buchholz et al. (1992) ratios
     l1, l2, l3 = (0.19 * r for r in (0.245, 0.143, 0.097))
-    spec = hand.fingers["index"].chain
+    spec = hand.fingers["index"].chain.spec
     q = uniform(spec.lower, spec.upper, 500, gen)
     a, t1, t2, t3 = q.unbind(-1)
     t12, t123 = t1 + t2, t1 + t2 + t3
