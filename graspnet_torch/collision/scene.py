@@ -1,6 +1,6 @@
 """Collision counts with python-fcl, the engine of record (shared/INTERFACE.md, "Collisions").
 
-A :class:`CollisionScene` holds the robot's links (the URDF's ``<collision>`` primitives) and the
+A :class:`CollisionScene` holds the robot's links (the URDF's ``<collision>`` primitives and meshes) and the
 problem's environment: its obstacles and the grasped object. For a posture it counts
 
 - the distinct (robot link, obstacle) pairs whose geometries intersect, and
@@ -29,7 +29,7 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
 __all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "fcl_geometry", "has_environment",
-           "self_collision_pairs"]
+           "link_geometry", "self_collision_pairs"]
 
 FLOOR_SIZE = (100.0, 100.0, 1.0)  # m: the floor slab (centred under the world origin)
 FLOOR_GAP = 0.001  # m: its top lies this far below the robot's floor height
@@ -90,7 +90,7 @@ def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
         objects: dict[str, list] = {}
         for shape in shapes:
             placed = _transform(frames[shape.link] @ shape.origin)
-            obj = fcl.CollisionObject(fcl_geometry(shape.kind, shape.size), placed)
+            obj = fcl.CollisionObject(link_geometry(shape), placed)
             objects.setdefault(shape.link, []).append(obj)
         for i, a in enumerate(with_geometry):
             for b in with_geometry[i + 1:]:
@@ -122,6 +122,13 @@ def fcl_geometry(kind: str, size: tuple[float, ...], mesh=None):
     model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
     model.endModel()
     return model
+
+
+def link_geometry(shape) -> object:
+    """The FCL geometry of a link's shape (``robot.geometry.Shape``): a primitive, or a mesh as a
+    ``BVHModel`` of its triangles (a surface: FCL finds where it crosses another geometry, not a
+    geometry wholly inside a closed mesh)."""
+    return fcl_geometry(shape.kind, shape.size, shape.mesh)
 
 
 def _transform(T: np.ndarray):
@@ -175,7 +182,7 @@ class CollisionScene:
 
         self.robot, self.problem, self.object_tolerance = robot, problem, object_tolerance
         self.shapes = link_shapes(robot.urdf, "collision")
-        self.link_objects = [fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl.Transform()) for s in self.shapes]
+        self.link_objects = [fcl.CollisionObject(link_geometry(s), fcl.Transform()) for s in self.shapes]
         self.obstacles = [_environment_object(o) for o in environment_obstacles(robot, problem)]
         self.self_pairs = self_collision_pairs(robot)
         self.object = _environment_object(problem.object) if problem.object is not None else None

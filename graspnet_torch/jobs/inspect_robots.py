@@ -1,8 +1,9 @@
-"""Load every shipped robot, print a summary table and draw each at its home posture."""
+"""Load robots (shipped or by path), print a summary table and draw each at its home posture and,
+for a robot with fingers, with its thumb (else its first finger) opposed to one or two others."""
 
 from __future__ import annotations
 
-import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -13,15 +14,20 @@ import torch
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
-from graspnet_torch.robot import ChainKernel, Posture, Robot, available_robots, load_robot
-from graspnet_torch.robot.ik import refine
-from graspnet_torch.settings import build
+from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
+from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
 
-__all__ = ["inspect_robots", "pinch_posture", "prepare_inspect", "robot_summary"]
+__all__ = [
+    "inspect_robots",
+    "opposing_fingers",
+    "opposition_posture",
+    "pinch_posture",
+    "prepare_inspect",
+    "robot_summary",
+]
 
-# a tip-to-tip pinch: the finger's abduction, MCP, PIP, DIP (degrees)
-PINCH_FLEXION_DEG = (0.0, 55.0, 60.0, 25.0)
+MAX_OPPOSITIONS = 2  # opposition panels per robot
 
 
 def robot_summary(robot: Robot) -> dict[str, object]:
@@ -30,31 +36,75 @@ def robot_summary(robot: Robot) -> dict[str, object]:
             "chains": robot.n_chains, "DOF": robot.dof}
 
 
-def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, float]:
-    """Flex ``finger`` into a pinch and bring the thumb tip onto its tip (damped least squares).
+def opposing_fingers(robot: Robot) -> list[tuple[str, str]]:
+    """(first, other) finger pairs to oppose: the thumb (else the first finger) and each other
+    finger, at most ``MAX_OPPOSITIONS``; none for a robot with fewer than two fingers."""
+    names = list(robot.finger_names)
+    if len(names) < 2:
+        return []
+    first = "thumb" if "thumb" in names else names[0]
+    return [(first, other) for other in names if other != first][:MAX_OPPOSITIONS]
 
-    Returns the posture and the remaining thumb-to-fingertip distance (m).
-    """
-    k = robot.finger_index(finger)
-    thumb = robot.finger_index("thumb")
-    q = start.fingers.clone()
-    q[k] = torch.tensor([math.radians(a) for a in PINCH_FLEXION_DEG], dtype=q.dtype)
-    lo, hi = (torch.as_tensor(a, dtype=q.dtype) for a in robot.finger_limits)
-    q = torch.clamp(q, lo, hi)
-    target_palm = robot.fingertips_palm(q)[k]
-    target = robot.palm_to_base(target_palm.expand(robot.n_fingers, 3))[thumb]
-    kernel = ChainKernel(robot.fingers["thumb"].chain)
-    starts = lo[thumb] + (hi[thumb] - lo[thumb]) * torch.rand(32, kernel.n_joints, dtype=q.dtype,
-                                                               generator=torch.Generator().manual_seed(0))
-    qt, err = refine(kernel.position_jacobian, starts, target.expand(32, 3), lo[thumb], hi[thumb], iterations=60)
-    best = int(torch.argmin(err))
-    q[thumb] = qt[best]
-    return replace(start, fingers=q), float(err[best])
+
+def _base_rotations(robot: Robot, dtype: torch.dtype) -> torch.Tensor:
+    """(F, 3, 3) each finger base's rotation in the palm frame, from ``palm_to_base``: the rows of
+    R are R^T e_i = palm_to_base(e_i) - palm_to_base(0)."""
+    F = robot.n_fingers
+    unit = torch.eye(3, dtype=dtype)[:, None, :].expand(3, F, 3)
+    rows = robot.palm_to_base(unit) - robot.palm_to_base(torch.zeros(F, 3, dtype=dtype))  # (3, F, 3)
+    return rows.transpose(0, 1)
+
+
+def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: int = 48, iterations: int = 150,
+                       damping: float = 1e-3, tol: float = 1e-9, seed: int = 0) -> tuple[Posture, float]:
+    """Bring the tips of fingers ``a`` and ``b`` together (their midpoint) by damped least squares
+    over both fingers' joints, within the joint limits, from ``start`` and ``restarts - 1`` random
+    configurations; the other fingers stay as in ``start``. Padded or fixed slots (lower == upper)
+    do not move.
+
+    With e = tip_a - tip_b (palm frame) and J = [J_a, -J_b] (3, 2n), each step is
+    dq = -J^T (J J^T + damping^2 I)^-1 e, clipped to 0.2 rad (or m) per joint, then clamped to
+    the limits; it stops once some start is within ``tol`` (m). Returns the posture and the
+    remaining tip-to-tip distance (m)."""
+    ia, ib = robot.finger_index(a), robot.finger_index(b)
+    dtype = torch.float64
+    lo, hi = (torch.as_tensor(x, dtype=dtype) for x in robot.finger_limits)  # (F, n)
+    free = (hi > lo)[[ia, ib]]  # (2, n)
+    gen = torch.Generator().manual_seed(seed)
+    q = start.fingers.to(dtype).clone().expand(restarts, *lo.shape).clone()  # (S, F, n)
+    rand = lo + (hi - lo) * torch.rand(restarts - 1, *lo.shape, generator=gen, dtype=dtype)
+    q[1:, [ia, ib]] = rand[:, [ia, ib]]
+    q = torch.minimum(torch.maximum(q, lo), hi)
+    R = _base_rotations(robot, dtype)[[ia, ib]]  # (2, 3, 3)
+    eye = torch.eye(3, dtype=dtype)
+    for _ in range(iterations):
+        tips = robot.fingertips_palm(q)  # (S, F, 3)
+        e = tips[:, ia] - tips[:, ib]  # (S, 3)
+        if float(torch.linalg.vector_norm(e, dim=-1).min()) < tol:
+            break
+        _, J = robot.fingertips_base_jacobian(q)  # (S, F, 3, n) in each base frame
+        Jp = (R @ J[:, [ia, ib]]) * free[:, None, :]  # (S, 2, 3, n) palm frame; fixed slots still
+        Jab = torch.cat([Jp[:, 0], -Jp[:, 1]], dim=-1)  # (S, 3, 2n)
+        A = Jab @ Jab.transpose(1, 2) + damping ** 2 * eye
+        dq = -(Jab.transpose(1, 2) @ torch.linalg.solve(A, e.unsqueeze(-1))).squeeze(-1)  # (S, 2n)
+        dq = dq.clamp(-0.2, 0.2).view(-1, 2, lo.shape[1])
+        q[:, [ia, ib]] = torch.minimum(torch.maximum(q[:, [ia, ib]] + dq, lo[[ia, ib]]), hi[[ia, ib]])
+    tips = robot.fingertips_palm(q)
+    gaps = torch.linalg.vector_norm(tips[:, ia] - tips[:, ib], dim=-1)
+    best = int(torch.argmin(gaps))
+    return replace(start, fingers=q[best].to(start.fingers.dtype)), float(gaps[best])
+
+
+def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, float]:
+    """``finger`` opposed to the thumb (else the first finger): :func:`opposition_posture`."""
+    first = "thumb" if "thumb" in robot.finger_names else robot.finger_names[0]
+    return opposition_posture(robot, first, finger, start)
 
 
 def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str | Path) -> tuple[list[str], Path]:
-    """The checks of the job before any work: the settings, every robot (config and URDF) and the
-    output folder; returns the robot names and the folder (``out_dir``, else the run folder)."""
+    """The checks of the job before any work: the settings, every robot (config and URDF; a name
+    or a path to a robot YAML) and the output folder; returns the robots and the folder
+    (``out_dir``, else the run folder)."""
     job = build(InspectRobotsJobCfg, cfg)
     out_dir = Path(job.out_dir) if job.out_dir else Path(run_dir)
     for name in job.robots:
@@ -63,34 +113,63 @@ def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str |
     return job.robots, out_dir
 
 
+def _panels(robot: Robot, row: dict) -> list:
+    """The home panels, then one per opposition (the gap goes into the row)."""
+    from graspnet_torch.viz import Panel
+
+    home = robot.home_posture()
+    name = robot.name
+    panels = [Panel(f"{name}: home posture", home, (15.0, -60.0) if robot.has_body else (10.0, -80.0))]
+    pairs = opposing_fingers(robot)
+    if pairs and not robot.has_body:
+        panels.append(Panel(f"{name}: home, side view", home, (15.0, -15.0)))
+    for a, b in pairs:
+        posture, gap = opposition_posture(robot, a, b, home)
+        view, focus = (10.0, 20.0), frozenset()
+        if robot.has_body:  # the hand at the end of the arm: framed on its links
+            view, focus = (15.0, -60.0), hand_links(robot)
+        panels.append(Panel(f"{a}-{b} opposition (gap {gap * 1000:.2f} mm)", posture, view, focus=focus))
+        row[f"{a}-{b} gap (mm)"] = round(gap * 1000, 3)
+    return panels
+
+
+def hand_links(robot: Robot) -> frozenset[str]:
+    """The palm link and every link below it."""
+    below = {robot.cfg.palm_link}
+    changed = True  # to a fixed point: the URDF's joints may come in any order
+    while changed:
+        changed = False
+        for joint in robot.urdf.robot.joints:
+            if joint.parent in below and joint.child not in below:
+                below.add(joint.child)
+                changed = True
+    return frozenset(below)
+
+
 def inspect_robots(names: Sequence[str] | None = None, out_dir: str | Path = "outputs/robots") -> list[dict]:
-    """Print the robot table and write ``<out_dir>/<robot>.png``; returns the table rows."""
+    """Print the robot table and write ``<out_dir>/<robot name>.png`` for each robot (a name or a
+    path to a robot YAML); returns the table rows. A picture that fails is a warning on stderr
+    (its row says ``-``), never an error."""
     names = list(names) if names else available_robots()
     out_dir = Path(out_dir)
-    from graspnet_torch.viz import Panel, render_robot
+    from graspnet_torch.viz import render_robot
 
     rows = []
     for name in names:
         robot = load_robot(name)
         row = robot_summary(robot)
-        home = robot.home_posture()
-        panels = [Panel(f"{name}: home posture", home, (15.0, -60.0) if robot.has_body else (10.0, -80.0))]
-        if not robot.has_body and "thumb" in robot.fingers:
-            panels.append(Panel(f"{name}: home, side view", home, (15.0, -15.0)))
-            for finger in ("index", "middle"):
-                if finger in robot.fingers:
-                    pinch, gap = pinch_posture(robot, finger, home)
-                    panels.append(Panel(f"thumb-{finger} opposition (gap {gap * 1000:.2f} mm)", pinch, (10.0, 20.0)))
-                    row[f"thumb-{finger} gap (mm)"] = round(gap * 1000, 3)
-        path = out_dir / f"{name}.png"
-        render_robot(robot, panels, path)
-        row["picture"] = str(path)
+        path = out_dir / f"{robot.name}.png"
+        try:
+            render_robot(robot, _panels(robot, row), path)
+            row["picture"] = str(path)
+        except Exception as exc:  # a picture must not stop the table
+            row["picture"] = "-"
+            print(f"warning: {robot.name}: picture not written: {type(exc).__name__}: "
+                  f"{clip(' '.join(str(exc).split()), 200)}", file=sys.stderr)
         rows.append(row)
     headers = ["robot", "links", "movable joints", "chains", "DOF", "picture"]
     print(format_table(headers, [[r[h] for h in headers] for r in rows]))
-    gaps = [f"{k} {r[k]}" for r in rows for k in r if k.endswith("gap (mm)")]
+    gaps = [f"{r['robot']} {k} {r[k]}" for r in rows for k in r if k.endswith("gap (mm)")]
     if gaps:
         print("opposition: " + ", ".join(gaps))
     return rows
-
-

@@ -1,4 +1,4 @@
-"""Primitive shapes of a URDF's links (boxes, cylinders, spheres), for pictures and collisions."""
+"""Shapes of a URDF's links (boxes, cylinders, spheres, meshes), for pictures and collisions."""
 
 from __future__ import annotations
 
@@ -11,24 +11,30 @@ from graspnet_torch.robot.chain import UrdfModel, rpy_matrix_np
 
 __all__ = ["Shape", "link_shapes"]
 
+GREY = (0.6, 0.6, 0.6, 1.0)
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, eq=False)
 class Shape:
-    """A primitive attached to a link.
+    """A shape attached to a link.
 
     Attributes:
         link: link name.
-        kind: 'box' | 'cylinder' | 'sphere'.
-        size: box (x, y, z) full extents; cylinder (radius, length) along its z; sphere (radius,).
+        kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
+        size: box (x, y, z) full extents; cylinder (radius, length) along its z; sphere (radius,);
+            mesh: the URDF's scale (x, y, z), already applied to ``mesh``.
         origin: (4, 4) pose of the shape in the link frame.
         rgba: colour from the URDF material (grey if none).
+        mesh: a mesh's ``trimesh.Trimesh`` (V vertices, M faces) in the shape's frame, scaled;
+            shared with a cache: do not modify it. None for primitives.
     """
 
     link: str
     kind: str
     size: tuple[float, ...]
     origin: np.ndarray
-    rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+    rgba: tuple[float, float, float, float] = GREY
+    mesh: object = None
 
 
 def _origin(origin) -> np.ndarray:
@@ -39,12 +45,16 @@ def _origin(origin) -> np.ndarray:
     return T
 
 
-def link_shapes(model: UrdfModel, source: str = "collision") -> list[Shape]:
-    """Every primitive of every link; ``source`` is 'collision' or 'visual'.
+def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] | None = None) -> list[Shape]:
+    """Every shape of every link; ``source`` is 'collision' or 'visual'.
 
-    Mesh geometry is refused: the shipped robots use primitives only (fast, exact collision checks).
+    Meshes are loaded (``robot/meshes.py`` resolves their URIs). A mesh that cannot be found or
+    loaded is a one-line :class:`ConfigError` naming the link, the URI and where it looked; when
+    ``errors`` (a list) is given, it is skipped instead and that line appended (pictures).
     """
-    from pytorch_kinematics.urdf_parser_py.urdf import Box, Cylinder, Sphere
+    from pytorch_kinematics.urdf_parser_py.urdf import Box, Cylinder, Mesh, Sphere
+
+    from graspnet_torch.robot.meshes import load_link_mesh
 
     materials = {m.name: m for m in model.robot.materials}
     shapes = []
@@ -55,19 +65,31 @@ def link_shapes(model: UrdfModel, source: str = "collision") -> list[Shape]:
             color = getattr(mat, "color", None) if mat is not None else None
             if color is None and mat is not None and mat.name in materials:
                 color = getattr(materials[mat.name], "color", None)
-            visual_colors.append(tuple(color.rgba) if color is not None else (0.6, 0.6, 0.6, 1.0))
+            visual_colors.append(tuple(color.rgba) if color is not None else GREY)
         elements = link.collisions if source == "collision" else link.visuals
         for k, el in enumerate(elements):
             g = el.geometry
-            rgba = visual_colors[k] if k < len(visual_colors) else (0.6, 0.6, 0.6, 1.0)
+            rgba = visual_colors[k] if k < len(visual_colors) else GREY
+            mesh = None
             if isinstance(g, Box):
                 kind, size = "box", tuple(float(s) for s in g.size)
             elif isinstance(g, Cylinder):
                 kind, size = "cylinder", (float(g.radius), float(g.length))
             elif isinstance(g, Sphere):
                 kind, size = "sphere", (float(g.radius),)
+            elif isinstance(g, Mesh) and g.filename:
+                scale = np.broadcast_to(np.asarray(g.scale if g.scale is not None else 1.0, dtype=np.float64), (3,))
+                try:
+                    mesh = load_link_mesh(g.filename, model.path, scale,
+                                          f"{model.path.name}: link '{link.name}' {source}")
+                except ConfigError as exc:
+                    if errors is None:
+                        raise
+                    errors.append(str(exc))
+                    continue
+                kind, size = "mesh", tuple(float(s) for s in scale)
             else:
                 raise ConfigError(f"{model.path.name}: link '{link.name}' has {type(g).__name__} "
-                                  f"{source} geometry; only box, cylinder and sphere are supported")
-            shapes.append(Shape(link.name, kind, size, _origin(el.origin), rgba))
+                                  f"{source} geometry; only box, cylinder, sphere and mesh are supported")
+            shapes.append(Shape(link.name, kind, size, _origin(el.origin), rgba, mesh))
     return shapes

@@ -1,10 +1,17 @@
-"""Pictures of robots (PNG), drawn from their collision primitives with matplotlib.
+"""Pictures of robots (PNG), drawn from their collision geometry with matplotlib.
+
+A robot is drawn from its ``<collision>`` shapes (primitives; meshes decimated to at most
+``PICTURE_FACES`` faces), or its ``<visual>`` shapes when it has no collision geometry at all. A
+robot with nothing drawable, or whose meshes cannot be loaded (one warning on stderr per robot),
+is drawn as a skeleton as well: a line from each link's frame to its child links' frames and a
+marker per link frame. A picture never fails because of a robot's geometry.
 
 matplotlib is imported here only, lazily, and always with the non-interactive Agg backend.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,7 +22,8 @@ from graspnet_torch.io import atomic_path
 from graspnet_torch.robot.geometry import Shape, link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 
-__all__ = ["Panel", "draw_mesh", "draw_shapes", "new_figure", "render_robot", "save_figure"]
+__all__ = ["Panel", "draw_mesh", "draw_shapes", "draw_skeleton", "drawable_shapes", "new_figure", "render_robot",
+           "save_figure"]
 
 
 def new_figure(n_views: int, size: float = 4.2):
@@ -62,8 +70,8 @@ COLLIDING = (0.85, 0.1, 0.1)
 
 def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alpha: float = 1.0,
                 red: frozenset[str] = frozenset()) -> np.ndarray:
-    """Draw primitives at their links' world frames, the links in ``red`` red (colliding);
-    returns (N, 3) points spanning the drawing."""
+    """Draw shapes at their links' world frames, the links in ``red`` red (colliding); returns
+    (N, 3) points spanning the drawing."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     extent = []
@@ -78,6 +86,14 @@ def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alph
             ax.add_collection3d(Poly3DCollection([w[f] for f in faces], facecolor=color, edgecolor=(0, 0, 0, 0.25),
                                                  linewidth=0.3, alpha=alpha))
             extent.append(w)
+        elif s.kind == "mesh":
+            from graspnet_torch.robot.meshes import decimate
+
+            mesh = decimate(s.mesh)
+            w = np.asarray(mesh.vertices) @ T[:3, :3].T + T[:3, 3]
+            ax.add_collection3d(Poly3DCollection(w[np.asarray(mesh.faces)], facecolors=color, shade=True,
+                                                 edgecolor=(0, 0, 0, 0.08), linewidth=0.1, alpha=alpha))
+            extent.append(w)
         else:
             X, Y, Z = _sphere(s.size[0]) if s.kind == "sphere" else _cylinder(*s.size)
             X, Y, Z = _apply(T, X, Y, Z)
@@ -87,6 +103,7 @@ def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alph
 
 
 def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) -> None:
+    points = points if len(points) else np.zeros((1, 3))
     lo, hi = points.min(0), points.max(0)
     center, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-3) * 1.05
     ax.set_xlim(center[0] - half, center[0] + half)
@@ -104,8 +121,9 @@ def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) ->
 @dataclass(frozen=True)
 class Panel:
     """One picture panel: a posture seen from (elevation, azimuth) degrees, with optional red
-    markers (N, 3) in the world (e.g. contact points), trimesh meshes (objects, obstacles) and the
-    links to draw red (colliding)."""
+    markers (N, 3) in the world (e.g. contact points), trimesh meshes (objects, obstacles), the
+    links to draw red (colliding) and the links to draw (``focus``; empty: all), e.g. the hand at
+    the end of an arm."""
 
     caption: str
     posture: Posture
@@ -113,6 +131,7 @@ class Panel:
     markers: np.ndarray | None = None
     meshes: tuple = ()
     red_links: frozenset[str] = frozenset()
+    focus: frozenset[str] = frozenset()
 
 
 def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndarray:
@@ -124,12 +143,47 @@ def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndar
     return np.asarray(mesh.vertices)
 
 
+def drawable_shapes(robot: Robot) -> tuple[list[Shape], list[str]]:
+    """The shapes a picture draws (collision, else visual when there is no collision geometry)
+    and the one-line errors of the meshes that could not be loaded (skipped)."""
+    errors: list[str] = []
+    shapes = link_shapes(robot.urdf, "collision", errors)
+    if not shapes and not errors:
+        shapes = link_shapes(robot.urdf, "visual", errors)
+    return shapes, errors
+
+
+def draw_skeleton(ax, robot: Robot, frames: dict[str, np.ndarray], links: frozenset[str] = frozenset()) -> np.ndarray:
+    """Lines from each link's frame origin (its parent joint's) to its child links' origins and a
+    marker per link frame, for the ``links`` given (empty: all); returns the (N, 3) origins."""
+    origins = {link: T[:3, 3] for link, T in frames.items()
+               if link in robot.urdf.links and (not links or link in links)}
+    for joint in robot.urdf.robot.joints:
+        if joint.parent in origins and joint.child in origins:
+            a, b = origins[joint.parent], origins[joint.child]
+            ax.plot([a[0], b[0]], [a[1], b[1]], [a[2], b[2]], color=(0.25, 0.25, 0.3), linewidth=1.4)
+    pts = np.array(list(origins.values())) if origins else np.zeros((0, 3))
+    if len(pts):
+        ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], color=(0.2, 0.35, 0.7), s=6, depthshade=False)
+    return pts
+
+
 def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title: str | None = None) -> Path:
-    """Draw a robot in one or more panels and save a PNG atomically."""
-    shapes = link_shapes(robot.urdf)
+    """Draw a robot in one or more panels and save a PNG atomically. Meshes that cannot be loaded
+    are one warning on stderr, and the robot is then drawn as a skeleton too (as one with
+    nothing to draw)."""
+    shapes, errors = drawable_shapes(robot)
+    if errors:
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        print(f"warning: {errors[0]}{more}; drawn as a skeleton", file=sys.stderr)
+    skeleton = bool(errors) or not shapes
     fig, axes = new_figure(len(panels))
     for ax, panel in zip(axes, panels, strict=True):
-        pts = draw_shapes(ax, shapes, robot.link_frames(panel.posture), red=panel.red_links)
+        frames = robot.link_frames(panel.posture)
+        drawn = [s for s in shapes if s.link in panel.focus] if panel.focus else shapes
+        pts = draw_shapes(ax, drawn, frames, red=panel.red_links)
+        if skeleton:
+            pts = np.concatenate([pts, draw_skeleton(ax, robot, frames, panel.focus)])
         for mesh in panel.meshes:
             pts = np.concatenate([pts, draw_mesh(ax, mesh)])
         if panel.markers is not None and len(panel.markers):

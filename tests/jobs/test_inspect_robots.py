@@ -36,6 +36,56 @@ def test_script_unknown_robot_exits_2_with_one_line(tmp_path):
 
 
 def test_script_runs(tmp_path):
-    res = _script("robots=[arm_hand]", f"hydra.run.dir={tmp_path}")
+    """A shipped robot and one given by its YAML path, in one list."""
+    from tests.mesh_robots import bare_hand_urdf, write_robot
+
+    bare = write_robot(tmp_path / "bare", bare_hand_urdf(), name="barehand")
+    res = _script(f"robots=[arm_hand,{bare}]", f"hydra.run.dir={tmp_path}")
     assert res.returncode == 0, res.stderr
     assert "arm_hand" in res.stdout and (tmp_path / "arm_hand.png").is_file()
+    assert "barehand" in res.stdout and (tmp_path / "barehand.png").is_file()
+
+
+def test_robots_by_path_get_generic_opposition_panels(tmp_path, capsys):
+    """A hand given by its YAML path (mesh palm; no finger called thumb: the first finger opposes
+    the others) and one without any geometry: table rows, gaps and pictures."""
+    from tests.mesh_robots import bare_hand_urdf, mesh_hand_urdf, write_box_mesh, write_robot
+
+    write_box_mesh(tmp_path / "meshhand" / "meshes" / "palm.stl")
+    urdf = mesh_hand_urdf('<mesh filename="package://meshhand/meshes/palm.stl"/>').replace("thumb", "first")
+    mesh = write_robot(tmp_path / "meshhand", urdf)
+    text = mesh.read_text().replace("thumb", "first")
+    mesh.write_text(text)
+    bare = write_robot(tmp_path / "bare", bare_hand_urdf(), name="barehand")
+    rows = inspect_robots([str(mesh), str(bare)], tmp_path / "out")
+    assert [r["robot"] for r in rows] == ["meshhand", "barehand"]
+    assert rows[0]["first-index gap (mm)"] < 0.01 and rows[1]["thumb-index gap (mm)"] < 0.01
+    for name in ("meshhand", "barehand"):
+        assert (tmp_path / "out" / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+    assert capsys.readouterr().err == ""
+
+
+def test_a_picture_failure_is_a_warning_per_robot(tmp_path, capsys, monkeypatch):
+    import graspnet_torch.viz as viz
+
+    def broken(robot, *args, **kwargs):
+        raise RuntimeError(f"no picture of {robot.name}\nsecond line")
+
+    monkeypatch.setattr(viz, "render_robot", broken)
+    rows = inspect_robots(["manus"], tmp_path)
+    assert rows[0]["picture"] == "-"
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "warning: manus: picture not written: RuntimeError: no picture of manus second line"]
+
+
+def test_opposition_keeps_padded_and_fixed_slots(hand):
+    """Slots whose limits are equal do not move; the other fingers keep their start."""
+    from graspnet_torch.jobs.inspect_robots import opposing_fingers, opposition_posture
+
+    assert opposing_fingers(hand) == [("thumb", "index"), ("thumb", "middle")]
+    home = hand.home_posture()
+    posture, gap = opposition_posture(hand, "thumb", "ring", home)
+    assert gap < 1e-4
+    moved = (posture.fingers != home.fingers).any(dim=1).tolist()
+    assert moved == [True, False, False, True, False]
+

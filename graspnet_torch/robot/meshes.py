@@ -1,0 +1,143 @@
+"""Mesh files of a URDF: where a ``<mesh filename=...>`` lies, loading (cached) and decimation.
+
+A URI is resolved, first match wins:
+
+- ``package://<pkg>/rel/path``: (a) ``<folder>/rel/path`` for every folder named ``<pkg>`` among
+  the URDF's folder and its parents; (b) ``rel/path`` inside an installed Python package named
+  ``<pkg>`` (or ``<pkg>`` with ``-`` -> ``_``); (c) ``rel/path`` against the URDF's folder (the
+  package prefix stripped).
+- ``file:///abs/path`` or ``file://rel/path``, an absolute path, or a relative path: against the
+  URDF's folder.
+
+Loaded meshes are cached per (file, modification time, scale): the returned ``trimesh.Trimesh``
+objects are shared and must not be modified in place.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from functools import lru_cache
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.settings import clip
+
+__all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "resolve_mesh"]
+
+PICTURE_FACES = 2000  # meshes with more faces are decimated for pictures
+
+
+def _package_roots(pkg: str) -> list[Path]:
+    """Folders of an installed Python package named ``pkg`` (or ``pkg`` with '-' -> '_')."""
+    roots: list[Path] = []
+    for name in dict.fromkeys((pkg, pkg.replace("-", "_"))):
+        if not name.isidentifier():
+            continue
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            continue
+        if spec is None:
+            continue
+        locations = list(spec.submodule_search_locations or [])
+        if not locations and spec.origin:
+            locations = [str(Path(spec.origin).parent)]
+        roots += [Path(p) for p in locations]
+    return roots
+
+
+def mesh_candidates(uri: str, urdf_path: str | Path) -> list[Path]:
+    """Every file a mesh URI may name, in the order they are tried (see the module docstring)."""
+    folder = Path(urdf_path).resolve().parent
+    if uri.startswith("package://"):
+        pkg, _, rel = uri[len("package://"):].partition("/")
+        rel = unquote(rel)
+        out = [parent / rel for parent in (folder, *folder.parents) if parent.name == pkg]
+        out += [root / rel for root in _package_roots(pkg)]
+        out.append(folder / rel)
+        return out
+    if uri.startswith("file://"):
+        uri = unquote(uri[len("file://"):])
+    return [folder / Path(uri)]  # an absolute path stays absolute
+
+
+def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh") -> Path:
+    """The file a mesh URI names, or a one-line :class:`ConfigError` saying where it looked."""
+    candidates = mesh_candidates(uri, urdf_path)
+    for path in candidates:
+        if path.is_file():
+            return path
+    looked = ", ".join(dict.fromkeys(str(p.parent) for p in candidates))
+    raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' not found (looked in {clip(looked, 400)})")
+
+
+@lru_cache(maxsize=256)
+def _load(path: str, mtime: float, scale: tuple[float, float, float]):
+    import trimesh
+
+    mesh = trimesh.load(path, force="mesh", process=True)
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError("no triangles")
+    if scale != (1.0, 1.0, 1.0):
+        mesh.apply_scale(np.asarray(scale))
+    return mesh
+
+
+def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mesh"):
+    """The ``trimesh.Trimesh`` a URDF ``<mesh>`` names, in its own frame with ``scale`` (3 numbers,
+    or one) applied; cached and shared (do not modify it). A file that is missing or that trimesh
+    cannot read is a one-line :class:`ConfigError` starting with ``what``."""
+    path = resolve_mesh(uri, urdf_path, what)
+    s = np.broadcast_to(np.asarray(scale if scale is not None else 1.0, dtype=np.float64), (3,))
+    try:
+        return _load(str(path.resolve()), path.stat().st_mtime, tuple(float(v) for v in s))
+    except Exception as exc:  # trimesh raises assorted types on unreadable or foreign files
+        reason = clip(" ".join(f"{type(exc).__name__}: {exc}".split()), 160)
+        raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' ({path}) could not be loaded ({reason})") from None
+
+
+def decimate(mesh, max_faces: int = PICTURE_FACES):
+    """A mesh with at most ``max_faces`` faces, for pictures; never fails. Quadric decimation when
+    fast_simplification is installed, else vertex clustering on shrinking grids, else an even
+    subsample of the faces. mesh: a ``trimesh.Trimesh`` -> a ``trimesh.Trimesh``."""
+    import trimesh
+
+    if len(mesh.faces) <= max_faces:
+        return mesh
+    try:
+        out = mesh.simplify_quadric_decimation(face_count=max_faces)
+        if 0 < len(out.faces) <= max_faces:
+            return out
+    except Exception:  # fast_simplification absent or failing: cluster instead
+        pass
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    try:
+        vertices, faces = _cluster(vertices, faces, max_faces)
+    except Exception:  # pragma: no cover - numerical trouble: subsample below
+        pass
+    if len(faces) > max_faces:
+        faces = faces[np.linspace(0, len(faces) - 1, max_faces).astype(np.int64)]
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def _cluster(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex clustering: vertices (V, 3) merged per cell of an n^3 grid over the bounding box
+    (n shrinking until at most ``max_faces`` faces (M, 3) survive), faces that collapse dropped."""
+    lo = vertices.min(0)
+    span = max(float(np.ptp(vertices, axis=0).max()), 1e-12)
+    for n in (64, 48, 32, 24, 16, 12, 8, 6, 4, 3):
+        cell = np.minimum(np.floor((vertices - lo) / span * n), n - 1).astype(np.int64)
+        _, inverse, counts = np.unique(cell, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
+        f = inverse[faces]
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
+        f = f[np.sort(first)]
+        if len(f) <= max_faces:
+            break
+    merged = np.zeros((len(counts), 3))
+    np.add.at(merged, inverse, vertices)
+    return merged / counts[:, None], f
