@@ -11,7 +11,7 @@ answer is scored the same way: float64 forward kinematics of the returned joints
 target. One run, side by side; prints success within 1 mm, median / p99 error, joint-limit
 compliance, targets per second and the speed ratio to the peer.
 
-    python benchmarks/bench_fcnn.py [--targets 10000] [--sets 3] [--threads 2]
+    python benchmarks/bench_fcnn.py [--targets 10000] [--sets 3] [--threads 1]
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--targets", type=int, default=10_000)
     ap.add_argument("--sets", type=int, default=3, help="target sets per finger, each with fresh restarts")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--fingers", nargs="*", default=None)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)

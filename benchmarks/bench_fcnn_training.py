@@ -3,7 +3,7 @@
 Trains into a temporary folder (the shipped checkpoint is untouched), prints the wall time per
 finger and in total, and the closing accuracy table.
 
-    python benchmarks/bench_fcnn_training.py [--threads 2] [--epochs N]
+    python benchmarks/bench_fcnn_training.py [--threads 1] [--epochs N]
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from graspnet_torch.paths import configs_dir
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--epochs", type=int, default=None, help="override fcnn.epochs (default: configs/fcnn)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)

@@ -3,7 +3,7 @@
 Same chain, same joint values, float32, one run, timed side by side. Prints fingertips per second
 for both and the ratio (ours / pytorch-kinematics).
 
-    python benchmarks/bench_kinematics.py [--threads 2] [--batches 1 100 10000 100000]
+    python benchmarks/bench_kinematics.py [--threads 1] [--batches 1 100 10000 100000]
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from graspnet_torch.table import format_table
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 100, 10_000, 100_000])
     ap.add_argument("--min-time", type=float, default=0.5, help="seconds of timing per function and batch")
     args = ap.parse_args()

@@ -2,7 +2,7 @@
 with T = 1, 30, 1000 trials batched, with the ratio to the single-trial loop (glass3, default
 settings, fixed budgets, no early stop).
 
-    python benchmarks/bench_solver.py [--threads 2]
+    python benchmarks/bench_solver.py [--threads 1]
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def rate(trials: int, iterations: int, repeats: int, task: str = "glass3") -> fl
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     rate(1, 100, 1)  # warm-up

@@ -43,7 +43,7 @@ def main() -> None:
     default = args.a == RewardCfg.a and args.s == SigmaCfg.kind and args.scale == SigmaCfg.scale
     setting = "default settings" if default else f"a = {args.a:g}, s(r_hat) {args.s} with scale {args.scale:g}"
     flags = "" if default else f" --a {args.a:g} --s {args.s} --scale {args.scale:g}"
-    torch.set_num_threads(2)
+    torch.set_num_threads(1)
     out = Path(args.out)
     curves, rows = {}, []
     for sigma in LEVELS:

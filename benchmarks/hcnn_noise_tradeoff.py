@@ -60,7 +60,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3, help="seed sets for the noise study")
     ap.add_argument("--out", default="reports/noise_tradeoff.md")
     args = ap.parse_args()
-    torch.set_num_threads(2)
+    torch.set_num_threads(1)
     seeds = range(args.seeds)
     rows = []
     started = time.perf_counter()

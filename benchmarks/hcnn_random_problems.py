@@ -39,7 +39,7 @@ def main() -> None:
     ap.add_argument("--problems", type=int, default=100)
     ap.add_argument("--out", default="reports/random_problems.md")
     args = ap.parse_args()
-    torch.set_num_threads(2)
+    torch.set_num_threads(1)
     robot = gt.load_robot("hand")
     errors, fingers, seconds = [], [], []
     for seed in range(args.problems):

@@ -23,7 +23,7 @@ from graspnet_torch.robot import (
 )
 from graspnet_torch.solver import GraspResult, NoiseCfg, RewardCfg, SolverCfg, TrialResult, solve, solve_many
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
-from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks
+from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks, random_reachable_problem
 
 __version__ = "0.1.0"
 
@@ -61,6 +61,7 @@ __all__ = [
     "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
+    "random_reachable_problem",
     "solve",
     "solve_many",
 ]

@@ -155,6 +155,27 @@ def motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, 
     return A, B, np.array([t == "revolute" for t in types])
 
 
+def _finger_chains(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple | None]:
+    """Every finger's whole chain (mimic joints included) padded to the longest, m joints: A, B
+    (F, m, 4, 4), revolute (F, m), offsets (F, m + 1, 4, 4), and the map from the free joints
+    (F, n) to them, ``q_all = C q + c`` as (C (F, m, n), c (F, m)), or None when they are the same.
+    A padding joint has no motion (A = B = 0) and an identity offset."""
+    fingers = list(robot.fingers.values())
+    m, n = max(f.chain.spec.n_joints for f in fingers), robot.joints_per_finger
+    A, B = np.zeros((len(fingers), m, 4, 4)), np.zeros((len(fingers), m, 4, 4))
+    rev = np.ones((len(fingers), m), dtype=bool)
+    offsets = np.broadcast_to(np.eye(4), (len(fingers), m + 1, 4, 4)).copy()
+    C, c = np.zeros((len(fingers), m, n)), np.zeros((len(fingers), m))
+    for k, f in enumerate(fingers):
+        spec, j = f.chain.spec, f.chain.spec.n_joints
+        A[k, :j], B[k, :j], rev[k, :j] = motion_terms(spec.axes, spec.joint_types)
+        offsets[k, :j] = spec.offsets[:j]
+        offsets[k, m] = spec.offsets[j]
+        C[k, :j, : f.n_joints], c[k, :j] = f.chain.coupling, f.chain.coupling_offset
+    plain = m == n and all(f.chain.identity for f in fingers)
+    return A, B, rev, offsets, None if plain else (C, c)
+
+
 class ChainLevels:
     """Torch constants of one (batch of) serial chain(s). With M(q) = I + s(q) A + c(q) B,
 
@@ -280,10 +301,10 @@ class CollisionProxy:
             self.body = ChainLevels(A, B, rev, robot.body.offsets, kw)
             self._palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)
         if robot.n_fingers:
-            terms = [motion_terms(f.chain.axes, f.chain.joint_types) for f in robot.fingers.values()]
-            self.fingers = ChainLevels(np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]),
-                                  np.stack([t[2] for t in terms]),
-                                  np.stack([f.chain.offsets for f in robot.fingers.values()]), kw)
+            A, B, rev, offsets, self._finger_map = _finger_chains(robot)
+            self.fingers = ChainLevels(A, B, rev, offsets, kw)
+            if self._finger_map is not None:
+                self._finger_map = tuple(torch.as_tensor(a, **kw) for a in self._finger_map)
             base = np.stack([f.base_in_palm for f in robot.fingers.values()])  # (F, 4, 4)
             self.n_f = len(base)
             self._base_cols = torch.as_tensor(base.transpose(1, 0, 2).reshape(4, -1), **kw)  # (4, 4F): W4 @ it
@@ -441,7 +462,7 @@ class CollisionProxy:
                 k = movable(finger.chain.root)
                 P = np.eye(4)
                 for i in range(k):
-                    P = P @ finger.chain.offsets[i]
+                    P = P @ finger.chain.spec.offsets[i]
                 frame = frames[palm] @ finger.base_in_palm @ P
                 return ("finger", f, k), np.linalg.inv(frame) @ frames[link]
         if palm in path:
@@ -484,6 +505,8 @@ class CollisionProxy:
         frames.append(W)
         stacked = torch.stack(frames)  # (n, T, 3, 4)
         if self.robot.n_fingers:
+            if self._finger_map is not None:  # free joints (padded) -> every joint (mimic, padded)
+                fingers = torch.einsum("fan,tfn->tfa", self._finger_map[0], fingers) + self._finger_map[1]
             # base_f = W B_f for every finger at once: (T, 3, 4) @ (4, 4F)
             base = (W @ self._base_cols).view(T, 3, self.n_f, 4).transpose(1, 2)  # (T, F, 3, 4)
             levels = [base]

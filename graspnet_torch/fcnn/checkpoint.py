@@ -21,11 +21,12 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.io import atomic_path
 from graspnet_torch.paths import checkpoints_dir
 from graspnet_torch.robot.chain import ChainSpec
+from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.fingers import FingerChain
 from graspnet_torch.robot.robot import Robot, load_robot
 
 __all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "non_finite_tensors",
-           "save_finger_ik"]
+           "robot_checkpoint", "save_finger_ik"]
 
 FORMAT = "graspnet_torch.fcnn/1"
 
@@ -60,6 +61,18 @@ def default_checkpoint(robot_name: str) -> Path:
     return checkpoints_dir() / robot_name / "fcnn.pt"
 
 
+def robot_checkpoint(robot: Robot | RobotCfg) -> Path:
+    """Where a robot's FCNN is read from (and written by ``train_fcnn.py``): its config's
+    ``checkpoint``, else ``<config folder>/<name>.fcnn.pt`` for a config given by path, else
+    ``checkpoints/<name>/fcnn.pt``."""
+    cfg = robot.cfg if isinstance(robot, Robot) else robot
+    return cfg.checkpoint or default_checkpoint(cfg.name)
+
+
+def _train_hint(robot: Robot) -> str:
+    return f"`python scripts/train_fcnn.py robot={robot.cfg.cli_name}`"
+
+
 def save_finger_ik(ik: FingerIK, path: str | Path, info: dict | None = None) -> Path:
     """Write ``ik``'s experts (active ones only) to ``path`` atomically."""
     fingers = {}
@@ -82,13 +95,13 @@ def _experts_from(entry: dict, robot: Robot, finger: str, where: str) -> ExpertS
     if list(entry["joint_names"]) != list(chain.joint_names) or entry["fingerprint"] != chain_fingerprint(chain):
         raise CheckpointError(f"{where}: finger '{finger}' was trained for a different chain than robot "
                               f"'{robot.name}' has now (URDF or limits changed?); retrain with "
-                              f"`python scripts/train_fcnn.py robot={robot.name}`")
+                              f"{_train_hint(robot)}")
     E, n = int(entry["n_experts"]), chain.n_joints
     state = entry["state"]
     bad = non_finite_tensors(state)
     if bad:
         raise CheckpointError(f"{where}: finger '{finger}': non-finite values (NaN or infinity) in "
-                              f"{', '.join(bad[:3])}; retrain with `python scripts/train_fcnn.py robot={robot.name}`")
+                              f"{', '.join(bad[:3])}; retrain with {_train_hint(robot)}")
     if not bool((state["x_scale"] > 0).all()) or not bool((state["q_upper"] >= state["q_lower"]).all()):
         raise CheckpointError(f"{where}: finger '{finger}': input scales must be positive and joint ranges "
                               f"non-empty; the file is corrupted")
@@ -118,11 +131,11 @@ def load_finger_ik(robot: str | Robot = "hand", path: str | Path | None = None) 
     """
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
     shared = path is None and robot.cfg.checkpoint is not None  # the robot config names another robot's file
-    path = Path(path) if path is not None else (robot.cfg.checkpoint or default_checkpoint(robot.name))
+    path = Path(path) if path is not None else robot_checkpoint(robot)
     where = str(path)
     if not path.is_file():
         raise CheckpointError(f"{where}: FCNN checkpoint not found; train one with "
-                              f"`python scripts/train_fcnn.py robot={robot.name}`")
+                              f"{_train_hint(robot)}")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises assorted errors on truncated or foreign files

@@ -97,7 +97,7 @@ class FingerIK:
                                 else getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
 
         lower, upper = stack("q_lower"), stack("q_upper")
-        kernel = FingerKernel([self.robot.fingers[f].chain for f in fingers])
+        kernel = FingerKernel([self.robot.fingers[f].chain for f in fingers], width=n)
         bank = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
                      (lower + upper) / 2, (upper - lower) / 2, lower, upper, kernel)
         self._banks[key] = bank
@@ -221,8 +221,9 @@ class FingerIK:
                 needs it (a corner of the workspace that no expert covers), so it costs almost
                 nothing on average. Deterministic: the random postures come from a fixed seed.
         Returns:
-            q: (B, F, n) joint angles within limits (radians); error: (B, F) fingertip error (m).
-            Unreachable targets come back with their error, never an exception.
+            q: (B, F, n) joint angles within limits (radians), n = ``robot.joints_per_finger`` (a
+            finger with fewer free joints is padded with 0); error: (B, F) fingertip error (m). Unreachable
+            targets come back with their error, never an exception.
         """
         fingers = tuple(fingers) if fingers is not None else self.finger_names
         unknown = [f for f in fingers if f not in self.experts]
@@ -268,13 +269,13 @@ class FingerIK:
         """Joint angles of one finger.
 
         targets: (B, 3) fingertip targets in the finger's base frame (metres) ->
-        q: (B, n) within limits, error: (B,) fingertip error (m). See :meth:`solve_fingers`.
+        q: (B, n_f) the finger's free joints within limits, error: (B,) fingertip error (m). See :meth:`solve_fingers`.
         """
         if finger not in self.experts:
             raise ValueError(f"no experts for finger '{finger}'; have {list(self.finger_names)}")
         self._check_targets(targets, 0, "targets")
         q, err = self.solve_fingers(targets.unsqueeze(1), (finger,), refine, candidates, fallback_restarts, tol)
-        return q.squeeze(1), err.squeeze(1)
+        return q.squeeze(1)[:, : self.robot.fingers[finger].n_joints], err.squeeze(1)
 
     def __repr__(self) -> str:
         counts = ", ".join(f"{f}: {self.n_experts(f)}" for f in self.finger_names)

@@ -31,7 +31,7 @@ from typing import Any, TypeVar
 from graspnet_torch.errors import ConfigError, GraspnetError, InternalError
 from graspnet_torch.settings import Free, check_value, clip, lookup
 
-__all__ = ["check_overrides", "compose_for_check", "container", "run_cli", "user_errors_exit_2"]
+__all__ = ["check_overrides", "compose_for_check", "container", "robot_path_overrides", "run_cli", "user_errors_exit_2"]
 
 T = TypeVar("T")
 
@@ -202,6 +202,37 @@ def compose_for_check(config_name: str, argv: list[str]) -> list[tuple[dict, str
     return out
 
 
+def _is_robot_path(value: str) -> bool:
+    return value.endswith((".yaml", ".yml")) or os.sep in value or "/" in value
+
+
+def robot_path_overrides(argv: list[str]) -> list[str]:
+    """``robot=path/to/hand.yaml`` (a robot config outside ``configs/robot/``, INTERFACE.md) as
+    the overrides Hydra understands: the ``robot`` group removed and ``robot: {name, config}``
+    added, ``config`` the file's absolute path (the job loads it; ``name`` names the run folder).
+    Every other argument is kept as it is."""
+    out = []
+    for arg in argv:
+        key, sep, value = arg.partition("=")
+        if not sep or key.lstrip("+") != "robot" or not _is_robot_path(value) or "," in value:
+            out.append(arg)
+            continue
+        path = os.path.abspath(os.path.expanduser(value))
+        name = os.path.splitext(os.path.basename(path))[0] or "robot"
+        try:
+            import yaml
+
+            with open(path, encoding="utf-8") as fh:
+                data = yaml.safe_load(fh.read(1 << 20))
+            if isinstance(data, dict) and isinstance(data.get("name"), str) and data["name"].isidentifier():
+                name = data["name"]
+        except (OSError, ValueError, yaml.YAMLError):
+            pass  # the job's own check names the problem
+        quoted = path.replace("\\", "\\\\").replace("'", "\\'")
+        out += ["~robot", f"+robot.name={name}", f"+robot.config='{quoted}'"]
+    return out
+
+
 def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = None, config_name: str | None = None,
             prepare: Callable[[dict, str], Any] | None = None) -> None:
     """Check the command line, then run the Hydra ``main``; a refusal before the job starts is one
@@ -217,7 +248,11 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    argv = sys.argv[1:] if argv is None else argv
+    if argv is None:
+        sys.argv[1:] = robot_path_overrides(sys.argv[1:])  # Hydra's main reads sys.argv
+        argv = sys.argv[1:]
+    else:
+        argv = robot_path_overrides(argv)
     try:
         if os.environ.get("GRASPNET_TORCH_NO_PRECHECK") == "1":  # benchmarks/bench_validation.py only
             raise _SkipChecks

@@ -45,7 +45,7 @@ class SolveGraspJobCfg:
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     max_iterations: int | None = setting(None, lo=1, hi=10_000_000)
     device: str = "cpu"
-    threads: int = setting(2, lo=1, hi=1024)
+    threads: int = setting(1, lo=1, hi=1024)
     tensorboard: bool = True
     log_every: int = setting(10, lo=1, hi=10_000_000)
     pictures: bool = True
@@ -61,10 +61,10 @@ class TrainFCNNJobCfg:
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     fingers: list[str] | None = None
     resume: bool = False
-    export: bool | str = False
+    export: bool | str | None = None  # None: export when every finger is trained
     checkpoint_every: int = setting(25, lo=1, hi=10_000_000)
     progress: bool = True
-    threads: int = setting(2, lo=1, hi=1024)
+    threads: int = setting(1, lo=1, hi=1024)
     eval_targets: int = setting(10_000, lo=1, hi=1_000_000)
 
 

@@ -22,7 +22,7 @@ from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.paths import configs_dir
-from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import robot_and_ik, solve, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
@@ -44,13 +44,14 @@ def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, r
     robot_cfg = robot if isinstance(robot, RobotCfg) else None
     name = robot_cfg.name if robot_cfg is not None else robot
     if problem:
-        result = GraspProblem.from_file(problem, allow_outside_paths=allow_outside_paths)
+        result = GraspProblem.from_file(problem, robot_cfg=robot_cfg, allow_outside_paths=allow_outside_paths)
     elif isinstance(task, str):
-        result = GraspProblem.from_task(task)
+        result = GraspProblem.from_task(task, robot_cfg=robot_cfg)
     elif isinstance(task, Mapping):
         task_name = task.get("name", "task")
         result = GraspProblem.from_mapping(task, source=f"configs/task/{clip(str(task_name), 80)}.yaml",
-                                           folder=configs_dir() / "task", allow_outside_paths=allow_outside_paths)
+                                           robot_cfg=robot_cfg, folder=configs_dir() / "task",
+                                           allow_outside_paths=allow_outside_paths)
     else:
         raise ProblemError("nothing to solve: give problem=PATH or task=NAME")
     if name and name != result.robot:
@@ -123,8 +124,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     job = build(SolveGraspJobCfg, cfg)
     device = check_device(job.device)
     robot = job.robot
-    if isinstance(robot, Mapping):  # the robot group, as composed (overrides included)
-        robot = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")
+    if isinstance(robot, Mapping):  # the robot group, as composed (overrides included), or robot=PATH
+        robot = robot_cfg_from_setting(robot)
     problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
     defaults = problem.robot_cfg.solver_defaults
     job = replace(job, srv=with_defaults(SRVNetCfg, groups.get("srv", job.srv), defaults.get("srv"), "srv"),

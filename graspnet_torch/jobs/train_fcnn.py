@@ -14,14 +14,14 @@ from typing import Any
 import torch
 
 from graspnet_torch.errors import CheckpointError, ConfigError
-from graspnet_torch.fcnn.checkpoint import chain_fingerprint, default_checkpoint, non_finite_tensors, save_finger_ik
+from graspnet_torch.fcnn.checkpoint import chain_fingerprint, non_finite_tensors, robot_checkpoint, save_finger_ik
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
 from graspnet_torch.jobs.configs import TrainFCNNJobCfg, check_train_memory
-from graspnet_torch.robot.config import RobotCfg, load_robot_cfg
+from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
@@ -142,7 +142,7 @@ def train_fcnn(
 
     Writes ``run_dir/state.pt`` (resumable, every ``checkpoint_every`` epochs and after each
     finger), ``run_dir/fcnn.pt`` (the trained experts), TensorBoard logs under ``run_dir/tb`` and,
-    with ``export``, the checkpoint ``checkpoints/<robot>/fcnn.pt`` (or the given path).
+    with ``export``, the checkpoint the solver reads (:func:`robot_checkpoint`; or the given path).
     """
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
@@ -152,7 +152,7 @@ def train_fcnn(
     for f in fingers:
         robot.finger_index(f)  # clear error for unknown names
     if export:
-        check_output_path(str(default_checkpoint(robot.name) if export is True else export), "export", ConfigError)
+        check_output_path(str(robot_checkpoint(robot) if export is True else export), "export", ConfigError)
     state_path = run_dir / "state.pt"
     state = None
     if resume:
@@ -180,7 +180,7 @@ def train_fcnn(
                                           f"({type(exc).__name__})") from None
             trainers[finger] = trainer
             bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
-                       disable=not progress, file=sys.stderr, dynamic_ncols=True, leave=True)
+                       disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
             while trainer.epochs_done < cfg.epochs:
                 stats = trainer.epoch()
                 ep = trainer.epochs_done
@@ -215,9 +215,9 @@ def train_fcnn(
             "heldout": {r["finger"]: {"competition": r["competition"], "refined": r["refined"]} for r in rows}}
     save_finger_ik(ik, run_dir / "fcnn.pt", info)
     if export:
-        target = default_checkpoint(robot.name) if export is True else Path(export)
+        target = robot_checkpoint(robot) if export is True else Path(export)
         save_finger_ik(ik, target, info)
-        print(f"exported {target}")
+        print(f"exported {target} (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)")
     print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
     print(_closing_table(rows, points))
     return ik, rows
@@ -229,21 +229,18 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
     config, the export path and, with ``resume``, the training state in ``run_dir``."""
     job = build(TrainFCNNJobCfg, cfg)
     check_train_memory(job.fcnn, job.eval_targets)
-    robot = job.robot
-    if isinstance(robot, Mapping):
-        robot_cfg = RobotCfg.from_mapping(robot, source=f"robot={clip(str(robot.get('name')), 80)}")
-    elif isinstance(robot, str):
-        robot_cfg = load_robot_cfg(robot)
-    else:
-        raise ConfigError("robot: give robot=NAME (configs/robot/) to train its fingers")
+    robot_cfg = robot_cfg_from_setting(job.robot)
+    if robot_cfg is None:
+        raise ConfigError("robot: give robot=NAME (configs/robot/) or robot=PATH (a robot YAML) to train its fingers")
+    if not robot_cfg.fingers:
+        raise ConfigError(f"robot '{robot_cfg.name}' has no fingers: nothing to train")
     if job.fingers:
         unknown = [f for f in job.fingers if f not in robot_cfg.fingers]
         if unknown:
             raise ConfigError(f"robot '{robot_cfg.name}' has no finger '{clip(unknown[0], 40)}' (fingers: "
                               f"{', '.join(robot_cfg.fingers)})")
-    if job.export:
-        target = default_checkpoint(robot_cfg.name) if job.export is True else job.export
-        check_output_path(str(target), "export", ConfigError)
+    if export_target(job, robot_cfg) is not None:
+        check_output_path(str(export_target(job, robot_cfg)), "export", ConfigError)
     state_path = Path(run_dir) / "state.pt"
     if job.resume and os.path.lexists(state_path) and not state_path.is_file():
         raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
@@ -252,10 +249,22 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
     return job, robot_cfg
 
 
+def export_target(job: TrainFCNNJobCfg, robot_cfg: RobotCfg) -> Path | None:
+    """Where the job exports the trained checkpoint: ``export=PATH``; ``export=true`` (or left
+    unset when every finger is trained) the robot's checkpoint, which the solver reads; None."""
+    export = job.export
+    if export is None:
+        export = not job.fingers or set(job.fingers) >= set(robot_cfg.fingers)
+    if export is False:
+        return None
+    return robot_checkpoint(robot_cfg) if export is True else Path(export)
+
+
 def train_fcnn_job(cfg: Mapping[str, Any] | TrainFCNNJobCfg, run_dir: str | Path) -> tuple[FingerIK, list[dict]]:
     """The job behind ``scripts/train_fcnn.py``; ``cfg`` is the composed Hydra config as a dict."""
     job, robot_cfg = prepare_train(cfg, run_dir)
     torch.set_num_threads(job.threads)
     return train_fcnn(Robot(robot_cfg), job.fcnn, run_dir, seed=job.seed, fingers=job.fingers, resume=job.resume,
-                      export=job.export, checkpoint_every=job.checkpoint_every, progress=job.progress,
+                      export=export_target(job, robot_cfg) or False, checkpoint_every=job.checkpoint_every,
+                      progress=job.progress,
                       eval_targets=job.eval_targets)

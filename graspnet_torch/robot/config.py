@@ -21,7 +21,7 @@ from graspnet_torch.files import confined_file, read_document
 from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
-__all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg"]
+__all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg", "robot_cfg_from_setting"]
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,8 @@ class RobotCfg:
         home: joint name -> home value as written in the file (degrees for revolute joints, metres
             for prismatic ones), for pictures; missing joints are 0.
         checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
-            (``arm_hand`` reuses the hand's: same finger chains).
+            (``arm_hand`` reuses the hand's: same finger chains); a config given by path defaults
+            to ``<its folder>/<name>.fcnn.pt``.
         floor: height (m, world z) of the floor the robot stands on, an obstacle of every problem
             (a mobile robot: ``manus``), or None.
         self_collision: count collisions between the robot's own links (pairs that are neither
@@ -116,6 +117,12 @@ class RobotCfg:
     self_collision: bool = False
     solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
+
+    @property
+    def cli_name(self) -> str:
+        """How to name this robot on a command line: its name when shipped, else its file."""
+        return self.name if self.source == str(configs_dir() / "robot" / f"{self.name}.yaml") or \
+            not self.source.endswith((".yaml", ".yml")) else self.source
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], source: str = "<memory>", folder: Path | None = None,
@@ -173,6 +180,8 @@ class RobotCfg:
             if not isinstance(raw, str) or not raw or len(raw) > 4096:
                 raise ConfigError(f"{source}: 'checkpoint' must be a file path, got {short(raw)}")
             checkpoint = Path(raw) if Path(raw).is_absolute() else bases[0] / raw
+        elif folder is not None:  # a robot config given by path: its FCNN lives beside it
+            checkpoint = Path(folder) / f"{data['name']}.fcnn.pt"
         floor = data.get("floor")
         if floor is not None:
             floor = number_list([floor], 1, f"{source}: floor", ConfigError, -100.0, 100.0, "number (m)")[0]
@@ -242,6 +251,25 @@ def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
     data = read_document(path, "robot config", ConfigError)
     shipped = path.resolve().parent == (configs_dir() / "robot").resolve()
     return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent)
+
+
+def robot_cfg_from_setting(value: Any) -> RobotCfg | None:
+    """The robot of a job's ``robot`` setting: a name or a YAML path (str), the ``robot`` group as
+    Hydra composed it (a mapping, overrides included), ``robot=PATH`` on the command line
+    (``{name, config}``, see :func:`graspnet_torch.jobs.cli.robot_path_overrides`), or None."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return load_robot_cfg(value)
+    if isinstance(value, Mapping) and "config" in value and "urdf" not in value:
+        extra = sorted(set(value) - {"name", "config"})
+        if extra:
+            raise ConfigError(f"robot={clip(str(value['config']), 200)}: robot.{extra[0]} cannot be overridden for a "
+                              f"robot given by path; edit the file")
+        return load_robot_cfg(str(value["config"]))
+    if isinstance(value, Mapping):
+        return RobotCfg.from_mapping(value, source=f"robot={clip(str(value.get('name')), 80)}")
+    raise ConfigError(f"robot: expected a robot name or a path to a robot YAML file, got {short(value)}")
 
 
 def _solver_defaults(data: Mapping[str, Any], source: str) -> dict[str, dict[str, Any]]:

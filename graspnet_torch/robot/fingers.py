@@ -166,19 +166,21 @@ class _Group:
 class FingerKernel:
     """Batched fingertip positions and Jacobians over the free joints of one or more fingers.
 
-    ``FingerKernel(chain)`` (a :class:`FingerChain`, or a ``ChainSpec``: every joint free) takes joints ``(..., n_f)``; ``FingerKernel([chains])`` takes
-    ``(..., K, n)`` with n the largest free-joint count (fingers with fewer are padded, see the
-    module docstring). Outputs are in each finger's base frame and in the dtype/device of q.
+    ``FingerKernel(chain)`` (a :class:`FingerChain`, or a ``ChainSpec``: every joint free) takes
+    joints ``(..., n_f)``; ``FingerKernel([chains])`` takes ``(..., K, n)``, n = ``width`` or the
+    largest free-joint count (fingers with fewer are padded, see the module docstring). Outputs are in each
+    finger's base frame and in the dtype/device of q.
     """
 
-    def __init__(self, chains: FingerChain | ChainSpec | Sequence[FingerChain | ChainSpec]):
+    def __init__(self, chains: FingerChain | ChainSpec | Sequence[FingerChain | ChainSpec], width: int | None = None):
         self.stacked = not isinstance(chains, FingerChain | ChainSpec)
-        self.chains: tuple[FingerChain, ...] = tuple(
-            c if isinstance(c, FingerChain) else FingerChain.from_spec(c) for c in (chains if self.stacked else (chains,)))
+        given = chains if self.stacked else (chains,)
+        self.chains: tuple[FingerChain, ...] = tuple(c if isinstance(c, FingerChain) else FingerChain.from_spec(c)
+                                                     for c in given)
         if not self.chains:
             raise ValueError("FingerKernel needs at least one finger")
         self.num_chains = len(self.chains)
-        self.n_joints = max(c.n_joints for c in self.chains)
+        self.n_joints = max([c.n_joints for c in self.chains] + [width or 0])
         by_types: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(self.chains):
             by_types.setdefault(c.spec.joint_types, []).append(k)
@@ -268,4 +270,5 @@ class FingerKernel:
 
     def __repr__(self) -> str:
         tips = ", ".join(c.tip for c in self.chains)
-        return f"FingerKernel({self.num_chains} finger(s) -> {tips}; {self.n_joints} free joints; {len(self._groups)} group(s))"
+        return (f"FingerKernel({self.num_chains} finger(s) -> {tips}; {self.n_joints} free joints; "
+                f"{len(self._groups)} group(s))")

@@ -418,12 +418,12 @@ class ChainKernel:
         prismatic = "prismatic" in self.joint_types
         zero = torch.zeros_like(c) if (jacobian or prismatic) else None
         if prismatic:
-            V = torch.where(rev.unsqueeze(-1), torch.stack([one, c, s], -1), torch.stack([one, qq, zero], -1))
+            V = torch.where(rev, torch.stack([one, c, s], -1), torch.stack([one, qq, zero], -1))
         else:
             V = torch.stack([one, c, s], -1)  # (B, K, n, 3)
         if jacobian:
             dV = torch.stack([zero, -s, c], -1) if "prismatic" not in self.joint_types else torch.where(
-                rev.unsqueeze(-1), torch.stack([zero, -s, c], -1), torch.stack([zero, one, zero], -1))
+                rev, torch.stack([zero, -s, c], -1), torch.stack([zero, one, zero], -1))
             V = torch.where(eye, dV.unsqueeze(2), V.unsqueeze(2))  # (B, K, n + 1, n, 3)
         factors = V.unbind(-2)
         m = factors[0]

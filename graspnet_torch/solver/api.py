@@ -110,7 +110,7 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
     solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
-    if solver.final_refine > 0:
+    if solver.final_refine > 0 or solver.polish == "whole":
         outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
     return _result(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
 
@@ -170,7 +170,9 @@ def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, 
         return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg,
                                   solver.refine)
     cls = ArmHandEnvironment if robot.has_body else HandEnvironment
-    return cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
+    env = cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
+    env.polish, env.polish_iterations = solver.polish, solver.polish_iterations
+    return env
 
 
 def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:

@@ -58,6 +58,10 @@ class SolverCfg:
             damped least-squares steps that settle each proposal before it is evaluated.
         final_refine: refinement iterations applied after the loop to the reported configuration's
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
+        polish: after ``final_refine``, 'fingers' stops there (the paper: the palm pose is what the
+            network chose); 'whole' also polishes the palm pose (or arm joints) together with the
+            contact fingers' free joints, ``polish_iterations`` Levenberg-Marquardt steps in float64
+            within bounds and limits, never worse, never into a collision the proxy sees.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
         approach_m, approach_deg: a gripper problem with an ``approach`` configuration searches
             within +- these of it (prismatic joints in metres, revolute joints in degrees),
@@ -85,6 +89,8 @@ class SolverCfg:
     approach_deg: float = setting(30.0, lo=0.0, lo_open=True, hi=360.0)
     refine: int = setting(0, lo=0, hi=1000)
     final_refine: int = setting(3, lo=0, hi=1000)
+    polish: str = setting("fingers", choices=("fingers", "whole"))
+    polish_iterations: int = setting(30, lo=0, hi=10_000)
     candidates: int = setting(1, lo=1, hi=64)
     stop_clear: bool = False
     report: str = setting("best", choices=("best", "final"))

@@ -178,15 +178,96 @@ class FingerEnvironment:
             collisions = self.proxy.count(palm, every, config if self.robot.has_body else None, levels)
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions)
 
+    polish = "fingers"  # 'whole': also polish the configuration with the fingers (SolverCfg.polish)
+    polish_iterations = 0
+
     def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
         """Refine the finger joints of the reported configurations (the configuration kept); never
-        worse. Returns the configurations and their evaluation."""
-        if iterations <= 0:
-            return config, evaluation
-        with torch.inference_mode():
-            q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
-        return config, Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
-                                  collisions=evaluation.collisions)
+        worse. With ``polish = 'whole'``, then polish the configuration and the fingers together
+        (:meth:`polish_whole`). Returns the configurations and their evaluation."""
+        if iterations > 0:
+            with torch.inference_mode():
+                q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
+            evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
+                                    collisions=evaluation.collisions)
+        if self.polish == "whole" and self.polish_iterations > 0:
+            config, evaluation = self.polish_whole(config, evaluation, self.polish_iterations)
+        return config, evaluation
+
+    def _tips64(self, x: Tensor) -> Tensor:
+        """Contact fingertips in the world for stacked [configuration, finger joints] rows.
+        x: (B, n + F * j) float64 -> (B, F, 3)."""
+        from graspnet_torch.robot.transforms import transform_points
+
+        F, j = len(self.idx), self.robot.joints_per_finger
+        R, t = self.palm_frame(x[:, : self.n])
+        kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
+        local = kernel.position(x[:, self.n:].reshape(-1, F, j))
+        in_palm = transform_points(self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu(), local)
+        return transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
+
+    def _count64(self, x: Tensor) -> Tensor:
+        """The proxy's collision count (B,) of stacked rows (see :meth:`_tips64`)."""
+        F, j = len(self.idx), self.robot.joints_per_finger
+        config = x[:, : self.n].to(self.lower)
+        q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
+        every = self.home.expand(q.shape[0], -1, -1).index_copy(1, self._idx, q)
+        return self.proxy.count(self.palm_frame(config), every, config if self.robot.has_body else None)
+
+    def polish_whole(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
+        """Levenberg-Marquardt on the whole configuration (palm pose or arm joints) together with
+        the contact fingers' free joints, in float64 within the bounds and joint limits:
+
+            dx = J^T (J J^T + lambda^2 I)^-1 e,   e: (3F,) contacts - fingertips,  J = d tips / d x
+
+        (forward differences). A step is kept only where it lowers |e| (then lambda / 3, else
+        lambda * 4) and, with a collision proxy, does not raise the collision count: never worse.
+        The loop finds the basin; the fingers alone, with the palm fixed, end where the palm left
+        them (a few mm), the whole polish lands in it."""
+        T, F, j = config.shape[0], len(self.idx), self.robot.joints_per_finger
+        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        lo = torch.cat([self.lower.to(torch.float64).cpu(), flo])
+        hi = torch.cat([self.upper.to(torch.float64).cpu(), fhi])
+        x = torch.clamp(torch.cat([self.clamp(config), evaluation.joints.detach().to(torch.float64).cpu()
+                                   .reshape(T, -1)], 1), lo, hi)
+        m = x.shape[1]
+        goal = self.contacts.to(torch.float64).cpu().reshape(1, -1)
+        eye_e, eye_x = torch.eye(3 * F, dtype=torch.float64), torch.eye(m, dtype=torch.float64)
+        h = 1e-7
+        tips = self._tips64(x).reshape(T, -1)
+        err = (goal - tips).norm(dim=-1)
+        lam = torch.full((T, 1, 1), 1e-3, dtype=torch.float64)
+        count = self._count64(x) if self.proxy is not None else None
+        for _ in range(iterations):
+            e = goal - tips
+            J = ((self._tips64((x.unsqueeze(1) + h * eye_x).reshape(-1, m)).reshape(T, m, -1)
+                  - tips.unsqueeze(1)) / h).transpose(1, 2)  # (T, 3F, m)
+            blocked = None
+            for _pass in range(2):  # joints at a bound the step pushes outward leave the Jacobian
+                Jb = J if blocked is None else J * (~blocked).unsqueeze(1)
+                dx = (Jb.transpose(1, 2) @ torch.linalg.solve(Jb @ Jb.transpose(1, 2) + lam ** 2 * eye_e,
+                                                              e.unsqueeze(-1))).squeeze(-1)
+                blocked = ((x <= lo + 1e-12) & (dx < 0)) | ((x >= hi - 1e-12) & (dx > 0))
+                if not bool(blocked.any()):
+                    break
+            new = torch.clamp(x + dx, lo, hi)
+            new_tips = self._tips64(new).reshape(T, -1)
+            new_err = (goal - new_tips).norm(dim=-1)
+            better = new_err < err
+            if count is not None:
+                new_count = self._count64(new)
+                better &= new_count <= count
+                count = torch.where(better, new_count, count)
+            x = torch.where(better.unsqueeze(1), new, x)
+            tips = torch.where(better.unsqueeze(1), new_tips, tips)
+            err = torch.where(better, new_err, err)
+            lam = torch.where(better.view(-1, 1, 1), (lam / 3).clamp(min=1e-6), (lam * 4).clamp(max=1.0))
+        finger_err = (goal - tips).reshape(T, F, 3).norm(dim=-1)
+        kw = {"dtype": config.dtype, "device": config.device}
+        return x[:, : self.n].to(**kw), Evaluation(
+            error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
+            joints=x[:, self.n:].reshape(T, F, j).to(**kw),
+            collisions=count.to(config.device) if count is not None else evaluation.collisions)
 
     def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
         """Per trial, the result fields of the reported configuration, recomputed in float64: the

@@ -9,6 +9,7 @@ metres and radians.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -259,13 +260,21 @@ class GraspProblem:
         robot = data.get("robot")
         if not isinstance(robot, str) or not robot or len(robot) > 4096:
             raise ProblemError(f"{source}: 'robot' must name a robot ({', '.join(available_robots())})")
-        if robot_cfg is None:
+        by_path = robot.endswith((".yaml", ".yml")) or "/" in robot or os.sep in robot
+        if by_path and folder is not None and not Path(robot).is_absolute() and (Path(folder) / robot).is_file():
+            robot = str(Path(folder) / robot)  # a robot config beside the problem
+        if robot_cfg is None or by_path:
             try:
-                robot_cfg = load_robot_cfg(robot)
+                loaded = load_robot_cfg(robot)
             except ConfigError as exc:
                 raise ProblemError(f"{source}: robot: {exc}") from None
+            if robot_cfg is not None and loaded.name != robot_cfg.name:
+                raise ProblemError(f"{source}: the problem is for robot '{loaded.name}' ({clip(robot, 200)}), "
+                                   f"but robot={robot_cfg.name} was given")
+            robot_cfg = robot_cfg or loaded
+            robot = robot_cfg.name
         elif robot_cfg.name != robot:
-            raise ProblemError(f"{source}: the problem is for robot '{robot}', not '{robot_cfg.name}'")
+            raise ProblemError(f"{source}: the problem is for robot '{robot}', but robot={robot_cfg.name} was given")
         fingers = list(robot_cfg.fingers)
         if not fingers:  # a gripper with two marked points (MANUS): points instead of contacts
             return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)

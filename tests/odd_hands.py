@@ -1,0 +1,98 @@
+"""A hand unlike the shipped one, written into a test's tmp folder: what real URDFs do.
+
+``oddhand`` (all lengths in metres):
+
+- ``thumb``: 4 revolute joints with non-unit axes (``0 0 2``, ``1 1 0``...), base rotated on the palm,
+  tip a link;
+- ``index``: 4 joints, the last a ``<mimic>`` of the third (multiplier 0.7, offset 0.05): 3 free;
+- ``middle``: 2 joints, its chain starts directly at the palm (no base link), and the URDF ends at
+  the distal joint: the tip is an offset in the distal link (``tip: {link, offset}``);
+- ``ring``: a revolute joint then a prismatic one (a sliding fingertip).
+
+The file starts with an XML encoding declaration, as many exported URDFs do.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+MIMIC = {"index_dip": ("index_pip", 0.7, 0.05)}
+MIDDLE_TIP_OFFSET = (0.0, 0.0, 0.022)
+
+
+def _limit(lo: float, hi: float) -> str:
+    return f'<limit lower="{lo}" upper="{hi}" effort="1" velocity="1"/>'
+
+
+def oddhand_urdf() -> str:
+    box = '<collision><geometry><box size="0.07 0.02 0.08"/></geometry></collision>'
+    cyl = ('<collision><origin xyz="0 0 0.015"/><geometry><cylinder radius="0.006" length="0.03"/></geometry>'
+           '</collision>')
+    links = ["palm", "thumb_base", "thumb_l1", "thumb_l2", "thumb_l3", "thumb_l4", "thumb_tip",
+             "index_base", "index_l1", "index_l2", "index_l3", "index_l4", "index_tip",
+             "middle_l1", "middle_distal", "ring_base", "ring_l1", "ring_slider", "ring_tip"]
+    body = [f'<link name="palm">{box}</link>'] + [f'<link name="{n}">{cyl}</link>' for n in links[1:]]
+
+    def joint(name, kind, parent, child, xyz="0 0 0", rpy="0 0 0", axis=None, lim=None, mimic=None):
+        s = f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+        s += f'<origin xyz="{xyz}" rpy="{rpy}"/>'
+        if axis:
+            s += f'<axis xyz="{axis}"/>'
+        if lim:
+            s += _limit(*lim)
+        if mimic:
+            s += f'<mimic joint="{mimic[0]}" multiplier="{mimic[1]}" offset="{mimic[2]}"/>'
+        return s + "</joint>"
+
+    j = [
+        joint("thumb_mount", "fixed", "palm", "thumb_base", "0.03 0.015 0.02", "0.3 -0.4 0.6"),
+        joint("thumb_abd", "revolute", "thumb_base", "thumb_l1", axis="0 0 2", lim=(-0.5, 0.8)),
+        joint("thumb_flex", "revolute", "thumb_l1", "thumb_l2", "0 0 0.01", axis="1 1 0", lim=(-0.2, 1.2)),
+        joint("thumb_mcp", "revolute", "thumb_l2", "thumb_l3", "0 0 0.04", axis="1 0 0", lim=(0.0, 1.2)),
+        joint("thumb_ip", "revolute", "thumb_l3", "thumb_l4", "0 0 0.03", axis="1 0 0", lim=(0.0, 1.3)),
+        joint("thumb_tip_joint", "fixed", "thumb_l4", "thumb_tip", "0 0 0.025"),
+        joint("index_mount", "fixed", "palm", "index_base", "0.02 0 -0.05", "3.14159265 0 0"),
+        joint("index_abd", "revolute", "index_base", "index_l1", axis="0 1 0", lim=(-0.3, 0.3)),
+        joint("index_mcp", "revolute", "index_l1", "index_l2", axis="1 0 0", lim=(0.0, 1.5)),
+        joint("index_pip", "revolute", "index_l2", "index_l3", "0 0 0.04", axis="1 0 0", lim=(0.0, 1.6)),
+        joint("index_dip", "revolute", "index_l3", "index_l4", "0 0 0.025", axis="1 0 0", lim=(0.0, 1.3),
+              mimic=MIMIC["index_dip"]),
+        joint("index_tip_joint", "fixed", "index_l4", "index_tip", "0 0 0.02"),
+        joint("middle_mcp", "revolute", "palm", "middle_l1", "0 0 -0.05", "3.14159265 0 0", "1 0 0", (0.0, 1.5)),
+        joint("middle_pip", "revolute", "middle_l1", "middle_distal", "0 0 0.045", axis="1 0 0", lim=(0.0, 1.6)),
+        joint("ring_mount", "fixed", "palm", "ring_base", "-0.02 0 -0.05", "3.14159265 0 0"),
+        joint("ring_mcp", "revolute", "ring_base", "ring_l1", axis="1 0 0", lim=(0.0, 1.4)),
+        joint("ring_slide", "prismatic", "ring_l1", "ring_slider", "0 0 0.03", axis="0 0 1", lim=(0.0, 0.02)),
+        joint("ring_tip_joint", "fixed", "ring_slider", "ring_tip", "0 0 0.02"),
+    ]
+    return ('<?xml version="1.0" encoding="utf-8"?>\n<robot name="oddhand">\n' + "\n".join(body + j)
+            + "\n</robot>\n")
+
+
+def oddhand_config(urdf: str = "oddhand.urdf") -> dict:
+    return {
+        "name": "oddhand",
+        "urdf": urdf,
+        "palm_link": "palm",
+        "fingers": {
+            "thumb": {"base": "thumb_base", "tip": "thumb_tip"},
+            "index": {"base": "index_base", "tip": "index_tip"},
+            "middle": {"tip": {"link": "middle_distal", "offset": list(MIDDLE_TIP_OFFSET)}},
+            "ring": {"base": "ring_base", "tip": "ring_tip"},
+        },
+        "palm_bounds": {"min": [-0.05, -0.05, 0.10, -30, -30, -30], "max": [0.05, 0.05, 0.20, 30, 30, 30]},
+    }
+
+
+def write_oddhand(folder: Path, **changes) -> Path:
+    """Write ``oddhand.urdf`` and ``oddhand.yaml`` (config keys replaced by ``changes``) into
+    ``folder``; returns the YAML path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "oddhand.urdf").write_bytes(oddhand_urdf().encode("utf-8"))
+    cfg = oddhand_config()
+    cfg.update(changes)
+    path = folder / "oddhand.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
