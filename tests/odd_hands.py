@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import torch
 import yaml
 
 MIMIC = {"index_dip": ("index_pip", 0.7, 0.05)}
@@ -96,3 +97,27 @@ def write_oddhand(folder: Path, **changes) -> Path:
     path = folder / "oddhand.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
+
+
+def pk_fingertips_palm(robot, q):
+    """Fingertips in the palm frame by pytorch-kinematics on the whole URDF: every joint set,
+    mimic joints computed here from the URDF's own numbers, tip offset applied. q: (B, F, n)."""
+    import pytorch_kinematics as pk
+
+    chain = pk.build_chain_from_urdf(robot.urdf.path.read_bytes()).to(dtype=torch.float64)
+    names = chain.get_joint_parameter_names()
+    B = q.shape[0]
+    th = torch.zeros(B, len(names), dtype=torch.float64)
+    for k, f in enumerate(robot.fingers.values()):
+        for i, name in enumerate(f.chain.joint_names):
+            th[:, names.index(name)] = q[:, k, i]
+    for name, (leader, m, b) in MIMIC.items():
+        th[:, names.index(name)] = m * th[:, names.index(leader)] + b
+    frames = chain.forward_kinematics(th)
+    palm = frames["palm"].get_matrix()
+    out = []
+    for f in robot.fingers.values():
+        T = torch.linalg.solve(palm, frames[f.chain.tip].get_matrix())
+        offset = torch.tensor([*(MIDDLE_TIP_OFFSET if f.name == "middle" else (0, 0, 0)), 1.0], dtype=torch.float64)
+        out.append((T @ offset)[:, :3])
+    return torch.stack(out, dim=1)

@@ -16,7 +16,7 @@ from graspnet_torch.fcnn.checkpoint import chain_fingerprint
 from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.kernel import ChainKernel
 from tests.conftest import uniform
-from tests.odd_hands import MIDDLE_TIP_OFFSET, MIMIC, oddhand_config, write_oddhand
+from tests.odd_hands import MIMIC, oddhand_config, pk_fingertips_palm, write_oddhand
 
 
 @pytest.fixture(scope="module")
@@ -39,35 +39,11 @@ def test_structure_free_joints_padding_and_mimic(odd):
     assert odd.cfg.checkpoint.name == "oddhand.fcnn.pt"  # beside the config given by path
 
 
-def _pk_tips(robot: gt.Robot, q: torch.Tensor) -> torch.Tensor:
-    """Fingertips in the palm frame by pytorch-kinematics on the whole URDF: every joint set,
-    mimic joints computed here from the URDF's own numbers, tip offset applied. q: (B, F, n)."""
-    import pytorch_kinematics as pk
-
-    chain = pk.build_chain_from_urdf(robot.urdf.path.read_bytes()).to(dtype=torch.float64)
-    names = chain.get_joint_parameter_names()
-    B = q.shape[0]
-    th = torch.zeros(B, len(names), dtype=torch.float64)
-    for k, f in enumerate(robot.fingers.values()):
-        for i, name in enumerate(f.chain.joint_names):
-            th[:, names.index(name)] = q[:, k, i]
-    for name, (leader, m, b) in MIMIC.items():
-        th[:, names.index(name)] = m * th[:, names.index(leader)] + b
-    frames = chain.forward_kinematics(th)
-    palm = frames["palm"].get_matrix()
-    out = []
-    for f in robot.fingers.values():
-        T = torch.linalg.solve(palm, frames[f.chain.tip].get_matrix())
-        offset = torch.tensor([*(MIDDLE_TIP_OFFSET if f.name == "middle" else (0, 0, 0)), 1.0], dtype=torch.float64)
-        out.append((T @ offset)[:, :3])
-    return torch.stack(out, dim=1)
-
-
 def test_fingertips_match_pytorch_kinematics_with_mimic_and_offset(odd, gen):
     q = uniform(*odd.finger_limits, 64, gen)  # pytorch-kinematics keeps joint origins in float32: ~1e-8 m
-    np.testing.assert_allclose(odd.fingertips_palm(q).numpy(), _pk_tips(odd, q).numpy(), atol=5e-8)
+    np.testing.assert_allclose(odd.fingertips_palm(q).numpy(), pk_fingertips_palm(odd, q).numpy(), atol=5e-8)
     q32 = q.float()
-    np.testing.assert_allclose(odd.fingertips_palm(q32).double().numpy(), _pk_tips(odd, q).numpy(), atol=2e-6)
+    np.testing.assert_allclose(odd.fingertips_palm(q32).double().numpy(), pk_fingertips_palm(odd, q).numpy(), atol=2e-6)
 
 
 def test_jacobian_matches_finite_differences_and_padding_is_inert(odd, gen):
