@@ -67,7 +67,7 @@ def test_solve_recomputed_from_the_urdf_with_exact_mimic_couplings(trained, seed
     data = json.loads(result.to_json())
     joints = data["joints"]
     assert [len(joints[f]) for f in robot.finger_names] == [4, 4, 2, 2]  # every joint, mimic included
-    leader, m, b = MIMIC["index_dip"]
+    _leader, m, b = MIMIC["index_dip"]
     pip, dip = math.radians(joints["index"][2]), math.radians(joints["index"][3])
     assert dip == pytest.approx(m * pip + b, abs=1e-9)
     # from the URDF alone: pytorch-kinematics with the reported joints and palm pose
