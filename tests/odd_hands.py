@@ -121,3 +121,37 @@ def pk_fingertips_palm(robot, q):
         offset = torch.tensor([*(MIDDLE_TIP_OFFSET if f.name == "middle" else (0, 0, 0)), 1.0], dtype=torch.float64)
         out.append((T @ offset)[:, :3])
     return torch.stack(out, dim=1)
+
+
+def write_odd_arm(folder: Path, checkpoint: str | None = None) -> Path:
+    """The odd hand on a 4-joint arm (shoulder yaw, pitch, elbow, wrist roll) in one URDF, and an
+    ``arm_hand``-like config for it (``arm: {base: torso, tip: palm}``); returns the YAML path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    hand = oddhand_urdf()
+    body = hand[hand.index("<link"):hand.rindex("</robot>")]
+    cyl = '<collision><origin xyz="0 0 -{h}"/><geometry><cylinder radius="0.03" length="{l}"/></geometry></collision>'
+    arm = [
+        '<link name="torso"/>',
+        '<link name="upper_yaw"/>',
+        f'<link name="upper_arm">{cyl.format(h=0.14, l=0.2)}</link>',
+        f'<link name="forearm">{cyl.format(h=0.12, l=0.18)}</link>',
+        '<joint name="shoulder_yaw" type="revolute"><parent link="torso"/><child link="upper_yaw"/>'
+        f'<origin xyz="0 0 0.5"/><axis xyz="0 0 1"/>{_limit(-1.5, 1.5)}</joint>',
+        '<joint name="shoulder_pitch" type="revolute"><parent link="upper_yaw"/><child link="upper_arm"/>'
+        f'<axis xyz="0 1 0"/>{_limit(-0.5, 2.0)}</joint>',
+        '<joint name="elbow" type="revolute"><parent link="upper_arm"/><child link="forearm"/>'
+        f'<origin xyz="0 0 -0.3"/><axis xyz="0 1 0"/>{_limit(0.0, 2.2)}</joint>',
+        '<joint name="wrist_roll" type="revolute"><parent link="forearm"/><child link="palm"/>'
+        f'<origin xyz="0 0 -0.25" rpy="3.14159265 0 0"/><axis xyz="0 0 1"/>{_limit(-1.5, 1.5)}</joint>',
+    ]
+    (folder / "oddarm.urdf").write_text('<?xml version="1.0"?>\n<robot name="oddarm">\n' + "\n".join(arm) + body
+                                        + "</robot>\n")
+    cfg = oddhand_config("oddarm.urdf")
+    cfg["name"] = "oddarm"
+    del cfg["palm_bounds"]
+    cfg["arm"] = {"base": "torso", "tip": "palm"}
+    if checkpoint:
+        cfg["checkpoint"] = checkpoint
+    path = folder / "oddarm.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path

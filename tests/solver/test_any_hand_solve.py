@@ -14,7 +14,7 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
-from tests.odd_hands import MIMIC, pk_fingertips_palm, write_oddhand
+from tests.odd_hands import MIMIC, pk_fingertips_palm, write_odd_arm, write_oddhand
 
 TINY = FCNNTrainCfg.from_mapping({"epochs": 12, "targets_per_epoch": 96, "train_steps": 15, "val_targets": 500,
                                   "val_every": 12})
@@ -79,4 +79,25 @@ def test_solve_recomputed_from_the_urdf_with_exact_mimic_couplings(trained, seed
         k = robot.finger_index(c.finger)
         world = problem.contacts_world()[problem.fingers.index(c.finger)]
         err_mm = float(np.linalg.norm(tips[k] - world)) * 1000
+        assert err_mm == pytest.approx(data["fingertip_error_mm"][c.finger], abs=1e-4)
+
+
+def test_an_arm_carries_another_hand(trained, tmp_path):
+    """An arm_hand-like config naming an arm chain and this hand: the arm's loop (ACNN) places the
+    palm, the same FCNN (identical finger chains) places the fingers."""
+    robot, ik, _ = trained
+    arm = gt.load_robot(str(write_odd_arm(tmp_path, checkpoint=str(robot.cfg.checkpoint))))
+    assert arm.body_joint_names == ("shoulder_yaw", "shoulder_pitch", "elbow", "wrist_roll")
+    assert arm.dof == 4 + 11
+    arm_ik = gt.load_finger_ik(arm)  # the hand's checkpoint: fingerprints match
+    problem = gt.random_reachable_problem(arm, 2, n_fingers=2)
+    result = gt.solve(problem, trials=8, seed=0, robot=arm, finger_ik=arm_ik, max_iterations=400,
+                      solver={"polish": "whole"})
+    data = json.loads(result.to_json())
+    assert list(data["arm_joints"]) == list(arm.body_joint_names)
+    assert result.total_error_mm < 1.0
+    body = torch.tensor([math.radians(data["arm_joints"][n]) for n in arm.body_joint_names], dtype=torch.float64)
+    tips = arm.fingertips_world_from_body(body, arm.finger_joints_from_file(data["joints"]))
+    for c, world in zip(problem.contacts, problem.contacts_world(), strict=True):
+        err_mm = float(torch.linalg.vector_norm(tips[arm.finger_index(c.finger)] - torch.as_tensor(world))) * 1000
         assert err_mm == pytest.approx(data["fingertip_error_mm"][c.finger], abs=1e-4)
