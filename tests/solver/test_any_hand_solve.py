@@ -85,7 +85,7 @@ def test_solve_recomputed_from_the_urdf_with_exact_mimic_couplings(trained, seed
 def test_an_arm_carries_another_hand(trained, tmp_path):
     """An arm_hand-like config naming an arm chain and this hand: the arm's loop (ACNN) places the
     palm, the same FCNN (identical finger chains) places the fingers."""
-    robot, ik, _ = trained
+    robot, _ik, _ = trained
     arm = gt.load_robot(str(write_odd_arm(tmp_path, checkpoint=str(robot.cfg.checkpoint))))
     assert arm.body_joint_names == ("shoulder_yaw", "shoulder_pitch", "elbow", "wrist_roll")
     assert arm.dof == 4 + 11
