@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -52,6 +52,10 @@ bench-arm: $(STAMP)  ## the arm loop with collision checking vs without (targets
 
 bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (targets 2,000 it/s, 100,000 at T=1000)
 	$(PY) benchmarks/bench_manus.py --check
+
+bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): train, solve 40 problems, verify from the URDF (~7 min)
+	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
+	$(PY) benchmarks/any_hand.py --check
 
 report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~6.5 min)
 	$(PY) benchmarks/manus_protocol.py --check
