@@ -217,7 +217,9 @@ def train_fcnn(
     if export:
         target = robot_checkpoint(robot) if export is True else Path(export)
         save_finger_ik(ik, target, info)
-        print(f"exported {target} (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)")
+        reads = Path(target).resolve() == robot_checkpoint(robot).resolve()
+        print(f"exported {target}" + (f" (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)"
+                                      if reads else ""))
     print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
     print(_closing_table(rows, points))
     return ik, rows
