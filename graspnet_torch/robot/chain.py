@@ -14,6 +14,8 @@ the URDF in float64 (pytorch-kinematics stores them in float32), so the fast ker
 from __future__ import annotations
 
 import math
+import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -90,6 +92,26 @@ class ChainSpec:
 MAX_URDF_BYTES = 32 << 20
 
 
+@contextmanager
+def _quiet_parser():
+    """While pytorch-kinematics' URDF parser runs, drop its 'Unknown attribute' / 'Unknown tag'
+    notes (non-standard extras such as the full inertia tensor some vendors write: harmless, and
+    printed once per parse); other parser messages still reach stderr."""
+    from pytorch_kinematics.urdf_parser_py.xml_reflection import core
+
+    previous = core.on_error
+
+    def on_error(message: str) -> None:
+        if not str(message).startswith(("Unknown attribute", "Unknown tag")):
+            sys.stderr.write(f"{message}\n")
+
+    core.on_error = on_error
+    try:
+        yield
+    finally:
+        core.on_error = previous
+
+
 class UrdfModel:
     """A URDF file parsed by pytorch-kinematics, with its serial chains on demand."""
 
@@ -103,7 +125,8 @@ class UrdfModel:
         from pytorch_kinematics.urdf_parser_py.urdf import URDF
 
         try:
-            self.robot = URDF.from_xml_string(self.xml)
+            with _quiet_parser():
+                self.robot = URDF.from_xml_string(self.xml)
         except Exception as exc:  # the parser raises assorted types on malformed XML
             raise ConfigError(f"{self.path}: not a valid URDF ({clip(' '.join(str(exc).split()), 160)})") from None
         self.links: dict[str, object] = {link.name: link for link in self.robot.links}
@@ -141,7 +164,8 @@ class UrdfModel:
         """The whole kinematic tree as a pytorch-kinematics ``Chain``."""
         import pytorch_kinematics as pk
 
-        return pk.build_chain_from_urdf(self.xml)
+        with _quiet_parser():
+            return pk.build_chain_from_urdf(self.xml)
 
     @cached_property
     def chain64(self) -> pk.Chain:
@@ -150,7 +174,8 @@ class UrdfModel:
         import pytorch_kinematics as pk
         import torch
 
-        return pk.build_chain_from_urdf(self.xml).to(dtype=torch.float64)
+        with _quiet_parser():
+            return pk.build_chain_from_urdf(self.xml).to(dtype=torch.float64)
 
     def check_link(self, link: str, what: str) -> None:
         if link not in self.links:

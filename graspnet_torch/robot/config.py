@@ -131,7 +131,8 @@ class RobotCfg:
 
         ``urdf`` is looked up in ``folder`` (the config file's folder, when it has one) and then the
         repository root; it must stay within those, or an installed Python package, unless
-        ``allow_outside_paths``.
+        ``allow_outside_paths``. ``urdf: package://<python package>/<path>`` names a file inside an
+        installed Python package (found without importing it; see :func:`_urdf_file`).
         """
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
@@ -173,7 +174,7 @@ class RobotCfg:
             home[clip(joint, 80)] = number_list([value], 1, f"{source}: home.{clip(joint, 40)}", ConfigError,
                                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
         bases = (Path(folder), repo_root()) if folder is not None else (repo_root(),)
-        urdf = confined_file(data["urdf"], f"{source}: urdf", bases, ConfigError, allow_outside_paths)
+        urdf = _urdf_file(data["urdf"], f"{source}: urdf", bases, allow_outside_paths)
         checkpoint = None
         if data.get("checkpoint") is not None:
             raw = data["checkpoint"]
@@ -192,6 +193,38 @@ class RobotCfg:
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
                    home=home, checkpoint=checkpoint, floor=floor, self_collision=self_collision,
                    solver_defaults=_solver_defaults(data, source), source=source)
+
+
+def _urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: bool) -> Path:
+    """The URDF a config names: a path (relative to ``bases``, see :func:`confined_file`) or
+    ``package://<python package>/<path>``, resolved like a mesh URI (:func:`package_candidates`:
+    a folder named ``<python package>`` above the config, then the installed package, found
+    without importing it)."""
+    if not raw.startswith("package://"):
+        return confined_file(raw, where, bases, ConfigError, allow_outside)
+    from urllib.parse import unquote
+
+    from graspnet_torch.robot.meshes import package_candidates, package_roots
+
+    pkg, _, rel = raw[len("package://"):].partition("/")
+    rel = unquote(rel)
+    if not pkg or not rel.strip("/") or Path(rel).is_absolute() or "\x00" in rel or len(raw) > 4096:
+        raise ConfigError(f"{where}: expected package://<python package>/<path inside it>, got {clip(raw, 120)}")
+    if ".." in Path(rel).parts:
+        raise ConfigError(f"{where}: {clip(raw, 120)}: '..' would lead out of package '{clip(pkg, 60)}'")
+    installed = package_roots(pkg)
+    candidates = package_candidates(pkg, rel, bases[0])
+    if not candidates:
+        hint = f" (pip install {pkg.replace('_', '-')})" if pkg.replace("-", "_").isidentifier() else ""
+        raise ConfigError(f"{where}: {clip(raw, 120)}: Python package '{clip(pkg, 60)}' is not installed{hint}")
+    found = next((c for c in candidates if _is_file(c)), None)
+    if found is None:
+        looked = ", ".join(dict.fromkeys(str(c.parent) for c in candidates))
+        raise ConfigError(f"{where}: {clip(raw, 120)}: no file '{clip(rel, 120)}' in package '{clip(pkg, 60)}' "
+                          f"(looked in {clip(looked, 300)})")
+    # the package named is trusted as a base (an editable install may live outside site-packages);
+    # '..' or a link leading out of it is refused like any path
+    return confined_file(str(found), where, (*bases, *installed), ConfigError, allow_outside)
 
 
 def _finger(value: Any, where: str, palm: str) -> ChainCfg:

@@ -25,13 +25,15 @@ import numpy as np
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.settings import clip
 
-__all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "resolve_mesh"]
+__all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "package_candidates", "package_roots",
+           "resolve_mesh"]
 
 PICTURE_FACES = 2000  # meshes with more faces are decimated for pictures
 
 
-def _package_roots(pkg: str) -> list[Path]:
-    """Folders of an installed Python package named ``pkg`` (or ``pkg`` with '-' -> '_')."""
+def package_roots(pkg: str) -> list[Path]:
+    """Folders of an installed Python package named ``pkg`` (or ``pkg`` with '-' -> '_'), found
+    without importing it."""
     roots: list[Path] = []
     for name in dict.fromkeys((pkg, pkg.replace("-", "_"))):
         if not name.isidentifier():
@@ -49,16 +51,22 @@ def _package_roots(pkg: str) -> list[Path]:
     return roots
 
 
+def package_candidates(pkg: str, rel: str, folder: str | Path) -> list[Path]:
+    """The files ``package://<pkg>/<rel>`` may name seen from ``folder``, in the order they are
+    tried: ``rel`` in every folder named ``pkg`` among ``folder`` and its parents, then in the
+    installed Python package ``pkg`` (:func:`package_roots`). ``rel`` is already unquoted."""
+    folder = Path(folder).resolve()
+    out = [parent / rel for parent in (folder, *folder.parents) if parent.name == pkg]
+    return out + [root / rel for root in package_roots(pkg)]
+
+
 def mesh_candidates(uri: str, urdf_path: str | Path) -> list[Path]:
     """Every file a mesh URI may name, in the order they are tried (see the module docstring)."""
     folder = Path(urdf_path).resolve().parent
     if uri.startswith("package://"):
         pkg, _, rel = uri[len("package://"):].partition("/")
         rel = unquote(rel)
-        out = [parent / rel for parent in (folder, *folder.parents) if parent.name == pkg]
-        out += [root / rel for root in _package_roots(pkg)]
-        out.append(folder / rel)
-        return out
+        return [*package_candidates(pkg, rel, folder), folder / rel]
     if uri.startswith("file://"):
         uri = unquote(uri[len("file://"):])
     return [folder / Path(uri)]  # an absolute path stays absolute

@@ -117,3 +117,58 @@ def test_malformed_yaml_names_the_file(tmp_path):
 def test_bad_solver_defaults_are_refused(tmp_path, defaults, message):
     with pytest.raises(gt.ConfigError, match=message):
         gt.load_robot(_hand_yaml(tmp_path, solver_defaults=defaults))
+
+
+def _installed_package(tmp_path, monkeypatch, name="fake_hand_description"):
+    """A Python package on sys.path holding urdf/hand.urdf; importing it would fail (as
+    robot_properties_fingers does without pinocchio), so resolving must not import it."""
+    from graspnet_torch.paths import repo_root
+
+    root = tmp_path / "site" / name
+    (root / "urdf").mkdir(parents=True)
+    (root / "__init__.py").write_text("raise ImportError('this package must not be imported')\n")
+    (root / "urdf" / "hand.urdf").write_bytes((repo_root() / "urdf" / "hand" / "hand.urdf").read_bytes())
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    return root
+
+
+def test_urdf_inside_an_installed_package(tmp_path, monkeypatch):
+    root = _installed_package(tmp_path, monkeypatch)
+    cfg = gt.load_robot_cfg(_hand_yaml(tmp_path, urdf="package://fake_hand_description/urdf/hand.urdf"))
+    assert cfg.urdf == (root / "urdf" / "hand.urdf").resolve()
+    assert gt.load_robot(cfg).n_fingers == 5
+
+
+@pytest.mark.parametrize(("urdf", "message"), [
+    ("package://no_such_hand_pkg/urdf/hand.urdf",
+     r"urdf: package://no_such_hand_pkg/urdf/hand.urdf: Python package 'no_such_hand_pkg' is not installed "
+     r"\(pip install no-such-hand-pkg\)$"),
+    ("package://fake_hand_description/urdf/nope.urdf",
+     r"urdf: package://fake_hand_description/urdf/nope.urdf: no file 'urdf/nope.urdf' in package "
+     r"'fake_hand_description' \(looked in .*fake_hand_description/urdf\)$"),
+    ("package://fake_hand_description/../../robot.yaml",
+     r"package://fake_hand_description/../../robot.yaml: '..' would lead out of package 'fake_hand_description'$"),
+    ("package://fake_hand_description", r"expected package://<python package>/<path inside it>"),
+    ("package:///urdf/hand.urdf", r"expected package://<python package>/<path inside it>"),
+    ("package://fake_hand_description/urdf/%00.urdf", r"expected package://<python package>/<path inside it>"),
+])
+def test_bad_package_urdf_is_one_line(tmp_path, monkeypatch, urdf, message):
+    _installed_package(tmp_path, monkeypatch)
+    with pytest.raises(gt.ConfigError, match=message) as info:
+        gt.load_robot_cfg(_hand_yaml(tmp_path, urdf=urdf))
+    assert "\n" not in str(info.value)
+
+
+def test_a_link_out_of_the_package_is_refused(tmp_path, monkeypatch):
+    root = _installed_package(tmp_path, monkeypatch)
+    outside = tmp_path / "elsewhere" / "hand.urdf"
+    outside.parent.mkdir()
+    outside.write_bytes((root / "urdf" / "hand.urdf").read_bytes())
+    (root / "urdf" / "linked.urdf").symlink_to(outside)
+    data = yaml.safe_load(_hand_yaml(tmp_path).read_text())
+    data["urdf"] = "package://fake_hand_description/urdf/linked.urdf"
+    config = tmp_path / "configs" / "robot.yaml"  # its folder is not where the link leads
+    config.parent.mkdir()
+    config.write_text(yaml.safe_dump(data))
+    with pytest.raises(gt.ConfigError, match=r"is outside the file's folder, the repository and installed packages"):
+        gt.load_robot_cfg(config)
