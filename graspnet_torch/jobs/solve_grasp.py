@@ -137,6 +137,12 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
                        4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
+    rc = problem.robot_cfg
+    if problem.object is not None or problem.obstacles or rc.floor is not None or rc.self_collision:
+        from graspnet_torch.robot.chain import UrdfModel  # collisions need the URDF's collision geometry:
+        from graspnet_torch.robot.geometry import link_shapes  # every mesh found and readable, before any work
+
+        link_shapes(UrdfModel(rc.urdf), "collision")
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     check_reach(robot, problem)
     if problem.points is not None:  # a gripper: its approach names known joints within their limits

@@ -183,3 +183,22 @@ def test_manus_from_the_command_line(tmp_path):
     assert data["robot"] == "manus" and len(data["arm_joints"]) == 9
     assert {"distance_mm", "alignment", "gripper_points", "collisions"} <= set(data)
     assert "best d " in res.stdout and (tmp_path / "posture.png").exists()
+
+
+def test_a_missing_collision_mesh_is_refused_before_any_work(tmp_path):
+    """With an object to collide with, every collision mesh must be found: exit 2, one line naming
+    the link, no result written (robot given by path, no checkpoint needed to get there)."""
+    import yaml
+
+    from tests.mesh_robots import mesh_hand_urdf, write_robot
+
+    robot = write_robot(tmp_path, mesh_hand_urdf('<mesh filename="meshes/missing_palm.stl"/>'))
+    problem = tmp_path / "p.yaml"
+    problem.write_text(yaml.safe_dump({
+        "robot": "meshhand.yaml", "object": {"shape": "box", "size": [0.04, 0.04, 0.04], "pose": [0, 0, 0.1, 0, 0, 0]},
+        "contacts": [{"finger": "thumb", "position": [0.02, 0, 0]}, {"finger": "index", "position": [-0.02, 0, 0]}]}))
+    out = tmp_path / "r.json"
+    res = _run(f"robot={robot}", f"problem={problem}", f"out={out}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2, res.stderr
+    assert "palm" in res.stderr and "missing_palm.stl" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not out.exists() and not (tmp_path / "run").exists()
