@@ -47,7 +47,7 @@ def tables(runs: int) -> tuple[dict, dict]:
     rows, results = {}, {}
     for env in ("env1", "env2"):
         for kind in REWARDS:
-            res = gt.solve(env, trials=runs, seed=SEED, reward=reward_cfg(kind))
+            res = gt.solve(env, trials=runs, seed=SEED, reward=reward_cfg(kind), solver=SolverCfg.paper())
             results[env, kind] = res
             trials = res.trials
             success = [t for t in trials if t.success]
@@ -88,7 +88,7 @@ def cmaes_rows(runs: int, results: dict) -> dict:
     for env in ("env1", "env2"):
         problem = gt.GraspProblem.from_task(env)
         robot, ik = robot_and_ik(problem.robot_cfg)
-        solver = SolverCfg()
+        solver = SolverCfg.paper()
         environment = build_environment(robot, problem, ik, solver, torch.float32, "cpu", reward_cfg("r3"))
         scene = CollisionScene(robot, problem)
         starts = results[env, "r3"].outcome.start
@@ -110,14 +110,14 @@ def product(n: int) -> dict:
     """16 learners batched on one problem, R3 (the arm's default): the best trial collision-free
     with total error < 1 mm, from n random seeds per environment; wall time of the whole solve.
     Two stop rules: every learner runs to its own stop (the paper's protocol, the default) and
-    ``solver.enough=8`` (the batch stops once 8 of the 16 learners succeeded: "give me a grasp")."""
+    ``solver.stop=8`` (the batch stops once 8 of the 16 learners succeeded: "give me a grasp")."""
     out = {}
     for env in ("env1", "env2"):
         for enough in (None, 8):
             ok, walls = 0, []
             for s in range(n):
                 t0 = time.perf_counter()
-                res = gt.solve(env, trials=16, seed=1000 + s, solver=SolverCfg(enough=enough))
+                res = gt.solve(env, trials=16, seed=1000 + s, solver=SolverCfg.paper(stop=enough))
                 walls.append(time.perf_counter() - t0)
                 ok += res.best.collisions == 0 and res.best.total_error_mm < 1.0
             out[env, enough] = {"ok": ok, "median_s": float(np.median(walls)), "max_s": float(np.max(walls))}
@@ -295,7 +295,7 @@ def main() -> int:
               "The best of 16 trials collision-free (FCL) with total error < 1 mm, and the wall time of the "
               f"whole `gt.solve` call ({args.threads} thread(s)), over {args.runs} seeds per environment:", "",
               format_table(["environment", "stop rule", "grasps found", "median wall time (s)", "max (s)"],
-                           [[env, "every trial to its own stop (default)" if e is None else f"solver.enough={e}",
+                           [[env, "every trial to its own stop (the paper)" if e is None else f"solver.stop={e}",
                              f"{prod[env, e]['ok']}/{args.runs}", prod[env, e]["median_s"], prod[env, e]["max_s"]]
                             for env in ("env1", "env2") for e in (None, 8)], floatfmt=".2f"), "",
               "## Random reachable arm problems", "",
@@ -313,7 +313,7 @@ def main() -> int:
             misses.append(f"{env}: R3 collision-free successes {rows[env, 'r3']['free']} < 22/30")
         fast = prod[env, 8]  # the product setting; the default protocol's times are reported beside it
         if fast["ok"] < 29 * args.runs / 30 or fast["median_s"] >= 2.0:
-            misses.append(f"{env}, solver.enough=8: product {fast['ok']}/{args.runs}, median {fast['median_s']:.2f} s")
+            misses.append(f"{env}, solver.stop=8: product {fast['ok']}/{args.runs}, median {fast['median_s']:.2f} s")
     if rand["solved"] < 0.9 * rand["n"]:
         misses.append(f"random problems {rand['solved']}/{rand['n']} < 90 %")
     for m in misses:

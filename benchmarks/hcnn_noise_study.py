@@ -48,7 +48,7 @@ def main() -> None:
     curves, rows = {}, []
     for sigma in LEVELS:
         res = gt.solve("block5", trials=args.trials, seed=0, noise=sigma, srv=srv, reward=reward,
-                       solver=SolverCfg(threshold=None, max_iterations=args.steps))
+                       solver=SolverCfg.paper(threshold=None, max_iterations=args.steps))
         h = res.outcome.history
         total = h["total"].double().numpy()  # (K, T), metres
         curves[sigma] = {"reinforcement": np.median(h["observed"].double().numpy(), axis=1),

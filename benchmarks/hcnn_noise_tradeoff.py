@@ -38,7 +38,7 @@ TABLE2 = (("glass3", 2000, 3.1), ("glass4", 1000, 5.1), ("videotape5", 1000, 6.9
 def final_error_mm(srv: SRVNetCfg, reward: RewardCfg, sigma_n: float, seed: int, trials: int, steps: int) -> float:
     """Noise-study final error: median over trials of the mean error of the last 100 steps (mm)."""
     res = gt.solve("block5", trials=trials, seed=seed, noise=sigma_n, srv=srv, reward=reward,
-                   solver=SolverCfg(threshold=None, max_iterations=steps, final_refine=0))
+                   solver=SolverCfg.paper(threshold=None, max_iterations=steps, final_refine=0))
     total = res.outcome.history["total"].double().numpy()  # (K, T) metres
     return float(np.median(total[-100:].mean(0))) * 1000
 
@@ -48,7 +48,7 @@ def table2_means_mm(srv: SRVNetCfg, reward: RewardCfg, trials: int) -> list[floa
     out = []
     for task, iterations, _paper in TABLE2:
         res = gt.solve(task, trials=trials, seed=0, srv=srv, reward=reward,
-                       solver=SolverCfg(threshold=None, max_iterations=iterations, history=False))
+                       solver=SolverCfg.paper(threshold=None, max_iterations=iterations, history=False))
         out.append(float(np.mean([t.total_error_mm for t in res.trials])))
     return out
 

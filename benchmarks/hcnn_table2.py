@@ -73,8 +73,8 @@ def main() -> None:
     summary = []
     started = time.perf_counter()
     for task, label, budgets, iterations in TASKS:
-        columns = [(f"{b:g} s", SolverCfg(threshold=None, max_iterations=10**7, time_budget=b)) for b in budgets]
-        columns.append((f"{iterations} iterations", SolverCfg(threshold=None, max_iterations=iterations)))
+        columns = [(f"{b:g} s", SolverCfg.paper(threshold=None, max_iterations=10**7, time_budget=b)) for b in budgets]
+        columns.append((f"{iterations} iterations", SolverCfg.paper(threshold=None, max_iterations=iterations)))
         results = [run_column(task, args.trials, cfg) for _, cfg in columns]
         paper = PAPER[task]
         fingers = list(results[0]["fingers"])
@@ -101,7 +101,7 @@ def main() -> None:
               "iterations.", "", "| task | median total error mm | mean | trials reaching r > 0.999 | "
               "median iterations |", "|---|---|---|---|---|"]
     for task, *_ in TASKS:
-        res = gt.solve(task, trials=20, seed=0, solver=SolverCfg(threshold=0.999, max_iterations=20_000))
+        res = gt.solve(task, trials=20, seed=0, solver=SolverCfg.paper(threshold=0.999, max_iterations=20_000))
         e = np.array([t.total_error_mm for t in res.trials])
         it = np.array([t.iterations for t in res.trials])
         ok = sum(t.success for t in res.trials)

@@ -59,6 +59,7 @@ class FingerIK:
         self.experts = dict(experts)
         self.damping = damping
         self._banks: dict[tuple, _Bank] = {}
+        self._kernels: dict[tuple[str, ...], FingerKernel] = {}  # per finger set, shared by every dtype / device
 
     @property
     def finger_names(self) -> tuple[str, ...]:
@@ -97,7 +98,9 @@ class FingerIK:
                                 else getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
 
         lower, upper = stack("q_lower"), stack("q_upper")
-        kernel = FingerKernel([self.robot.fingers[f].chain for f in fingers], width=n)
+        kernel = self._kernels.get(fingers)
+        if kernel is None:
+            kernel = self._kernels[fingers] = FingerKernel([self.robot.fingers[f].chain for f in fingers], width=n)
         bank = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
                      (lower + upper) / 2, (upper - lower) / 2, lower, upper, kernel)
         self._banks[key] = bank

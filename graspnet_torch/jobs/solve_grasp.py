@@ -68,8 +68,9 @@ def posture_of(robot, trial: TrialResult):
 
 
 def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...], every: int = 10) -> None:
-    """Per trial: reinforcement, expected reinforcement, mean sigma, total and per-finger error and,
-    when the loop counted them (rewards R2-R4 with an object or obstacles), collisions."""
+    """Per trial: reinforcement, total and per-finger error, what the solver has of expected
+    reinforcement and mean sigma (SRV) or step size (CMA-ES) and, when it counted them (rewards
+    R2-R4 with an object or obstacles), collisions; x: the iteration (CMA-ES: evaluations used)."""
     history = result.outcome.history if result.outcome is not None else None
     if history is None:
         return
@@ -77,17 +78,22 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
 
     with SummaryWriter(str(log_dir)) as writer:
         K, T = history["total"].shape
+        steps = history["iteration"].tolist() if "iteration" in history else list(range(1, K + 1))
         for k in list(range(0, K, every)) + ([K - 1] if (K - 1) % every else []):
             for t in range(T):
                 tag = f"trial_{t:02d}"
-                writer.add_scalar(f"{tag}/reinforcement", float(history["reinforcement"][k, t]), k + 1)
-                writer.add_scalar(f"{tag}/expected_reinforcement", float(history["expected"][k, t]), k + 1)
-                writer.add_scalar(f"{tag}/sigma_mean", float(history["sigma"][k, t]), k + 1)
-                writer.add_scalar(f"{tag}/total_error_mm", float(history["total"][k, t]) * 1000, k + 1)
-                for f, finger in enumerate(fingers):
-                    writer.add_scalar(f"{tag}/error_mm/{finger}", float(history["errors"][k, t, f]) * 1000, k + 1)
+                writer.add_scalar(f"{tag}/reinforcement", float(history["reinforcement"][k, t]), steps[k])
+                for key, name in (("expected", "expected_reinforcement"), ("sigma", "sigma_mean"),
+                                  ("step_size", "cmaes_step_size")):  # what the solver has (SRV, CMA-ES)
+                    if key in history:
+                        writer.add_scalar(f"{tag}/{name}", float(history[key][k, t]), steps[k])
+                writer.add_scalar(f"{tag}/total_error_mm", float(history["total"][k, t]) * 1000, steps[k])
+                if "errors" in history:
+                    for f, finger in enumerate(fingers):
+                        writer.add_scalar(f"{tag}/error_mm/{finger}", float(history["errors"][k, t, f]) * 1000,
+                                          steps[k])
                 if "collisions" in history:
-                    writer.add_scalar(f"{tag}/collisions", float(history["collisions"][k, t]), k + 1)
+                    writer.add_scalar(f"{tag}/collisions", float(history["collisions"][k, t]), steps[k])
 
 
 def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:

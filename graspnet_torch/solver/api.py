@@ -8,6 +8,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import torch
+from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.checkpoint import load_finger_ik
@@ -20,12 +21,12 @@ from graspnet_torch.solver.arm import ArmHandEnvironment
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.hand import HandEnvironment
-from graspnet_torch.solver.loop import LoopOutcome, run_loop
+from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "reference_posture", "robot_and_ik", "solve", "solve_many", "trial_posture"]
+__all__ = ["build_environment", "reference_posture", "robot_and_ik", "search", "solve", "solve_many", "trial_posture"]
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -36,6 +37,11 @@ def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK | None]:
     return robot, (load_finger_ik(robot) if robot.n_fingers else None)
 
 
+@lru_cache(maxsize=8)
+def _shipped_cfg(robot_name: str) -> RobotCfg:
+    return load_robot_cfg(robot_name)
+
+
 def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
     """A robot and its trained FCNN (None for a robot without fingers, the MANUS): a shipped
     robot by name (cached per process), or a robot config; a config that differs from the shipped
@@ -44,7 +50,7 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
     if isinstance(robot, str):
         return _shipped_robot_and_ik(robot)
     if robot.name in available_robots():
-        shipped = load_robot_cfg(robot.name)
+        shipped = _shipped_cfg(robot.name)
         if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
             return _shipped_robot_and_ik(robot.name)
     built = Robot(robot)
@@ -76,7 +82,7 @@ def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, rew
 def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
     settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
-                "enough": solver.enough,
+                "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
                 "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
                 "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
                 "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
@@ -109,10 +115,40 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         finger_ik = finger_ik or shipped_ik
     solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
-    outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
-    if solver.final_refine > 0 or solver.polish == "whole":
-        outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
+    outcome = search(env, trials, seed, solver, srv, reward, noise)
     return _result(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
+
+
+def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg,
+           noise: NoiseCfg) -> LoopOutcome:
+    """``solver.method`` on one environment, then (srv, cmaes) the environment's finish (the
+    fingers' refinement and the whole polish; a gripper's polish); the wall time includes it."""
+    import time
+
+    t0 = time.perf_counter()
+    if solver.method == "dls":
+        from graspnet_torch.solver.dls import run_dls
+
+        outcome = run_dls(env, trials, seed, solver, reward, noise)
+    else:
+        if solver.method == "cmaes":
+            from graspnet_torch.solver.cmaes import run_cmaes
+
+            outcome = run_cmaes(env, trials, seed, solver, reward, noise)
+        else:
+            outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
+        if solver.final_refine > 0 or (solver.polish == "whole" and env.whole_polish):
+            done = None
+            if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
+                pid = getattr(env, "problem_index", None)
+                pid = None if pid is None else pid.cpu()
+
+                def done(converged: Tensor) -> Tensor:
+                    return enough_succeeded(converged, pid, solver.stop)
+            outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine,
+                                                            done)
+    outcome.wall_time_s = time.perf_counter() - t0
+    return outcome
 
 
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,
@@ -145,9 +181,7 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     dtype = DTYPES[solver.dtype]
     env = GripperEnvironment(robot, batch, dtype, device, reward.kind != "r1", solver.approach_m,
                              solver.approach_deg, solver.refine, runs=trials)
-    outcome = run_loop(env, trials * len(batch), seed, solver, srv, reward, noise)
-    if solver.final_refine > 0:
-        outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine)
+    outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
     results = []
     for k, problem in enumerate(batch):
         one = GripperEnvironment(robot, problem, dtype, device, False, solver.approach_m, solver.approach_deg)
@@ -172,6 +206,7 @@ def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, 
     cls = ArmHandEnvironment if robot.has_body else HandEnvironment
     env = cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
     env.polish, env.polish_iterations = solver.polish, solver.polish_iterations
+    env.polish_tol = solver.polish_tolerance_mm / 1000
     return env
 
 

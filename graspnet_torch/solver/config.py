@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from graspnet_torch.settings import build, setting
 
-__all__ = ["NoiseCfg", "RewardCfg", "SolverCfg"]
+__all__ = ["PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
 
 
 @dataclass(frozen=True)
@@ -45,12 +45,35 @@ class NoiseCfg:
         return build(cls, d, where)
 
 
+SOLVERS = ("srv", "cmaes", "dls")
+
+# The paper's protocol (section 2.4, Tables 2-4): every trial runs to its own stop and only the
+# fingers are refined after the loop (the palm pose is what the network chose).
+PAPER_PROTOCOL = {"stop": None, "polish": "fingers", "polish_from": None}
+
+
 @dataclass(frozen=True)
 class SolverCfg:
-    """The closed loop of section 2.4.
+    """The solver of a problem (Hydra group ``solver/``: ``srv``, ``cmaes``, ``dls``, ``paper``).
+
+    ``method`` picks the search; everything else (the problem, the result JSON, its float64
+    verification, pictures, TensorBoard) is the same for all three:
+
+    - 'srv': the closed loop of section 2.4 (the paper's system, the default), then a polish of
+      the whole configuration and batch-level stopping (both beyond the paper; ``solver=paper``
+      turns them off);
+    - 'cmaes': CMA-ES (the ``cmaes`` package) over the same configuration, seeing the same
+      (possibly noisy) reinforcement as a black box; one independent CMA-ES per trial, one
+      evaluation = one iteration;
+    - 'dls': damped least squares (Levenberg-Marquardt) over the whole configuration (palm pose or
+      body joints together with the contact fingers' free joints) from ``trials`` random
+      restarts; it minimises the model's error directly, so it never sees the reinforcement
+      (refused with sensor noise); one step = one iteration.
 
     Attributes:
-        max_iterations: iteration budget per trial.
+        method: 'srv', 'cmaes' or 'dls'.
+        max_iterations: iteration budget per trial (srv: loop iterations; cmaes: evaluations;
+            dls: Levenberg-Marquardt steps).
         threshold: a trial stops once its (noise-free) reinforcement exceeds this (paper: 0.99);
             ``None`` or > 1 (at most 2) never stops early (fixed-length runs such as the noise study).
         refine: steps inside the loop, per evaluation: FCNN refinement iterations (eq. 5) for a
@@ -58,18 +81,32 @@ class SolverCfg:
             damped least-squares steps that settle each proposal before it is evaluated.
         final_refine: refinement iterations applied after the loop to the reported configuration's
             fingers (the palm pose is kept); the reported errors are those of the refined joints.
-        polish: after ``final_refine``, 'fingers' stops there (the paper: the palm pose is what the
-            network chose); 'whole' also polishes the palm pose (or arm joints) together with the
-            contact fingers' free joints, ``polish_iterations`` Levenberg-Marquardt steps in float64
-            within bounds and limits, never worse, never into a collision the proxy sees.
+            Not used with ``polish: whole``, which moves the fingers too.
+        polish: 'whole' (default) polishes the palm pose (or arm joints) together with the
+            contact fingers' free joints after the loop (and inside it, ``polish_from``):
+            ``polish_iterations`` Levenberg-Marquardt steps in float64 within bounds and limits,
+            never worse, never into a collision the proxy sees; 'fingers' refines only the
+            fingers (``final_refine``; the paper: the palm pose is what the network chose). A
+            gripper (MANUS) always polishes its whole configuration (``final_refine``).
+        polish_tolerance_mm: a polished (or ``dls``) trial stops once its error (E of eq. 3, or
+            d of eq. 26) is below this.
+        polish_from: with ``polish: whole``, no sensor noise and a threshold, a trial whose
+            observed reinforcement first exceeds this (and each time it betters it) has its best
+            configuration polished inside the loop; where the polish lands above the threshold,
+            the trial has succeeded, else it learns on (``None``: the polish only after the loop).
+            0.9 with a = 1: E < 100 mm, measured on random reachable hand problems (README, "Which
+            solver?"): as sure as 0.95 and 0.99, and faster.
         candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
         approach_m, approach_deg: a gripper problem with an ``approach`` configuration searches
             within +- these of it (prismatic joints in metres, revolute joints in degrees),
             clipped to the joint limits (section 7 automates the last phase only).
         time_budget: wall-clock seconds after which the loop stops (``None``: no limit).
-        enough: stop the whole batch once this many trials have succeeded, the others reported as
-            they stand (``None``: every trial runs to its own stop, the paper's independent runs;
-            a number: "give me a grasp", when the trials are restarts of one search).
+        stop: a problem ends once this many of its trials have succeeded (srv, cmaes: r > threshold;
+            dls: within the tolerance), the others reported as they stand (default 1: "give me a
+            grasp", the trials are restarts of one search; ``None``: every trial runs to its own
+            stop, the paper's independent runs).
+        population: CMA-ES population per trial (``None``: the ``cmaes`` default, 4 + 3 ln n).
+        step_size: CMA-ES initial step size, in units of the normalised bounds [0, 1].
         stop_clear: a trial stops only at a configuration the collision proxy finds clear (the
             paper stops on the reinforcement alone, so an early colliding configuration, weakly
             shaped by R3/R4 while i << p, can end a trial; the MANUS defaults to true: a grasp
@@ -81,25 +118,36 @@ class SolverCfg:
         dtype: 'float32' (hot path) or 'float64'.
     """
 
+    method: str = setting("srv", choices=SOLVERS)
     max_iterations: int = setting(2000, lo=1, hi=10_000_000)
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
-    enough: int | None = setting(None, lo=1, hi=1_000_000)
+    stop: int | None = setting(1, lo=1, hi=1_000_000)
     approach_m: float = setting(0.2, lo=0.0, lo_open=True, hi=10.0)
     approach_deg: float = setting(30.0, lo=0.0, lo_open=True, hi=360.0)
     refine: int = setting(0, lo=0, hi=1000)
     final_refine: int = setting(3, lo=0, hi=1000)
-    polish: str = setting("fingers", choices=("fingers", "whole"))
+    polish: str = setting("whole", choices=("fingers", "whole"))
     polish_iterations: int = setting(30, lo=0, hi=10_000)
+    polish_tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
+    polish_from: float | None = setting(0.9, lo=-1.0, hi=1.0)
     candidates: int = setting(1, lo=1, hi=64)
     stop_clear: bool = False
     report: str = setting("best", choices=("best", "final"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))
+    population: int | None = setting(None, lo=2, hi=100_000)
+    step_size: float = setting(0.25, lo=0.0, lo_open=True, hi=10.0)
 
     @classmethod
     def from_mapping(cls, d: dict | None, where: str = "solver") -> SolverCfg:
         return build(cls, d, where)
+
+    @classmethod
+    def paper(cls, **changes) -> SolverCfg:
+        """The paper's protocol (every trial to its own stop, the fingers refined, the palm pose
+        kept), with ``changes``: what the reproductions of its tables use."""
+        return cls(**{**PAPER_PROTOCOL, **changes})
 
     @property
     def stop_threshold(self) -> float | None:

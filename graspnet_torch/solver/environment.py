@@ -19,11 +19,15 @@ robot and a problem; a new kind of robot is a new environment, never an edit of 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import torch
 from torch import Tensor
+
+if TYPE_CHECKING:
+    from graspnet_torch.solver.least_squares import LMResult
 
 __all__ = ["Environment", "Evaluation", "FingerEnvironment"]
 
@@ -180,23 +184,49 @@ class FingerEnvironment:
 
     polish = "fingers"  # 'whole': also polish the configuration with the fingers (SolverCfg.polish)
     polish_iterations = 0
+    polish_tol = 0.0  # metres: a polished trial stops below this error
+    whole_polish = True  # the environment has a whole polish (SolverCfg.polish applies)
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int,
+               done: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, Evaluation]:
         """Refine the finger joints of the reported configurations (the configuration kept); never
-        worse. With ``polish = 'whole'``, then polish the configuration and the fingers together
-        (:meth:`polish_whole`). Returns the configurations and their evaluation."""
-        if iterations > 0:
+        worse. With ``polish = 'whole'``, instead polish the configuration and the fingers together
+        (:meth:`polish_whole`; ``done`` as :meth:`local_solve`'s: the rows that may stop, given
+        the converged ones). Returns the configurations and their evaluation."""
+        whole = self.polish == "whole" and self.polish_iterations > 0
+        if iterations > 0 and not whole:  # the whole polish moves the fingers too
             with torch.inference_mode():
                 q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
             evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
                                     collisions=evaluation.collisions)
-        if self.polish == "whole" and self.polish_iterations > 0:
-            config, evaluation = self.polish_whole(config, evaluation, self.polish_iterations)
+        if whole:
+            config, evaluation = self.polish_whole(config, evaluation, self.polish_iterations, self.polish_tol, done)
         return config, evaluation
 
-    def _tips64(self, x: Tensor) -> Tensor:
-        """Contact fingertips in the world for stacked [configuration, finger joints] rows.
-        x: (B, n + F * j) float64 -> (B, F, 3)."""
+    # The whole configuration x = [configuration (n), the contact fingers' joints (F * j)], float64 on
+    # the CPU: what the whole polish and solver=dls move together (padding slots have limits [0, 0]).
+
+    def whole_bounds(self) -> tuple[Tensor, Tensor]:
+        """(m,) lower and upper bounds of x: the configuration's bounds, then the joint limits."""
+        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        return (torch.cat([self.lower.to(torch.float64).cpu(), flo]),
+                torch.cat([self.upper.to(torch.float64).cpu(), fhi]))
+
+    def whole_start(self, config: Tensor, joints: Tensor) -> Tensor:
+        """x (T, m) of configurations (T, n) and contact-finger joints (T, F, j), within bounds."""
+        lo, hi = self.whole_bounds()
+        T = config.shape[0]
+        return torch.clamp(torch.cat([self.clamp(config), joints.detach().to(torch.float64).cpu().reshape(T, -1)], 1),
+                           lo, hi)
+
+    def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
+        """x (T, m) uniform within the bounds and joint limits (``solver=dls``'s restarts)."""
+        lo, hi = self.whole_bounds()
+        u = torch.rand(trials, lo.numel(), generator=gen, dtype=torch.float64, device=gen.device).cpu()
+        return lo + (hi - lo) * u
+
+    def _tips64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+        """Contact fingertips in the world, flattened, of rows of x. x: (B, m) float64 -> (B, 3F)."""
         from graspnet_torch.robot.transforms import transform_points
 
         F, j = len(self.idx), self.robot.joints_per_finger
@@ -204,70 +234,51 @@ class FingerEnvironment:
         kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
         local = kernel.position(x[:, self.n:].reshape(-1, F, j))
         in_palm = transform_points(self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu(), local)
-        return transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
+        return transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm).reshape(x.shape[0], -1)
 
-    def _count64(self, x: Tensor) -> Tensor:
-        """The proxy's collision count (B,) of stacked rows (see :meth:`_tips64`)."""
+    def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+        """The proxy's collision count (B,) of rows of x."""
         F, j = len(self.idx), self.robot.joints_per_finger
         config = x[:, : self.n].to(self.lower)
         q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
         every = self.home.expand(q.shape[0], -1, -1).index_copy(1, self._idx, q)
-        return self.proxy.count(self.palm_frame(config), every, config if self.robot.has_body else None)
+        return self.proxy.count(self.palm_frame(config), every, config if self.robot.has_body else None).cpu()
 
-    def polish_whole(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
-        """Levenberg-Marquardt on the whole configuration (palm pose or arm joints) together with
-        the contact fingers' free joints, in float64 within the bounds and joint limits:
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0,
+                    done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
+                    ) -> LMResult:
+        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        on x (T, m): the contact fingertips onto their contacts, within bounds and limits, never
+        into a collision the proxy sees (when there is one)."""
+        from graspnet_torch.solver.least_squares import levenberg_marquardt
 
-            dx = J^T (J J^T + lambda^2 I)^-1 e,   e: (3F,) contacts - fingertips,  J = d tips / d x
+        lo, hi = self.whole_bounds()
+        goal = self.contacts.to(torch.float64).cpu().reshape(-1)
+        return levenberg_marquardt(self._tips64, goal, x, lo, hi, iterations, tol=tol, done=done, trace=trace,
+                                   count=self._count64 if self.proxy is not None else None)
 
-        (forward differences). A step is kept only where it lowers |e| (then lambda / 3, else
-        lambda * 4) and, with a collision proxy, does not raise the collision count: never worse.
-        The loop finds the basin; the fingers alone, with the palm fixed, end where the palm left
-        them (a few mm), the whole polish lands in it."""
-        T, F, j = config.shape[0], len(self.idx), self.robot.joints_per_finger
-        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
-        lo = torch.cat([self.lower.to(torch.float64).cpu(), flo])
-        hi = torch.cat([self.upper.to(torch.float64).cpu(), fhi])
-        x = torch.clamp(torch.cat([self.clamp(config), evaluation.joints.detach().to(torch.float64).cpu()
-                                   .reshape(T, -1)], 1), lo, hi)
-        m = x.shape[1]
+    def whole_result(self, solved: LMResult, like: Tensor, collisions: Tensor | None = None
+                     ) -> tuple[Tensor, Evaluation]:
+        """The configurations (T, n) and evaluation of solved x, in the dtype and device of ``like``."""
+        T, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
         goal = self.contacts.to(torch.float64).cpu().reshape(1, -1)
-        eye_e, eye_x = torch.eye(3 * F, dtype=torch.float64), torch.eye(m, dtype=torch.float64)
-        h = 1e-7
-        tips = self._tips64(x).reshape(T, -1)
-        err = (goal - tips).norm(dim=-1)
-        lam = torch.full((T, 1, 1), 1e-3, dtype=torch.float64)
-        count = self._count64(x) if self.proxy is not None else None
-        for _ in range(iterations):
-            e = goal - tips
-            J = ((self._tips64((x.unsqueeze(1) + h * eye_x).reshape(-1, m)).reshape(T, m, -1)
-                  - tips.unsqueeze(1)) / h).transpose(1, 2)  # (T, 3F, m)
-            blocked = None
-            for _pass in range(2):  # joints at a bound the step pushes outward leave the Jacobian
-                Jb = J if blocked is None else J * (~blocked).unsqueeze(1)
-                dx = (Jb.transpose(1, 2) @ torch.linalg.solve(Jb @ Jb.transpose(1, 2) + lam ** 2 * eye_e,
-                                                              e.unsqueeze(-1))).squeeze(-1)
-                blocked = ((x <= lo + 1e-12) & (dx < 0)) | ((x >= hi - 1e-12) & (dx > 0))
-                if not bool(blocked.any()):
-                    break
-            new = torch.clamp(x + dx, lo, hi)
-            new_tips = self._tips64(new).reshape(T, -1)
-            new_err = (goal - new_tips).norm(dim=-1)
-            better = new_err < err
-            if count is not None:
-                new_count = self._count64(new)
-                better &= new_count <= count
-                count = torch.where(better, new_count, count)
-            x = torch.where(better.unsqueeze(1), new, x)
-            tips = torch.where(better.unsqueeze(1), new_tips, tips)
-            err = torch.where(better, new_err, err)
-            lam = torch.where(better.view(-1, 1, 1), (lam / 3).clamp(min=1e-6), (lam * 4).clamp(max=1.0))
-        finger_err = (goal - tips).reshape(T, F, 3).norm(dim=-1)
-        kw = {"dtype": config.dtype, "device": config.device}
-        return x[:, : self.n].to(**kw), Evaluation(
+        finger_err = (goal - solved.value).reshape(T, F, 3).norm(dim=-1)
+        kw = {"dtype": like.dtype, "device": like.device}
+        count = solved.count if solved.count is not None else collisions
+        return solved.x[:, : self.n].to(**kw), Evaluation(
             error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
-            joints=x[:, self.n:].reshape(T, F, j).to(**kw),
-            collisions=count.to(config.device) if count is not None else evaluation.collisions)
+            joints=solved.x[:, self.n:].reshape(T, F, j).to(**kw),
+            collisions=None if count is None else count.to(like.device))
+
+    def polish_whole(self, config: Tensor, evaluation: Evaluation, iterations: int, tol: float = 0.0,
+                     done: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, Evaluation]:
+        """Levenberg-Marquardt on the whole configuration (palm pose or arm joints) together with
+        the contact fingers' free joints (:meth:`local_solve`), from the reported ones: never
+        worse. The loop finds the basin; the fingers alone, with the palm fixed, end where the
+        palm left them (a few mm), the whole polish lands in it. Rows stop at |e| < ``tol`` or
+        when ``done`` says so."""
+        solved = self.local_solve(self.whole_start(config, evaluation.joints), iterations, tol, done)
+        return self.whole_result(solved, config, evaluation.collisions)
 
     def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
         """Per trial, the result fields of the reported configuration, recomputed in float64: the

@@ -11,7 +11,8 @@ or obstacles. No FCNN.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -24,6 +25,9 @@ from graspnet_torch.rewards import manus_reward
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.tasks.problem import GraspProblem
+
+if TYPE_CHECKING:
+    from graspnet_torch.solver.least_squares import LMResult
 
 __all__ = ["CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
 
@@ -68,6 +72,7 @@ class GripperEnvironment:
     """
 
     subsets = True
+    whole_polish = False  # its finish always polishes every joint (final_refine); SolverCfg.polish does not apply
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
                  device: torch.device | str = "cpu", collisions: bool = False, approach_m: float = 0.2,
@@ -190,11 +195,14 @@ class GripperEnvironment:
                 J = self._jacobian(levels, pts)
         return q, levels, pts
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int) -> tuple[Tensor, Evaluation]:
+    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int,
+               done: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, Evaluation]:
         """Polish the reported configurations: ``iterations`` damped least-squares steps (float64)
         on the two gripper points against the object points of each trial's nearer pairing,
         within the bounds, each step kept only where it lowers d (never worse). The analogue of
         the hand's final finger refinement: the loop finds the basin, the polish lands in it.
+        Every trial is polished for the whole budget (``done`` is not used: the MANUS protocol's
+        figures are those of every learner).
 
             dq = J^T (J J^T + lambda^2 I)^-1 e,   J = d(points)/dq (6 x n, forward differences, float64)
         """
@@ -204,52 +212,89 @@ class GripperEnvironment:
         T = q.shape[0]
         targets = self._targets64.expand(T, 2, 3)
         goal = torch.cat([targets.reshape(T, 6), targets.flip(1).reshape(T, 6)])
-        q2, err = self._least_squares(q.repeat(2, 1), goal, iterations)  # both pairings (eq. 26-28) at once
+        solved = self._least_squares(q.repeat(2, 1), goal, iterations)  # both pairings (eq. 26-28) at once
+        q2, err = solved.x, solved.err
         crossed = err[T:] < err[:T]
         q = torch.where(crossed.unsqueeze(1), q2[T:], q2[:T])
         ev = self.evaluate(q.to(config))
         return (q.to(config) if ev.config is None else ev.config), ev
 
-    def _least_squares(self, q: Tensor, goal: Tensor, iterations: int) -> tuple[Tensor, Tensor]:
-        """Levenberg-Marquardt on the gripper points, float64, within the bounds.
+    def _least_squares(self, q: Tensor, goal: Tensor, iterations: int, tol: float = 0.0,
+                       done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
+                    ) -> LMResult:
+        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        on the gripper points, float64, within the bounds, never into a collision the proxy sees.
 
-        q: (B, n) start; goal: (B, 6) the two object points in the chosen pairing. Per row, a step
-        dq = J^T (J J^T + lambda^2 I)^-1 e is kept only where it lowers |e| (then lambda / 3), else
-        lambda * 4. Returns the configurations (B, n) and their |e| (B,).
+        q: (B, n) start, B a multiple of the trials (row r is trial r % T); goal: (B, 6) the two
+        object points in the pairing of each row. Returns where each row ended (``x``, ``err``).
         """
+        from graspnet_torch.solver.least_squares import levenberg_marquardt
+
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
-        if lo.dim() == 2:  # a batch of problems: q holds both pairings of every trial
+        T = self.lower.shape[0] if self.lower.dim() == 2 else None
+        if lo.dim() == 2:  # a batch of problems: q holds copies of every trial
             lo, hi = lo.repeat(q.shape[0] // lo.shape[0], 1), hi.repeat(q.shape[0] // hi.shape[0], 1)
-        h = 1e-6
-        lam = torch.full((q.shape[0], 1, 1), 1e-2, dtype=torch.float64)
-        eye6 = torch.eye(6, dtype=torch.float64)
-        eye = torch.eye(self.n, dtype=torch.float64)
-        pts = self.robot.gripper_points(q).reshape(-1, 6)
-        err = (goal - pts).norm(dim=-1)
-        collisions = self._count(q) if self.proxy is not None else None
-        for _ in range(iterations):
-            e = goal - pts
-            shifted = q.unsqueeze(1) + h * eye  # (B, n, n): one joint moved per row
-            J = (self.robot.gripper_points(shifted).reshape(q.shape[0], self.n, 6)
-                 - pts.reshape(-1, 1, 6)).transpose(1, 2) / h  # (B, 6, n), forward differences
-            dq = _dls(J, e, lam, eye6)
-            # joints at a bound that the step pushes outward leave the Jacobian (an active set)
-            blocked = ((q <= lo + 1e-9) & (dq < 0)) | ((q >= hi - 1e-9) & (dq > 0))
-            if bool(blocked.any()):
-                dq = _dls(J * (~blocked).unsqueeze(1), e, lam, eye6)
-            new = torch.clamp(q + dq, lo, hi)
-            new_pts = self.robot.gripper_points(new).reshape(-1, 6)
-            new_err = (goal - new_pts).norm(dim=-1)
-            better = new_err < err
-            if collisions is not None:  # never into a collision: a step may not raise the proxy's count
-                new_c = self._count(new)
-                better &= new_c <= collisions
-                collisions = torch.where(better, new_c, collisions)
-            q = torch.where(better.unsqueeze(1), new, q)
-            pts = torch.where(better.unsqueeze(1), new_pts, pts)
-            err = torch.where(better, new_err, err)
-            lam = torch.where(better.view(-1, 1, 1), (lam / 3).clamp(min=1e-4), (lam * 4).clamp(max=10.0))
-        return q, err
+
+        def points(x: Tensor, rows: Tensor) -> Tensor:
+            return self.robot.gripper_points(x).reshape(-1, 6)
+
+        def count(x: Tensor, rows: Tensor) -> Tensor:
+            pid = None if T is None else self.problem_index[rows % T]
+            return self._count(x, pid)
+
+        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=1e-2, lam_min=1e-4, lam_max=10.0, h=1e-6,
+                                   edge=1e-9, tol=tol, done=done, trace=trace,
+                                   count=count if self.proxy is not None else None)
+
+    # solver=dls: the whole configuration is the body's joints (no fingers)
+
+    def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
+        """(T, n) configurations uniform within each trial's bounds, float64 on the CPU."""
+        lo, hi = (torch.as_tensor(a) for a in self._bounds)
+        u = torch.rand(trials, self.n, generator=gen, dtype=torch.float64, device=gen.device).cpu()
+        return lo + (hi - lo) * u
+
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0,
+                    done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
+                    ) -> LMResult:
+        """Levenberg-Marquardt from x (T, n) onto both pairings of the object points at once
+        (eq. 26-28), each trial keeping its better one; a trial stops once either pairing is
+        within ``tol`` or ``done`` says so."""
+        from graspnet_torch.solver.least_squares import LMResult
+
+        T = x.shape[0]
+        targets = self._targets64.expand(T, 2, 3)
+        goal = torch.cat([targets.reshape(T, 6), targets.flip(1).reshape(T, 6)])
+
+        def either(stopped: Tensor) -> Tensor:
+            one = stopped[:T] | stopped[T:]
+            if done is not None:
+                one = one | done(one)
+            return one.repeat(2)
+
+        both: list[Tensor] | None = [] if trace is not None else None
+        solved = self._least_squares(x.repeat(2, 1), goal, iterations, tol, either, both)
+        if trace is not None:
+            trace.extend(torch.minimum(e[:T], e[T:]) for e in both)
+        crossed = solved.err[T:] < solved.err[:T]
+        pick = torch.where(crossed, torch.arange(T, 2 * T), torch.arange(T))
+        return LMResult(x=solved.x[pick], err=solved.err[pick], value=solved.value[pick],
+                        count=None if solved.count is None else solved.count[pick],
+                        steps=torch.maximum(solved.steps[:T], solved.steps[T:]))
+
+    def whole_result(self, solved: LMResult, like: Tensor, collisions: Tensor | None = None
+                     ) -> tuple[Tensor, Evaluation]:
+        """The configurations (T, n) of solved rows and their evaluation (no settling steps)."""
+        config = solved.x.to(like)
+        levels, points, _ = self._kinematics(config)
+        _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
+        count = None
+        if self.proxy is not None:
+            end = levels[:, -1] @ self._palm_offset
+            none = self._no_fingers.expand(config.shape[0], 0, 0)
+            count = self.proxy.count((end[:, :3, :3], end[:, :3, 3]), none, config, list(levels.unbind(1)),
+                                     self.problem_index)
+        return config, Evaluation(error=d, alignment=alignment, collisions=count)
 
     def _count(self, q: Tensor, pid: Tensor | None = None) -> Tensor:
         """(B,) the proxy's collision count of configurations (B, n) of the trials of problems

@@ -31,7 +31,7 @@ from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
-__all__ = ["LoopOutcome", "run_loop"]
+__all__ = ["LoopOutcome", "enough_succeeded", "run_loop"]
 
 
 @dataclass
@@ -141,6 +141,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     iterations = torch.full((T,), solver.max_iterations, dtype=torch.long, device=device)
     best_config = best_ev = best_r = best_obs = None
     n_active = T
+    succeeded = torch.zeros(T, dtype=torch.bool, device=device)
+    polish_from = None  # the polish inside the loop (SolverCfg.polish_from; never with sensor noise)
+    if (solver.polish_from is not None and solver.polish == "whole" and getattr(env, "whole_polish", False)
+            and noise.sigma == 0 and threshold is not None):
+        polish_from = solver.polish_from
+    polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
+    problem_index = getattr(env, "problem_index", None)  # (T,) a batch of problems: each trial's
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
         step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
@@ -170,6 +177,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             best_r = torch.where(better, r, best_r)
             best_config = torch.where(better.unsqueeze(1), config, best_config)
             best_ev = ev.where(better, best_ev)
+        if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
+            near = active & (observed > polish_from) & (observed > polished_at)
+            if bool(near.any()):
+                polished_at = torch.where(near, observed, polished_at)
+                best_config, best_ev, best_r, best_obs, landed = _polish_near(
+                    env, near, best_config, best_ev, best_r, best_obs, reward, k + 1, threshold, solver)
+                observed = torch.where(landed, best_obs, observed)  # the stop below sees the landed ones
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
                                ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
@@ -187,13 +201,51 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             if solver.stop_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
                 done &= ev.collisions == 0
             if bool(done.any()):
+                succeeded |= done
+                if solver.stop is not None:  # a problem with enough successes ends: its other trials too
+                    done = done | (active & enough_succeeded(succeeded, problem_index, solver.stop))
                 iterations = torch.where(done, torch.full_like(iterations, k + 1), iterations)
                 active = active & ~done
                 all_active = False
                 n_active = int(active.sum())
                 if not bool(active.any()):
                     break
-                if solver.enough is not None and int((~active).sum()) >= solver.enough:  # the batch has its grasps
-                    iterations = torch.where(active, torch.full_like(iterations, k + 1), iterations)
-                    break
     return best_config, best_ev, best_r, iterations
+
+
+def _polish_near(env: Environment, near: Tensor, config: Tensor, ev: Evaluation, r: Tensor, obs: Tensor,
+                 reward: Reward, iteration: int, threshold: float, solver: SolverCfg
+                 ) -> tuple[Tensor, Evaluation, Tensor, Tensor, Tensor]:
+    """Polish the best configurations of the trials ``near`` (T,) (the environment's whole polish,
+    ``solver.polish_iterations`` steps to ``solver.polish_tolerance_mm``) and keep each where it
+    is better; returns the best configuration, evaluation, reinforcement and observed
+    reinforcement of every trial, and (T,) which polished trials now exceed the threshold."""
+    idx = near.nonzero().squeeze(1)
+    part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
+    done = None
+    if solver.stop is not None:  # the polish ends once enough of a problem's trials have landed
+        pid = getattr(env, "problem_index", None)
+        pid = None if pid is None else pid[idx].cpu()
+
+        def done(converged: Tensor) -> Tensor:
+            return enough_succeeded(converged, pid, solver.stop)
+    new_config, new_ev = env.polish_whole(config[idx], part, solver.polish_iterations,
+                                          solver.polish_tolerance_mm / 1000, done)
+    new_r = reward(new_ev, iteration)
+    better = new_r > r[idx]
+    take = torch.zeros_like(near).index_fill(0, idx[better], True)
+    full_config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
+    full_ev = ev.put(idx, new_ev.where(better, part), full_config)
+    full_r = r.index_copy(0, idx, torch.where(better, new_r, r[idx]))
+    full_obs = torch.where(take, full_r, obs)
+    return full_config, full_ev, full_r, full_obs, take & (full_r > threshold)
+
+
+def enough_succeeded(succeeded: Tensor, problem_index: Tensor | None, stop: int) -> Tensor:
+    """(T,) True for the trials of problems with at least ``stop`` successes (``problem_index``
+    (T,): each trial's problem; None: one problem)."""
+    if problem_index is None:
+        return succeeded.sum().expand(succeeded.shape[0]) >= stop
+    counts = torch.zeros(int(problem_index.max()) + 1, dtype=torch.long, device=succeeded.device)
+    counts.index_add_(0, problem_index, succeeded.long())
+    return counts[problem_index] >= stop

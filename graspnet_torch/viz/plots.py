@@ -25,23 +25,26 @@ def plot_learning_curves(history: Mapping[str, np.ndarray], path: str | Path, ti
                          highlight: int | None = None) -> Path:
     """Reinforcement, total error, expected reinforcement and sigma per iteration.
 
-    history: arrays (K, T) under 'reinforcement', 'total' (m), 'expected', 'sigma' and optionally
-    'collisions' (a fifth panel, as the paper's Fig. 9); every trial is a thin line,
-    ``highlight`` (a trial index) a bold one.
+    history: arrays (K, T) under 'reinforcement', 'total' (m) and, where the solver has them,
+    'expected', 'sigma', 'step_size' (CMA-ES) and 'collisions' (a panel as the paper's Fig. 9);
+    'iteration' (K,): the x values when the rows are not consecutive iterations (CMA-ES: one row
+    per generation). Every trial is a thin line, ``highlight`` (a trial index) a bold one.
     """
     plt = _plt()
     panels = [("reinforcement", "a/ reinforcement r", None), ("total", "b/ total error E (m)", "log"),
               ("expected", "c/ expected reinforcement r_hat (mean over SRV units)", None),
-              ("sigma", "d/ standard deviation sigma (mean over SRV units)", None)]
+              ("sigma", "d/ standard deviation sigma (mean over SRV units)", None),
+              ("step_size", "c/ CMA-ES step size (normalised units)", "log")]
     if "collisions" in history:
         panels.append(("collisions", "e/ collisions (the loop's count)", None))
+    panels = [p for p in panels if p[0] in history]  # CMA-ES and DLS have no r_hat (CMA-ES: its step size)
     rows = (len(panels) + 1) // 2
-    fig, axes = plt.subplots(rows, 2, figsize=(10, 3.25 * rows), dpi=110, sharex=True)
+    fig, axes = plt.subplots(rows, 2, figsize=(10, 3.25 * rows), dpi=110, sharex=True, squeeze=False)
     if len(panels) % 2:
         axes.ravel()[-1].set_visible(False)
     for ax, (key, label, scale) in zip(axes.ravel(), panels, strict=False):
         data = np.asarray(history[key])
-        x = np.arange(1, data.shape[0] + 1)
+        x = np.asarray(history["iteration"]) if "iteration" in history else np.arange(1, data.shape[0] + 1)
         ax.plot(x, data, color="tab:blue", alpha=0.25, linewidth=0.7)
         if highlight is not None:
             ax.plot(x, data[:, highlight], color="tab:red", linewidth=1.4, label=f"trial {highlight}")

@@ -79,7 +79,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["-m", "seed=0,1", "problem=/dev/zero"], "/dev/zero: the problem file is not a regular file"),
     (["-m", "seed=0,1", "trials=200000000"], "trials=200000000 x max_iterations=2000 needs about"),
     (["srv.hidden=[4096,4096]"], "srv.hidden[0]=4096: expected an integer in [1, 1024]"),
-    (["solver.enough=0"], "solver.enough=0: expected an integer in [1, 1000000]"),
+    (["solver.stop=0"], "solver.stop=0: expected an integer in [1, 1000000]"),
     (["solver.approach_deg=-5"], "solver.approach_deg=-5: expected a number in (0, 360]"),
     (["solver.approach_m=abc"], "solver.approach_m='abc': expected a number"),
     (["reward=r5"], "unknown reward 'r5': expected one of default, r1, r2, r3, r4"),

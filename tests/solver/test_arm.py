@@ -109,8 +109,8 @@ def test_learning_beats_the_same_loop_with_learning_rates_at_zero(task, srv, max
     frozen = gt.SRVNetCfg(lr_bp=0.0, lr_srv=0.0, lr_lms=0.0)
     runs = {}
     for name, cfg in (("learning", srv), ("frozen", frozen)):
-        result = gt.solve(task, trials=30, seed=0, srv=cfg, solver=gt.SolverCfg(max_iterations=max_iterations,
-                                                                                 history=False))
+        result = gt.solve(task, trials=30, seed=0, srv=cfg, solver=gt.SolverCfg.paper(max_iterations=max_iterations,
+                                                                                       history=False))
         runs[name] = (sum(t.iterations for t in result.trials) / 30, sum(t.success for t in result.trials))
     assert runs["learning"][0] < ratio * runs["frozen"][0], runs
     assert runs["learning"][1] >= runs["frozen"][1], runs

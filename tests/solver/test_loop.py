@@ -29,7 +29,7 @@ def problem_from_posture(robot, fingers, seed=0):
 
 def test_loop_solves_a_reachable_problem(hand):
     problem = problem_from_posture(hand, ("thumb", "index", "middle"), seed=3)
-    result = gt.solve(problem, trials=8, seed=0, max_iterations=1500)
+    result = gt.solve(problem, trials=8, seed=0, max_iterations=1500, solver=SolverCfg.paper())
     assert result.success
     assert result.total_error_mm < 10.0
     assert sum(t.success for t in result.trials) >= 4
@@ -108,7 +108,7 @@ def test_fixed_seed_glass3_matches_the_recorded_result():
     from pathlib import Path
 
     recorded = json.loads((Path(__file__).parent / "data" / "glass3_seed0_T6_K300.json").read_text())
-    result = gt.solve("glass3", trials=6, seed=0, max_iterations=300).to_dict()
+    result = gt.solve("glass3", trials=6, seed=0, max_iterations=300, solver=SolverCfg.paper()).to_dict()
     assert [t["iterations"] for t in result["trials"]] == [t["iterations"] for t in recorded["trials"]]
     for got, want in zip(result["trials"], recorded["trials"], strict=True):
         assert got["success"] == want["success"]

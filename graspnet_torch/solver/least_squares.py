@@ -1,0 +1,121 @@
+"""Batched Levenberg-Marquardt within bounds: the local solver behind every polish and ``solver=dls``.
+
+For B rows at once, each with its own goal, bounds and damping, minimise |g - f(x)| over x within
+[lo, hi]:
+
+    e = g - f(x)                              (B, k)
+    J = d f / d x                             (B, k, m), forward differences (step h)
+    dx = J^T (J J^T + lambda^2 I)^-1 e        (damped least squares, the form of robot/ik.py)
+
+Joints at a bound that the step pushes outward leave the Jacobian and the step is solved again
+(an active set). A step is kept only where it lowers |e| and, with a collision count, does not
+raise it: never worse. Kept: lambda / 3, else lambda * 4, within [lam_min, lam_max]. A row stops
+once |e| < ``tol`` or once ``done`` says so (e.g. enough rows of its problem have converged), and
+then costs nothing more.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+__all__ = ["LMResult", "levenberg_marquardt"]
+
+
+@dataclass
+class LMResult:
+    """Where each row ended.
+
+    Attributes:
+        x: (B, m) the configurations.
+        err: (B,) |g - f(x)|.
+        value: (B, k) f(x).
+        count: (B,) the collision count at x, or None without a count.
+        steps: (B,) iterations each row ran before it stopped (its tolerance, or the budget).
+    """
+
+    x: Tensor
+    err: Tensor
+    value: Tensor
+    count: Tensor | None
+    steps: Tensor
+
+
+def levenberg_marquardt(f: Callable[[Tensor, Tensor], Tensor], goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor,
+                        iterations: int, *, lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0,
+                        h: float = 1e-7, edge: float = 1e-12, tol: float = 0.0,
+                        count: Callable[[Tensor, Tensor], Tensor] | None = None,
+                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
+                        ) -> LMResult:
+    """Levenberg-Marquardt on B rows (float64, the device of ``x``).
+
+    Args:
+        f: ``f(x, rows)``: x (b, m) of the rows ``rows`` (b,) (indices into the batch) -> (b, k).
+            Rows may come in any subset; f must not depend on which (except through ``rows``).
+        goal: (B, k) or (k,).
+        x: (B, m) start, clamped to the bounds first.
+        lo, hi: (m,) or (B, m) bounds.
+        iterations: most steps per row.
+        lam, lam_min, lam_max: the damping's start and range.
+        h: forward-difference step.
+        edge: a value within this of a bound counts as at it.
+        tol: a row stops once |e| < tol.
+        count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
+        done: ``done(converged (B,) bool)`` -> (B,) bool, the rows that stop (at least the
+            converged ones; e.g. every row of a problem with enough converged rows).
+        trace: a list that receives |e| (B,) after every step (curves for TensorBoard).
+    """
+    B, m = x.shape
+    goal = goal.expand(B, -1) if goal.dim() == 1 else goal
+    lo, hi = (b.expand(B, m) if b.dim() == 1 else b for b in (lo, hi))
+    x = torch.minimum(torch.maximum(x, lo), hi).clone()
+    all_rows = torch.arange(B, device=x.device)
+    value = f(x, all_rows)
+    err = (goal - value).norm(dim=-1)
+    lams = torch.full((B,), lam, dtype=x.dtype, device=x.device)
+    counts = count(x, all_rows) if count is not None else None
+    steps = torch.zeros(B, dtype=torch.long, device=x.device)
+    eye_x = torch.eye(m, dtype=x.dtype, device=x.device)
+    k = goal.shape[1]
+    eye_e = torch.eye(k, dtype=x.dtype, device=x.device)
+    for _ in range(iterations):
+        stopped = err < tol
+        if done is not None:
+            stopped = stopped | done(stopped)
+        if bool(stopped.all()):
+            break
+        rows = (~stopped).nonzero().squeeze(1)
+        b = rows.numel()
+        xr, vr, gr, lr, hr = x[rows], value[rows], goal[rows], lo[rows], hi[rows]
+        e = gr - vr
+        shifted = (xr.unsqueeze(1) + h * eye_x).reshape(-1, m)
+        J = ((f(shifted, rows.repeat_interleave(m)).reshape(b, m, k) - vr.unsqueeze(1)) / h).transpose(1, 2)
+        damp = (lams[rows] ** 2).view(-1, 1, 1) * eye_e
+        dx = _step(J, e, damp)
+        blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
+        if bool(blocked.any()):  # joints at a bound the step pushes outward leave the Jacobian
+            dx = _step(J * (~blocked).unsqueeze(1), e, damp)
+        new = torch.minimum(torch.maximum(xr + dx, lr), hr)
+        new_value = f(new, rows)
+        new_err = (gr - new_value).norm(dim=-1)
+        better = new_err < err[rows]
+        if counts is not None:  # never into a collision: a step may not raise the count
+            new_count = count(new, rows)
+            better &= new_count <= counts[rows]
+            counts[rows] = torch.where(better, new_count, counts[rows])
+        x[rows] = torch.where(better.unsqueeze(1), new, xr)
+        value[rows] = torch.where(better.unsqueeze(1), new_value, vr)
+        err[rows] = torch.where(better, new_err, err[rows])
+        lams[rows] = torch.where(better, lams[rows] / 3, lams[rows] * 4).clamp(lam_min, lam_max)
+        steps[rows] += 1
+        if trace is not None:
+            trace.append(err.clone())
+    return LMResult(x=x, err=err, value=value, count=counts, steps=steps)
+
+
+def _step(J: Tensor, e: Tensor, damp: Tensor) -> Tensor:
+    """dx = J^T (J J^T + damp)^-1 e: J (b, k, m), e (b, k), damp (b, k, k) -> (b, m)."""
+    return (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damp, e.unsqueeze(-1))).squeeze(-1)
