@@ -139,6 +139,9 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
                   solver=with_defaults(SolverCfg, groups.get("solver", job.solver), defaults.get("solver"), "solver"))
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     solver = job.solver
+    if solver.method == "dls" and job.noise.sigma > 0:
+        raise ConfigError(f"solver=dls with noise.sigma={job.noise.sigma:g}: damped least squares minimises the "
+                          f"model's error and never sees the (noisy) reinforcement; use solver=srv or solver=cmaes")
     if job.max_iterations is not None:
         solver = replace(solver, max_iterations=job.max_iterations)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
@@ -179,6 +182,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     errors = np.array([t.error_mm for t in result.trials])
     if solver.stop_threshold is not None:
         stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
+        if solver.stop is not None and solver.stop < trials:
+            stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{'es' * (solver.stop > 1)})"
     else:  # noise presets: a noisy signal crosses any threshold by chance
         stops = f"no stopping threshold: {trials} trials ran their whole budget"
     free = sum(t.collisions == 0 for t in result.trials)
@@ -188,8 +193,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     else:
         per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
         quality = f"best total error {best.total_error_mm:.3f} mm ({per_finger})"
-    print(f"\n{problem.name or problem.source}: {stops}; {quality}, {best.collisions} collision(s); median "
-          f"{np.median(errors):.3f} mm; {free}/{trials} trials collision-free (FCL, INTERFACE.md); "
+    print(f"\n{problem.name or problem.source} (solver={solver.method}): {stops}; {quality}, "
+          f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials collision-free (FCL, INTERFACE.md); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")

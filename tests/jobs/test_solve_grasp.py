@@ -203,3 +203,23 @@ def test_a_missing_collision_mesh_is_refused_before_any_work(tmp_path):
     assert res.returncode == 2, res.stderr
     assert "palm" in res.stderr and "missing_palm.stl" in res.stderr and len(res.stderr.strip().splitlines()) == 1
     assert not out.exists() and not (tmp_path / "run").exists()
+
+
+def test_each_solver_from_the_command_line(tmp_path):
+    """solver=dls and solver=cmaes: the same result JSON, pictures and TensorBoard as the default."""
+    for name in ("dls", "cmaes"):
+        run = tmp_path / name
+        res = _run("task=glass3", "trials=3", "seed=0", f"solver={name}", "max_iterations=200", f"hydra.run.dir={run}")
+        assert res.returncode == 0, res.stderr
+        data = json.loads((run / "result.json").read_text())
+        assert data["settings"]["solver"] == name and len(data["trials"]) == 3
+        assert data["total_error_mm"] < 1.0
+        assert (run / "learning.png").exists() and list((run / "tb").glob("events.out.tfevents.*"))
+
+
+def test_dls_with_sensor_noise_is_refused_before_any_work(tmp_path):
+    out = tmp_path / "r.json"
+    res = _run("task=glass3", "solver=dls", "noise=sigma0.2", f"out={out}", f"hydra.run.dir={tmp_path}")
+    assert res.returncode == 2
+    assert "solver=dls with noise.sigma=0.2" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not out.exists()
