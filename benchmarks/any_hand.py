@@ -42,12 +42,12 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 import graspnet_torch as gt
-from graspnet_torch.solver.config import PAPER_PROTOCOL
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.files import read_document
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.solver.config import PAPER_PROTOCOL
 from graspnet_torch.table import format_table
 
 DEFAULT_ROBOT = repo_root() / "examples" / "dexmate_f5d6" / "dexmate_f5d6_right.yaml"

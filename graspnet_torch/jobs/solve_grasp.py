@@ -183,7 +183,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     if solver.stop_threshold is not None:
         stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
         if solver.stop is not None and solver.stop < trials:
-            stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{'es' * (solver.stop > 1)})"
+            plural = "es" if solver.stop > 1 else ""
+            stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{plural})"
     else:  # noise presets: a noisy signal crosses any threshold by chance
         stops = f"no stopping threshold: {trials} trials ran their whole budget"
     free = sum(t.collisions == 0 for t in result.trials)
@@ -194,7 +195,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
         per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
         quality = f"best total error {best.total_error_mm:.3f} mm ({per_finger})"
     print(f"\n{problem.name or problem.source} (solver={solver.method}): {stops}; {quality}, "
-          f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials collision-free (FCL, INTERFACE.md); "
+          f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials "
+          f"collision-free (FCL, INTERFACE.md); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")

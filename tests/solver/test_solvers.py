@@ -104,7 +104,7 @@ def test_baselines_solve_a_hand_problem_under_the_same_contract(hand, method):
 
 
 def test_dls_refuses_sensor_noise():
-    with pytest.raises(ConfigError, match="solver=dls .* never sees the reinforcement"):
+    with pytest.raises(ConfigError, match=r"solver=dls .* never sees the reinforcement"):
         gt.solve("glass3", trials=2, noise=0.1, solver={"method": "dls"})
 
 
