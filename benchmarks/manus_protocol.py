@@ -31,28 +31,10 @@ from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_pos
 from graspnet_torch.solver.baselines import cmaes_search
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.table import format_table
+from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 from graspnet_torch.tasks.problem import GraspProblem
 
 PAPER_D = (9.6, 4.1)  # mm, section 7.2
-GRID_X = np.linspace(0.6, 1.2, 8)  # m
-GRID_Y = np.linspace(-0.5, 0.5, 8)
-
-
-def cube_problem(x: float, y: float, approach: dict | None = None) -> GraspProblem:
-    """The cube of task ``cube`` at (x, y) on a table whose near edge is 0.1 m in front of it."""
-    data = {"name": f"cube@({x:.3f},{y:.3f})", "robot": "manus",
-            "object": {"shape": "box", "size": [0.07, 0.07, 0.07], "pose": [x, y, 0.755, 0, 0, 0]},
-            "points": [[0.0, 0.035, 0.0], [0.0, -0.035, 0.0]],
-            "obstacles": [{"shape": "box", "size": [0.6, 1.2, 0.72], "pose": [x + 0.2, y, 0.36, 0, 0, 0]}]}
-    if approach is not None:
-        data["approach"] = approach
-    return GraspProblem.from_mapping(data, f"<protocol {x:.3f},{y:.3f}>")
-
-
-def positions() -> list[tuple[float, float]]:
-    return [(float(x), float(y)) for x in GRID_X for y in GRID_Y]
-
-
 def summary(d_mm: np.ndarray, align: np.ndarray, coll: np.ndarray) -> dict:
     orient = np.degrees(np.arccos(np.clip(align, 0.0, 1.0)))
     ok = (d_mm < 1.0) & (coll == 0)
@@ -65,7 +47,7 @@ def protocol(runs: int) -> tuple[dict, list]:
     """The paper's method (the robot's defaults) at every position; returns its summary and the
     per-position results."""
     d, al, co = [], [], []
-    results = gt.solve_many([cube_problem(x, y) for x, y in positions()], trials=runs, seed=0,
+    results = gt.solve_many([cube_problem(x, y) for x, y in protocol_positions()], trials=runs, seed=0,
                             solver={"stop": None})  # every learner to its own stop: the paper's protocol
     for res in results:
         d += [t.distance_mm for t in res.trials]
@@ -84,7 +66,7 @@ def baselines(runs: int, every: int) -> dict:
     solver = SolverCfg(**{**defaults["solver"], "refine": 0})
     out = {"dls": ([], [], []), "cmaes": ([], [], [])}
     scene_cache = {}
-    for k, (x, y) in enumerate(positions()):
+    for k, (x, y) in enumerate(protocol_positions()):
         if k % every:
             continue
         problem = cube_problem(x, y)
@@ -116,7 +98,7 @@ def approach_check(results: list, trials: int, seed: int = 7) -> dict:
     robot, _ = robot_and_ik("manus")
     rng = np.random.default_rng(seed)
     problems = []
-    for (x, y), res in zip(positions(), results, strict=True):
+    for (x, y), res in zip(protocol_positions(), results, strict=True):
         good = [t for t in res.trials if t.collisions == 0 and t.distance_mm < 1]
         if not good:
             continue

@@ -110,7 +110,10 @@ class SolverCfg:
         stop_clear: a trial stops only at a configuration the collision proxy finds clear (the
             paper stops on the reinforcement alone, so an early colliding configuration, weakly
             shaped by R3/R4 while i << p, can end a trial; the MANUS defaults to true: a grasp
-            through the table is not a success).
+            through the table is not a success). ``None``: true exactly when ``stop`` is set (a
+            problem that ends at its first success ends at a clear one; measured on env1/env2: the
+            best trial collision-free for 12/12 seeds against 7/12 without), false for the
+            paper's protocol.
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
@@ -132,7 +135,7 @@ class SolverCfg:
     polish_tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
     polish_from: float | None = setting(0.9, lo=-1.0, hi=1.0)
     candidates: int = setting(1, lo=1, hi=64)
-    stop_clear: bool = False
+    stop_clear: bool | None = None
     report: str = setting("best", choices=("best", "final"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))
@@ -148,6 +151,12 @@ class SolverCfg:
         """The paper's protocol (every trial to its own stop, the fingers refined, the palm pose
         kept), with ``changes``: what the reproductions of its tables use."""
         return cls(**{**PAPER_PROTOCOL, **changes})
+
+    @property
+    def stops_clear(self) -> bool:
+        """Whether a trial stops only where the collision proxy finds it clear: ``stop_clear``, or
+        by default exactly when a problem ends at its first successes (``stop`` set)."""
+        return self.stop_clear if self.stop_clear is not None else self.stop is not None
 
     @property
     def stop_threshold(self) -> float | None:

@@ -65,7 +65,7 @@ class LoopOutcome:
         ev = replace(self.evaluation, **{k: v[trials] for k, v in self.evaluation.tensors().items()})
         history = None
         if self.history is not None:
-            history = {k: v if k == "time" else v[:, trials] for k, v in self.history.items()}
+            history = {k: v if v.dim() == 1 else v[:, trials] for k, v in self.history.items()}  # time, iteration: (K,)
         return LoopOutcome(config=self.config[trials], evaluation=ev, reinforcement=self.reinforcement[trials],
                            iterations=self.iterations[trials], success=self.success[trials],
                            wall_time_s=self.wall_time_s, history=history,
@@ -198,7 +198,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             break
         if threshold is not None:
             done = active & (observed > threshold)
-            if solver.stop_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
+            if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
                 done &= ev.collisions == 0
             if bool(done.any()):
                 succeeded |= done
