@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -56,6 +56,9 @@ bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (tar
 bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): train, solve 40 problems, verify from the URDF (~7 min)
 	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
 	$(PY) benchmarks/any_hand.py --check
+
+bench-solvers: $(STAMP)  ## every solver (srv, paper, cmaes, dls) on the same problems, with targets (~10 min)
+	$(PY) benchmarks/solvers.py --check
 
 report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~6.5 min)
 	$(PY) benchmarks/manus_protocol.py --check
