@@ -2,12 +2,16 @@
 with T = 1, 30, 1000 trials batched, with the ratio to the single-trial loop (glass3, default
 settings, fixed budgets, no early stop).
 
-    python benchmarks/bench_solver.py [--threads 1]
+    python benchmarks/bench_solver.py [--threads 1] [--check]
+
+Targets (``--check`` exits 1 when one is missed): one trial >= 2,000 iterations/s; T = 1000
+>= 50,000 trial-iterations/s.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 
 import torch
 
@@ -26,11 +30,17 @@ def rate(trials: int, iterations: int, repeats: int, task: str = "glass3") -> fl
     return best
 
 
-def main() -> None:
+SINGLE_TARGET = 2_000
+BATCH_TARGET = 50_000
+
+
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    print(f"torch threads: {torch.get_num_threads()}")
     rate(1, 100, 1)  # warm-up
     single = rate(1, 2000, 3)
     rows = [[1, single, single, 1.0]]
@@ -42,7 +52,12 @@ def main() -> None:
     five = rate(1, 2000, 3, task="videotape5")
     print(f"\none trial: {single:.0f} iterations/s (target >= 2,000); T = 1000: {rows[-1][2]:.0f} "
           f"trial-iterations/s (target >= 50,000); five fingers (videotape5), one trial: {five:.0f} iterations/s")
+    checks = [(f"one trial: {single:.0f} iterations/s >= {SINGLE_TARGET:,}", single >= SINGLE_TARGET),
+              (f"T = 1000: {rows[-1][2]:.0f} trial-iterations/s >= {BATCH_TARGET:,}", rows[-1][2] >= BATCH_TARGET)]
+    for text, ok in checks:
+        print(f"{'met   ' if ok else 'MISSED'}  {text}")
+    return 1 if args.check and not all(ok for _, ok in checks) else 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
