@@ -79,16 +79,21 @@ def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, rew
     return solver, srv, reward
 
 
+def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> dict:
+    return {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
+            "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
+            "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
+            "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
+            "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
+            "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
+
+
 def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
-    settings = {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
-                "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
-                "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
-                "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
-                "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
-                "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
-    return GraspResult(robot=robot.name, trials=_report(env, outcome, reward, solver),
-                       problem=problem.name or problem.source, seed=seed, settings=settings, outcome=outcome)
+    fields = env.report(outcome.config, outcome.evaluation)
+    return GraspResult(robot=robot.name, trials=_trials(robot, problem, fields, outcome, reward, solver),
+                       problem=problem.name or problem.source, seed=seed,
+                       settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome)
 
 
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
@@ -157,54 +162,57 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
                device: str | torch.device = "cpu") -> list[GraspResult]:
     """Solve P problems of one robot, ``trials`` learners each: one result per problem, in order.
 
-    For a gripper robot (the MANUS) the P x ``trials`` learners run as one vectorised loop (one
-    network batch, one collision proxy holding every problem's table and object; the problems
-    need the same kinds of obstacles in the same order); other robots solve one problem after
-    another (``seed + k`` for the k-th). Settings as :func:`solve`; one ``seed`` for the batch, so
-    a problem's result differs from its single solve with the same seed.
+    The P x ``trials`` learners run as one vectorised search (one network batch; for a hand, the
+    union of the problems' contact fingers with a mask per trial; one collision proxy holding
+    every problem's objects, so problems with obstacles need the same kinds in the same order). A
+    problem ends once ``solver.stop`` of its trials have succeeded; once most trials have stopped,
+    only the others are evaluated. Settings as :func:`solve`; one ``seed`` for the batch, so a
+    problem's result differs from its single solve with the same seed. Each result's
+    ``wall_time_s`` is the batch's time divided by P.
     """
     batch = [_as_problem(p) for p in problems]
     if not batch:
         return []
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
-    robot, _ = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
+    robot, finger_ik = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
     for p in batch[1:]:
         if (p.robot_cfg or p.robot) != (batch[0].robot_cfg or batch[0].robot):
             raise ProblemError(f"{p.source}: robot '{p.robot}' differs from the batch's '{batch[0].robot}' "
                                f"(one batch, one robot)")
-    if robot.n_fingers or len(batch) == 1:
-        return [solve(p, trials=trials, seed=seed + k, max_iterations=max_iterations, solver=solver, srv=srv,
-                      reward=reward, noise=noise, device=device) for k, p in enumerate(batch)]
-    from graspnet_torch.solver.gripper import GripperEnvironment
-
+    if len(batch) == 1:
+        return [solve(batch[0], trials=trials, seed=seed, max_iterations=max_iterations, solver=solver, srv=srv,
+                      reward=reward, noise=noise, device=device)]
     solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
-    dtype = DTYPES[solver.dtype]
-    env = GripperEnvironment(robot, batch, dtype, device, reward.kind != "r1", solver.approach_m,
-                             solver.approach_deg, solver.refine, runs=trials)
+    env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
+    fields = env.report(outcome.config, outcome.evaluation)
     results = []
     for k, problem in enumerate(batch):
-        one = GripperEnvironment(robot, problem, dtype, device, False, solver.approach_m, solver.approach_deg)
-        part = outcome.select(slice(k * trials, (k + 1) * trials))
-        results.append(_result(robot, problem, one, part, trials, seed, solver, srv, reward, noise))
+        rows = slice(k * trials, (k + 1) * trials)
+        part = outcome.select(rows)
+        part.wall_time_s = outcome.wall_time_s / len(batch)  # the batch's time, shared out
+        results.append(GraspResult(robot=robot.name, trials=_trials(robot, problem, fields[rows], part, reward, solver),
+                                   problem=problem.name or problem.source, seed=seed,
+                                   settings=_settings_dict(trials, solver, srv, reward, noise), outcome=part))
     return results
 
 
-def build_environment(robot: Robot, problem: GraspProblem, finger_ik: FingerIK, solver: SolverCfg,
-                      dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu",
-                      reward: RewardCfg | None = None) -> Environment:
-    """The environment of a robot and a problem: a free palm (robots without an arm) or a palm
-    carried by an arm (an arm with fingers, any arm and any hand). It counts collisions (the
-    torch proxy of :mod:`graspnet_torch.collision.proxy`) when the reward uses them (R2-R4) and
-    the problem has an object or obstacles."""
+def build_environment(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], finger_ik: FingerIK | None,
+                      solver: SolverCfg, dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu",
+                      reward: RewardCfg | None = None, runs: int = 1) -> Environment:
+    """The environment of a robot and a problem (or a batch of problems, ``runs`` trials each):
+    a free palm (robots without an arm), a palm carried by an arm (an arm with fingers, any arm
+    and any hand) or a gripper (two marked points). It counts collisions (the torch proxy of
+    :mod:`graspnet_torch.collision.proxy`) when the reward uses them (R2-R4) and the problem has
+    an object or obstacles."""
     collisions = reward is not None and reward.kind != "r1"
     if robot.n_fingers == 0:  # a gripper with two marked points (MANUS)
         from graspnet_torch.solver.gripper import GripperEnvironment
 
         return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg,
-                                  solver.refine)
+                                  solver.refine, runs=runs)
     cls = ArmHandEnvironment if robot.has_body else HandEnvironment
-    env = cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions)
+    env = cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions, runs)
     env.polish, env.polish_iterations = solver.polish, solver.polish_iterations
     env.polish_tol = solver.polish_tolerance_mm / 1000
     return env
@@ -255,20 +263,19 @@ def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
     return Posture(palm_pose=torch.as_tensor(ref.palm_pose, dtype=torch.float64), fingers=q, body=home.body)
 
 
-def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: SolverCfg) -> list[TrialResult]:
-    """Per-trial results: the environment's fields of the reported configuration (float64), the
-    noise-free reinforcement recomputed from them, success against the threshold, and the
-    collision count by FCL (INTERFACE.md) of each reported posture when the problem has an object
-    or obstacles."""
-    fields = env.report(outcome.config, outcome.evaluation)
-    problem = env.problem
+def _trials(robot: Robot, problem: GraspProblem, fields: list[dict], outcome: LoopOutcome, reward: RewardCfg,
+            solver: SolverCfg) -> list[TrialResult]:
+    """Per-trial results of one problem from the environment's float64 fields of its reported
+    configurations: the noise-free reinforcement recomputed from them, success against the
+    threshold, and the collision count by FCL (INTERFACE.md) of each reported posture when the
+    problem has an object or obstacles."""
     from graspnet_torch.collision.scene import has_environment
 
-    if has_environment(env.robot, problem):
+    if has_environment(robot, problem):
         from graspnet_torch.collision import CollisionScene
 
-        scene = CollisionScene(env.robot, problem)
-        collisions = torch.tensor([scene.count(trial_posture(env.robot, f)) for f in fields])
+        scene = CollisionScene(robot, problem)
+        collisions = torch.tensor([scene.count(trial_posture(robot, f)) for f in fields])
     else:
         collisions = None
     error = torch.tensor([f["error"] for f in fields], dtype=torch.float64)
@@ -277,12 +284,14 @@ def _report(env: Environment, outcome: LoopOutcome, reward: RewardCfg, solver: S
     threshold = math.inf if solver.stop_threshold is None else solver.stop_threshold
     if outcome.evaluation.alignment is not None:  # a gripper: the base of R is eq. 29's
         evaluation.alignment = torch.tensor([f["alignment"] for f in fields], dtype=torch.float64)
-    for f in fields:
+        r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
+    out = []
+    for t, f in enumerate(fields):
+        f = dict(f)
         if "distance_mm" not in f:
             f["total_error_mm"] = f["error"] * 1000
         f.pop("error")
-    return [TrialResult(success=bool(r[t] > threshold),
-                        iterations=int(outcome.iterations[t]), reinforcement=float(r[t]),
-                        wall_time_s=outcome.wall_time_s,
-                        collisions=0 if collisions is None else int(collisions[t]), **fields[t])
-            for t in range(len(fields))]
+        out.append(TrialResult(success=bool(r[t] > threshold), iterations=int(outcome.iterations[t]),
+                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s,
+                               collisions=0 if collisions is None else int(collisions[t]), **f))
+    return out

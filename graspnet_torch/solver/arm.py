@@ -9,6 +9,7 @@ and forward kinematics each fingertip's error (eq. 3, in the finger frames), as 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -51,13 +52,22 @@ class ArmHandEnvironment(FingerEnvironment):
         fingers: the contact fingers, in problem order.
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem, ik: FingerIK, refine: int = 0, candidates: int = 1,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], ik: FingerIK, refine: int = 0,
+                 candidates: int = 1, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
+                 collisions: bool = False, runs: int = 1):
         if not robot.has_body or robot.n_fingers == 0:
-            raise ProblemError(f"{problem.source}: robot '{robot.name}' is not an arm with fingers")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions)
+            first = problem if isinstance(problem, GraspProblem) else problem[0]
+            raise ProblemError(f"{first.source}: robot '{robot.name}' is not an arm with fingers")
+        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions, runs)
         self.n = len(robot.body_joint_names)
-        lo, hi = arm_bounds(robot, problem)
+        bounds = [arm_bounds(robot, p) for p in self.problems]
+        lo = np.stack([b[0] for b in bounds])
+        hi = np.stack([b[1] for b in bounds])
+        if len(self.problems) > 1:
+            lo, hi = np.repeat(lo, runs, axis=0), np.repeat(hi, runs, axis=0)  # (T, n)
+        else:
+            lo, hi = lo[0], hi[0]  # (n,)
+        self._bounds64 = (torch.as_tensor(lo, dtype=torch.float64), torch.as_tensor(hi, dtype=torch.float64))
         self.lower = torch.as_tensor(lo, dtype=dtype, device=device)
         self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
 
@@ -65,9 +75,8 @@ class ArmHandEnvironment(FingerEnvironment):
         """The arm's forward kinematics. (T, n) -> R (T, 3, 3), t (T, 3)."""
         return self.robot.palm_frame(q_arm)
 
-    def clamp(self, q_arm: Tensor) -> Tensor:
-        lo, hi = arm_bounds(self.robot, self.problem)
-        return torch.clamp(q_arm.detach().to(torch.float64).cpu(), torch.as_tensor(lo), torch.as_tensor(hi))
+    def bounds64(self) -> tuple[Tensor, Tensor]:
+        return self._bounds64
 
     def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
         """The shared fields (palm pose from the arm's forward kinematics) plus ``arm_joints`` by

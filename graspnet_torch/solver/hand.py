@@ -7,6 +7,8 @@ forward kinematics gives each fingertip's error (eq. 3, computed in the finger f
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -50,23 +52,30 @@ class HandEnvironment(FingerEnvironment):
 
     n = 6
 
-    def __init__(self, robot: Robot, problem: GraspProblem, ik: FingerIK, refine: int = 1, candidates: int = 1,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], ik: FingerIK, refine: int = 1,
+                 candidates: int = 1, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
+                 collisions: bool = False, runs: int = 1):
         if robot.has_body:
-            raise ProblemError(f"{problem.source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions)
-        bounds = problem.bounds()
-        self.lower = torch.as_tensor(bounds.lower, dtype=dtype, device=device)
-        self.upper = torch.as_tensor(bounds.upper, dtype=dtype, device=device)
+            first = problem if isinstance(problem, GraspProblem) else problem[0]
+            raise ProblemError(f"{first.source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
+        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions, runs)
+        bounds = [p.bounds() for p in self.problems]
+        lo = np.stack([b.lower for b in bounds])
+        hi = np.stack([b.upper for b in bounds])
+        if len(self.problems) > 1:
+            lo, hi = np.repeat(lo, runs, axis=0), np.repeat(hi, runs, axis=0)  # (T, 6)
+        else:
+            lo, hi = lo[0], hi[0]  # (6,)
+        self._bounds64 = (torch.as_tensor(lo, dtype=torch.float64), torch.as_tensor(hi, dtype=torch.float64))
+        self.lower = torch.as_tensor(lo, dtype=dtype, device=device)
+        self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
 
     def palm_frame(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
         """The configuration is the palm pose. (T, 6) -> R (T, 3, 3), t (T, 3)."""
         return pose_to_rt(palm_pose)
 
-    def clamp(self, palm_pose: Tensor) -> Tensor:
-        bounds = self.problem.bounds()
-        return torch.clamp(palm_pose.detach().to(torch.float64).cpu(), torch.as_tensor(bounds.lower),
-                           torch.as_tensor(bounds.upper))
+    def bounds64(self) -> tuple[Tensor, Tensor]:
+        return self._bounds64
 
 
 def _finger_reach(robot: Robot, finger: str) -> float:

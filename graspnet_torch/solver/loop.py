@@ -230,7 +230,7 @@ def _polish_near(env: Environment, near: Tensor, config: Tensor, ev: Evaluation,
         def done(converged: Tensor) -> Tensor:
             return enough_succeeded(converged, pid, solver.stop)
     new_config, new_ev = env.polish_whole(config[idx], part, solver.polish_iterations,
-                                          solver.polish_tolerance_mm / 1000, done)
+                                          solver.polish_tolerance_mm / 1000, done, trials=idx)
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
     take = torch.zeros_like(near).index_fill(0, idx[better], True)

@@ -139,3 +139,48 @@ def test_the_in_loop_polish_is_off_in_the_paper_protocol():
     assert all(t.iterations == 40 for t in paper.trials)
     fast = gt.solve("glass3", trials=3, seed=0)
     assert fast.best.iterations < 40 and fast.best.total_error_mm < 1.0
+
+
+def test_a_batch_of_hand_problems_evaluates_as_each_problem_alone(hand):
+    """The batch environment (union of fingers, per-trial contacts, a mask) gives each trial the
+    error its own problem's environment gives (batched == looped)."""
+    from graspnet_torch.solver.api import build_environment, robot_and_ik
+
+    _, ik = robot_and_ik("hand")
+    problems = [gt.random_reachable_problem(hand, s, n_fingers=k) for s, k in ((1, 2), (2, 4), (3, 3))]
+    cfg = SolverCfg()
+    batch = build_environment(hand, problems, ik, cfg, torch.float64, runs=2)
+    g = torch.Generator().manual_seed(0)
+    config = batch.lower + (batch.upper - batch.lower) * torch.rand(6, 6, generator=g, dtype=torch.float64)
+    ev = batch.evaluate(config)
+    for k, p in enumerate(problems):
+        alone = build_environment(hand, p, ik, cfg, torch.float64).evaluate(config[2 * k: 2 * k + 2])
+        assert torch.allclose(ev.error[2 * k: 2 * k + 2], alone.error, rtol=1e-9, atol=1e-12)
+        cols = [batch.fingers.index(f) for f in p.fingers]
+        assert torch.allclose(ev.finger_errors[2 * k: 2 * k + 2, cols], alone.finger_errors, atol=1e-12)
+        unused = [c for c in range(len(batch.fingers)) if c not in cols]
+        assert bool((ev.finger_errors[2 * k: 2 * k + 2, unused] == 0).all())
+    some = torch.tensor([5, 0])  # a subset of trials, out of order
+    part = batch.evaluate(config[some], some)
+    assert torch.allclose(part.error, ev.error[some], rtol=1e-9, atol=1e-12)
+
+
+def test_solve_many_solves_mixed_hand_problems_in_one_batch(hand):
+    """Problems with different contact fingers in one vectorised search: each result lists its
+    own fingers, its errors are forward kinematics of its reported configuration, the fingers it
+    does not use stay at home, and every problem lands below 1 mm."""
+    problems = [gt.random_reachable_problem(hand, s) for s in range(6)]
+    results = gt.solve_many(problems, trials=3, seed=0)
+    home = hand.home_posture(torch.float64).fingers
+    d = math.pi / 180
+    for p, r in zip(problems, results, strict=True):
+        assert set(r.fingertip_error_mm) == set(p.fingers) and len(r.trials) == 3
+        assert r.total_error_mm < 1.0
+        pose = torch.tensor(r.palm_pose[:3] + [a * d for a in r.palm_pose[3:]], dtype=torch.float64)
+        q = hand.finger_joints_from_file(r.joints)
+        tips = hand.fingertips_world(pose, q)
+        for c in p.contacts:
+            err = float((tips[hand.finger_index(c.finger)] - torch.as_tensor(c.position)).norm()) * 1000
+            assert err == pytest.approx(r.fingertip_error_mm[c.finger], abs=1e-6)
+        for f in set(hand.finger_names) - set(p.fingers):
+            assert torch.allclose(q[hand.finger_index(f)], home[hand.finger_index(f)])
