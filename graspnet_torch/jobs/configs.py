@@ -50,6 +50,7 @@ class SolveGraspJobCfg:
     log_every: int = setting(10, lo=1, hi=10_000_000)
     pictures: bool = True
     allow_outside_paths: bool = False
+    batch: int = setting(1000, lo=1, hi=1_000_000)  # problem=DIR / .jsonl: problems per vectorised search
 
 
 @dataclass(frozen=True)

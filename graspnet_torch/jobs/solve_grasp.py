@@ -32,7 +32,8 @@ from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["log_tensorboard", "posture_of", "prepare_solve", "resolve_problem", "solve_grasp"]
+__all__ = ["check_problem", "job_settings", "log_tensorboard", "posture_of", "prepare_solve", "resolve_problem",
+           "solve_grasp", "with_robot_defaults"]
 
 
 def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | RobotCfg | None,
@@ -112,40 +113,42 @@ def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 
     return format_table(headers, rows, floatfmt=".3g") + (f"\n... {more} more trials in the result" if more > 0 else "")
 
 
-def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
-                  ) -> tuple[SolveGraspJobCfg, GraspProblem, torch.device, Path, SolverCfg]:
-    """Every check of the job, before any work and without writing anything: the settings, the
-    device, the problem, the output path, the memory the solve needs, and the robot's URDF and
-    FCNN checkpoint (loaded once per process, so the job reuses them).
-
-    Returns:
-        the settings, the problem, the device, the result path and the solver settings (with
-        ``max_iterations`` applied).
-    """
+def job_settings(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> tuple[SolveGraspJobCfg, dict, RobotCfg | str | None]:
+    """The job's settings as given (a group's null: the robot's default, applied later by
+    :func:`with_robot_defaults`), the groups as given, and the robot setting (a config, a name or None)."""
     groups = {}
     if isinstance(cfg, Mapping):  # null in a group's YAML: the robot's default (srv.lr_bp, reward.kind, ...)
         classes = {"srv": SRVNetCfg, "reward": RewardCfg, "solver": SolverCfg}
         groups = {name: dict(cfg.get(name) or {}) for name in classes}
         cfg = {**cfg, **{name: unset(cls, groups[name]) for name, cls in classes.items()}}
     job = build(SolveGraspJobCfg, cfg)
-    device = check_device(job.device)
     robot = job.robot
     if isinstance(robot, Mapping):  # the robot group, as composed (overrides included), or robot=PATH
         robot = robot_cfg_from_setting(robot)
-    problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
-    defaults = problem.robot_cfg.solver_defaults
+    return job, groups, robot
+
+
+def with_robot_defaults(job: SolveGraspJobCfg, groups: dict, robot_cfg: RobotCfg
+                        ) -> tuple[SolveGraspJobCfg, SolverCfg]:
+    """The settings with the robot's ``solver_defaults`` where the job leaves them open, and the
+    solver settings with ``max_iterations`` applied; refuses what cannot go together."""
+    defaults = robot_cfg.solver_defaults
     job = replace(job, srv=with_defaults(SRVNetCfg, groups.get("srv", job.srv), defaults.get("srv"), "srv"),
                   reward=with_defaults(RewardCfg, groups.get("reward", job.reward), defaults.get("reward"), "reward"),
                   solver=with_defaults(SolverCfg, groups.get("solver", job.solver), defaults.get("solver"), "solver"))
-    out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     solver = job.solver
     if solver.method == "dls" and job.noise.sigma > 0:
         raise ConfigError(f"solver=dls with noise.sigma={job.noise.sigma:g}: damped least squares minimises the "
                           f"model's error and never sees the (noisy) reinforcement; use solver=srv or solver=cmaes")
     if job.max_iterations is not None:
         solver = replace(solver, max_iterations=job.max_iterations)
-    check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
-                       4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
+    return job, solver
+
+
+def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
+    """The checks of one problem that need its robot: collision meshes found and readable (when
+    it has something to collide with), the robot and its FCNN checkpoint loaded (cached), every
+    contact within reach, a gripper's approach within its limits."""
     rc = problem.robot_cfg
     if problem.object is not None or problem.obstacles or rc.floor is not None or rc.self_collision:
         from graspnet_torch.robot.chain import UrdfModel  # collisions need the URDF's collision geometry:
@@ -158,6 +161,26 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         from graspnet_torch.solver.gripper import gripper_bounds
 
         gripper_bounds(robot, problem, solver.approach_m, solver.approach_deg)
+
+
+def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
+                  ) -> tuple[SolveGraspJobCfg, GraspProblem, torch.device, Path, SolverCfg]:
+    """Every check of the job, before any work and without writing anything: the settings, the
+    device, the problem, the output path, the memory the solve needs, and the robot's URDF and
+    FCNN checkpoint (loaded once per process, so the job reuses them).
+
+    Returns:
+        the settings, the problem, the device, the result path and the solver settings (with
+        ``max_iterations`` applied).
+    """
+    job, groups, robot = job_settings(cfg)
+    device = check_device(job.device)
+    problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
+    job, solver = with_robot_defaults(job, groups, problem.robot_cfg)
+    out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
+    check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
+                       4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
+    check_problem(problem, solver)
     return job, problem, device, out, solver
 
 

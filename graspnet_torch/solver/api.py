@@ -175,8 +175,10 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
         return []
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
     robot, finger_ik = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
+    first = batch[0]
     for p in batch[1:]:
-        if (p.robot_cfg or p.robot) != (batch[0].robot_cfg or batch[0].robot):
+        if p.robot != first.robot or (p.robot_cfg is not first.robot_cfg and p.robot_cfg is not None
+                                      and first.robot_cfg is not None and p.robot_cfg.urdf != first.robot_cfg.urdf):
             raise ProblemError(f"{p.source}: robot '{p.robot}' differs from the batch's '{batch[0].robot}' "
                                f"(one batch, one robot)")
     if len(batch) == 1:

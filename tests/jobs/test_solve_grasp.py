@@ -223,3 +223,44 @@ def test_dls_with_sensor_noise_is_refused_before_any_work(tmp_path):
     assert res.returncode == 2
     assert "solver=dls with noise.sigma=0.2" in res.stderr and len(res.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def _write_random_problems(folder, n):
+    import graspnet_torch as gt
+
+    robot = gt.load_robot("hand")
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for s in range(n):
+        p = gt.random_reachable_problem(robot, s)
+        rows.append({"robot": "hand", "contacts": [{"finger": c.finger, "position": [float(v) for v in c.position]}
+                                                   for c in p.contacts]})
+    return rows
+
+
+def test_many_problems_from_a_folder_write_one_result_each(tmp_path):
+    """problem=DIR: every problem file solved in one vectorised batch, one result JSON per file
+    (named after it), a summary.csv, and the results checkable like any other."""
+    folder = tmp_path / "problems"
+    for k, data in enumerate(_write_random_problems(folder, 3)):
+        (folder / f"p{k}.json").write_text(json.dumps(data))
+    out = tmp_path / "results"
+    res = _run(f"problem={folder}", f"out={out}", "trials=2", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["p0.json", "p1.json", "p2.json", "summary.csv"]
+    for k in range(3):
+        data = json.loads((out / f"p{k}.json").read_text())
+        assert data["total_error_mm"] < 1.0 and len(data["trials"]) == 2
+    assert len((out / "summary.csv").read_text().splitlines()) == 4
+    assert "3 problems" in res.stdout
+
+
+def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
+    rows = _write_random_problems(tmp_path, 2)
+    path = tmp_path / "p.jsonl"
+    path.write_text(json.dumps(rows[0]) + "\n\n" + '{"robot": "hand", "contacts": [}\n' + json.dumps(rows[1]) + "\n")
+    out = tmp_path / "results"
+    res = _run(f"problem={path}", f"out={out}", "trials=2", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2
+    assert f"{path}:3: not valid JSON" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not out.exists() and not (tmp_path / "run").exists()

@@ -1,0 +1,210 @@
+"""``solve_grasp.py problem=DIR`` or ``problem=FILE.jsonl``: many problems, one result each.
+
+The grasp-dataset use case. Every problem file of a folder (``*.yaml``, ``*.yml``, ``*.json``,
+sorted by name), or every line of a JSON-lines file (one problem mapping per line; blank lines
+skipped), is read and checked before any work; then :func:`graspnet_torch.solve_many` solves them
+``batch`` problems at a time (P x T trials as one vectorised search), with a progress bar, and
+writes one result JSON per problem into the folder ``out`` (default ``<run dir>/results``):
+``<file stem>.json`` for a folder, ``<name>.json`` (the problem's ``name``, else ``line<k>``)
+for a JSON-lines file, each written atomically, plus ``summary.csv`` (one row per problem).
+No pictures or TensorBoard curves: those are for one problem.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.io import atomic_write_text
+from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
+from graspnet_torch.jobs.solve_grasp import check_problem, job_settings, with_robot_defaults
+from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.settings import clip
+from graspnet_torch.solver.api import solve_many
+from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.result import GraspResult
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["is_many", "load_problems", "prepare_job", "prepare_many", "run_job", "solve_grasps"]
+
+SUFFIXES = (".yaml", ".yml", ".json")
+MAX_LINE_BYTES = 1 << 20
+
+
+def is_many(problem: str | None) -> bool:
+    """Whether ``problem=`` names many problems: a folder or a ``.jsonl`` file."""
+    if not problem:
+        return False
+    p = Path(str(problem)).expanduser()
+    return p.is_dir() or p.suffix.lower() == ".jsonl"
+
+
+def load_problems(path: str | Path, robot: RobotCfg | str | None = None, allow_outside_paths: bool = False
+                  ) -> list[tuple[str, GraspProblem]]:
+    """(name, problem) of every problem of a folder or a JSON-lines file, validated, in order;
+    one robot for all (``robot``: a config that replaces the shipped one of its name, or a name
+    the problems must use). Names are unique file names (a suffix ``-k`` where they repeat)."""
+    p = Path(str(path)).expanduser()
+    robot_cfg = robot if isinstance(robot, RobotCfg) else None
+    named: list[tuple[str, GraspProblem]] = []
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in SUFFIXES and f.is_file())
+        if not files:
+            raise ProblemError(f"{clip(str(p), 200)}: no problem files ({', '.join('*' + s for s in SUFFIXES)}) in "
+                               f"this folder")
+        for f in files:
+            named.append((f.stem, GraspProblem.from_file(f, robot_cfg=robot_cfg,
+                                                         allow_outside_paths=allow_outside_paths)))
+    else:
+        if not p.is_file():
+            raise ProblemError(f"problem={clip(str(path), 200)}: no such file or folder")
+        with p.open("rb") as fh:
+            for k, raw in enumerate(fh, 1):
+                if len(raw) > MAX_LINE_BYTES:
+                    raise ProblemError(f"{clip(str(p), 200)}:{k}: a line over 1 MiB")
+                text = raw.decode("utf-8", errors="replace").strip()
+                if not text:
+                    continue
+                try:
+                    data = json.loads(text)
+                except json.JSONDecodeError as exc:
+                    where = f"{clip(str(p), 200)}:{k}"
+                    raise ProblemError(f"{where}: not valid JSON ({exc.msg}, column {exc.colno})") from None
+                problem = GraspProblem.from_mapping(data, source=f"{clip(str(p), 200)}:{k}", robot_cfg=robot_cfg,
+                                                    folder=p.resolve().parent,
+                                                    allow_outside_paths=allow_outside_paths)
+                named.append((problem.name or f"line{k}", problem))
+        if not named:
+            raise ProblemError(f"{clip(str(p), 200)}: no problems (every line is blank)")
+    name = robot_cfg.name if robot_cfg is not None else robot
+    first = named[0][1]
+    for _, problem in named:
+        if name and problem.robot != name:
+            raise ProblemError(f"{problem.source}: the problem is for robot '{problem.robot}', but robot="
+                               f"{clip(str(name), 80)} was given")
+        if problem.robot != first.robot:
+            raise ProblemError(f"{problem.source}: robot '{problem.robot}' differs from the first problem's "
+                               f"'{first.robot}' (one run, one robot)")
+    return _unique([(_file_name(n), pr) for n, pr in named])
+
+
+def _file_name(name: str) -> str:
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "problem"
+    return safe[:100]
+
+
+def _unique(named: list[tuple[str, GraspProblem]]) -> list[tuple[str, GraspProblem]]:
+    seen: dict[str, int] = {}
+    out = []
+    for name, problem in named:
+        k = seen.get(name, 0)
+        seen[name] = k + 1
+        out.append((name if k == 0 else f"{name}-{k}", problem))
+    return out
+
+
+def prepare_many(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
+                 ) -> tuple[SolveGraspJobCfg, list[tuple[str, GraspProblem]], torch.device, Path, SolverCfg]:
+    """Every check before any work, without writing anything: the settings, the device, every
+    problem (as :func:`~graspnet_torch.jobs.solve_grasp.prepare_solve` checks one), the output
+    folder (a folder or nothing yet, writable) and the memory of one batch."""
+    job, groups, robot = job_settings(cfg)
+    device = check_device(job.device)
+    named = load_problems(job.problem, robot, job.allow_outside_paths)
+    problems = [p for _, p in named]
+    job, solver = with_robot_defaults(job, groups, problems[0].robot_cfg)
+    out = Path(job.out or Path(run_dir) / "results").expanduser()
+    _check_out_folder(out)
+    per_batch = min(job.batch, len(problems))
+    check_solve_memory(job.trials * per_batch, solver.max_iterations, max(len(p.contacts) for p in problems),
+                       solver.history, 4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
+    for p in problems:
+        check_problem(p, solver)
+    return job, named, device, out, solver
+
+
+def _check_out_folder(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder (many problems write one result "
+                          f"each into a folder)")
+    probe = out
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ConfigError(f"out={clip(str(out), 120)}: {clip(str(probe), 120)} is not a folder")
+    import os
+    import tempfile
+
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=".probe-")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise ConfigError(f"out={clip(str(out), 120)}: cannot write in {clip(str(probe), 120)} "
+                          f"({exc.strerror})") from None
+
+
+def solve_grasps(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> list[GraspResult]:
+    """The job behind ``solve_grasp.py problem=DIR`` (or a ``.jsonl`` file): every problem
+    checked first (a refusal writes nothing), then solved ``batch`` at a time; one result JSON per
+    problem and ``summary.csv`` in the output folder. Returns the results in order."""
+    from tqdm.auto import tqdm
+
+    job, named, device, out, solver = prepare_many(cfg, run_dir)
+    torch.set_num_threads(job.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    results: list[GraspResult] = []
+    t0 = time.perf_counter()
+    with tqdm(total=len(named), unit="problem", desc="solving", disable=None) as bar:
+        for start in range(0, len(named), job.batch):
+            chunk = named[start:start + job.batch]
+            batch = solve_many([p for _, p in chunk], trials=job.trials, seed=job.seed + start, solver=solver,
+                               srv=job.srv, reward=job.reward, noise=job.noise, device=device)
+            for (name, _), result in zip(chunk, batch, strict=True):
+                result.save(out / f"{name}.json")
+            results.extend(batch)
+            bar.update(len(chunk))
+    wall = time.perf_counter() - t0
+    rows = ["name,problem,success,error_mm,collisions,iterations"]
+    rows += [f"{name},{_csv(r.problem)},{int(r.success)},{r.best.error_mm:.6g},{r.best.collisions},{r.best.iterations}"
+             for (name, _), r in zip(named, results, strict=True)]
+    atomic_write_text(out / "summary.csv", "\n".join(rows) + "\n")
+    errors = np.array([r.best.error_mm for r in results])
+    solved = sum(r.success for r in results)
+    print(f"{len(results)} problems (solver={solver.method}, {job.trials} trials each, batches of "
+          f"{min(job.batch, len(results))}): {solved} succeeded; best error < 1 mm: {int((errors < 1).sum())}; "
+          f"median {np.median(errors):.3g} mm; {wall:.1f} s ({len(results) / wall:.1f} problems/s)")
+    print(f"results: {out}/ (one JSON per problem, summary.csv)")
+    return results
+
+
+def _csv(text: str | None) -> str:
+    text = str(text or "")
+    return f'"{text.replace(chr(34), chr(34) * 2)}"' if any(c in text for c in ',"\n') else text
+
+
+def _problem_setting(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> str | None:
+    value = cfg.get("problem") if isinstance(cfg, Mapping) else cfg.problem
+    return value if isinstance(value, str) else None
+
+
+def prepare_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> None:
+    """The checks of ``solve_grasp.py`` before any work: many problems or one."""
+    from graspnet_torch.jobs.solve_grasp import prepare_solve
+
+    (prepare_many if is_many(_problem_setting(cfg)) else prepare_solve)(cfg, run_dir)
+
+
+def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> None:
+    """``solve_grasp.py``: many problems (a folder, a ``.jsonl`` file) or one."""
+    from graspnet_torch.jobs.solve_grasp import solve_grasp
+
+    (solve_grasps if is_many(_problem_setting(cfg)) else solve_grasp)(cfg, run_dir)
