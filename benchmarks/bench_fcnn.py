@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.benchmarking import time_interleaved
+from graspnet_torch.benchmarking import check_targets, time_interleaved
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
 from graspnet_torch.robot import ChainKernel
 from graspnet_torch.table import format_table
@@ -55,12 +56,13 @@ def pk_solver(robot, finger: str, generator: torch.Generator):
     return solve
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--targets", type=int, default=10_000)
     ap.add_argument("--sets", type=int, default=3, help="target sets per finger, each with fresh restarts")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--fingers", nargs="*", default=None)
+    ap.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     robot = gt.load_robot("hand")
@@ -113,7 +115,11 @@ def main() -> None:
     for finger, name, ours, theirs, speed in summary:
         verdict = "equal or better" if ours >= theirs else "LOWER"
         print(f"  {finger:7s} {name:34s} {ours:7.3f}% vs {theirs:7.3f}%  ({verdict}),  {speed:6.0f}x faster")
+    checks = [(f"{finger}, {name}: {ours:.3f} % within 1 mm >= 99.5 % and >= PseudoInverseIK ({theirs:.3f} %), "
+               f"{speed:.0f}x faster >= 10x", ours >= 99.5 and ours >= theirs and speed >= 10)
+              for finger, name, ours, theirs, speed in summary if name == "FCNN +3 refine"]
+    return check_targets(checks, args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

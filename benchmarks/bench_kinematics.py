@@ -9,20 +9,22 @@ for both and the ratio (ours / pytorch-kinematics).
 from __future__ import annotations
 
 import argparse
+import sys
 
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.benchmarking import time_interleaved
+from graspnet_torch.benchmarking import check_targets, time_interleaved
 from graspnet_torch.robot import ChainKernel
 from graspnet_torch.table import format_table
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 100, 10_000, 100_000])
     ap.add_argument("--min-time", type=float, default=0.5, help="seconds of timing per function and batch")
+    ap.add_argument("--check", action="store_true", help="exit 1 where pytorch-kinematics is faster")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -65,7 +67,10 @@ def main() -> None:
     print(f"fingertips per second, millions (float32, {args.threads} threads); ratio = ours / pytorch-kinematics")
     print(format_table(["chain", "batch", "FK ours", "FK pk", "ratio", "FK+J ours", "FK+J pk", "ratio"], rows,
                        floatfmt=".3g"))
+    checks = [(f"{r[0]}, B={r[1]}: FK {r[4]:.3g}x, FK+J {r[7]:.3g}x pytorch-kinematics >= 1x",
+               r[4] >= 1 and r[7] >= 1) for r in rows]
+    return check_targets(checks, args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 
 
@@ -39,10 +41,12 @@ def _kinematics(robot: gt.Robot) -> None:
         robot.fingertips_base_jacobian(q)
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--check", action="store_true", help="exit 1 when 2 threads beat 1 by more than 10 %")
     args = ap.parse_args()
+    checks = []
     robot = gt.load_robot("hand")
     problem = gt.GraspProblem.from_task("glass3")
     jobs = {"FCNN training (8 epochs, index)": lambda: _train(robot),
@@ -59,7 +63,10 @@ def main() -> None:
                 job()
                 best[threads] = min(best[threads], time.perf_counter() - t0)
         print(f"{name:36s} {best[1]:11.2f} {best[2]:12.2f} {best[2] / best[1]:7.2f}", flush=True)
+        checks.append((f"{name}: 1 thread {best[1]:.2f} s within 1.1x of 2 threads ({best[2]:.2f} s): the default "
+                       f"of 1 holds", best[1] <= 1.1 * best[2]))
+    return check_targets(checks, args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -14,12 +14,14 @@ refinements, mean total error) against the paper's 3.1 / 5.1 / 6.9 mm.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.solver import SolverCfg
 from graspnet_torch.solver.config import RewardCfg
@@ -53,12 +55,13 @@ def table2_means_mm(srv: SRVNetCfg, reward: RewardCfg, trials: int) -> list[floa
     return out
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--seeds", type=int, default=3, help="seed sets for the noise study")
     ap.add_argument("--out", default="reports/noise_tradeoff.md")
+    ap.add_argument("--check", action="store_true", help="exit 1 when the default setting misses Table 2")
     args = ap.parse_args()
     torch.set_num_threads(1)
     seeds = range(args.seeds)
@@ -97,7 +100,10 @@ def main() -> None:
     lines += ["", f"Settings meeting both: {len(both)} of {len(rows)}."]
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}")
+    default = rows[0]  # a = 1, linear s x 3: the defaults without noise
+    return check_targets([(f"a = {default[0]:g}, {default[1]} s x {default[2]:g} (default): Table 2 means "
+                           f"{fmt(default[6], 2)} mm at or below the paper's", bool(default[8]))], args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

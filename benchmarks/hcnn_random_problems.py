@@ -12,12 +12,14 @@ r > 0.99, fingers refined); a problem counts as solved when the result's total e
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.solver import SolverCfg
 
@@ -36,10 +38,11 @@ def random_problem(robot, seed: int) -> gt.GraspProblem:
     return gt.GraspProblem.from_mapping({"robot": robot.name, "contacts": contacts}, source=f"random problem {seed}")
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=100)
     ap.add_argument("--out", default="reports/random_problems.md")
+    ap.add_argument("--check", action="store_true", help="exit 1 when fewer than 95 % are solved to < 10 mm")
     args = ap.parse_args()
     torch.set_num_threads(1)
     robot = gt.load_robot("hand")
@@ -68,7 +71,9 @@ def main() -> None:
         lines.append(f"| {k} | {int(sel.sum())} | {np.mean(e[sel] < 10) * 100:.1f} % | {np.median(e[sel]):.3f} |")
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"solved {np.mean(e < 10) * 100:.1f} % (< 10 mm); wrote {args.out}")
+    solved = float(np.mean(e < 10) * 100)
+    return check_targets([(f"solver=paper: {solved:.1f} % solved to < 10 mm >= 95 %", solved >= 95)], args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -13,12 +13,14 @@ iterations): median total error.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.solver import SolverCfg
 
@@ -57,11 +59,12 @@ def run_column(task: str, trials: int, solver: SolverCfg) -> dict:
     return out
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--out", default="reports/table2.md")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--check", action="store_true", help="exit 1 when a task's mean error is above the paper's")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     gt.solve("glass3", trials=1, max_iterations=50)  # warm-up (loading, first compilations)
@@ -114,7 +117,9 @@ def main() -> None:
     lines.append(f"\n(total run time {time.perf_counter() - started:.0f} s)")
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}")
+    return check_targets([(f"{task}: mean total error {ours:.3f} mm <= the paper's {paper} mm", ours <= paper)
+                          for task, ours, paper in summary], args.check)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from graspnet_torch.solver.config import RewardCfg
 
-__all__ = ["bench_args", "loop_rate", "rate_rows", "time_interleaved"]
+__all__ = ["bench_args", "check_targets", "loop_rate", "rate_rows", "time_interleaved"]
 
 
 def time_interleaved(fns: Sequence[Callable[[], object]], min_time: float = 0.3, rounds: int = 5) -> list[float]:
@@ -34,6 +34,14 @@ def time_interleaved(fns: Sequence[Callable[[], object]], min_time: float = 0.3,
                     break
             best[k] = min(best[k], elapsed / n)
     return best
+
+
+def check_targets(checks: Sequence[tuple[str, bool]], check: bool) -> int:
+    """Print one line per target (``met`` or ``MISSED``); the exit status of a benchmark: 1 when
+    ``check`` and a target is missed, else 0."""
+    for text, ok in checks:
+        print(f"{'met   ' if ok else 'MISSED'}  {text}")
+    return 1 if check and not all(ok for _, ok in checks) else 0
 
 
 def bench_args(doc: str) -> argparse.Namespace:
