@@ -44,7 +44,7 @@ def _kinematics(robot: gt.Robot) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--check", action="store_true", help="exit 1 when 2 threads beat 1 by more than 10 %")
+    ap.add_argument("--check", action="store_true", help="exit 1 when 1 thread is over 3x slower than 2")
     args = ap.parse_args()
     checks = []
     robot = gt.load_robot("hand")
@@ -63,8 +63,10 @@ def main() -> int:
                 job()
                 best[threads] = min(best[threads], time.perf_counter() - t0)
         print(f"{name:36s} {best[1]:11.2f} {best[2]:12.2f} {best[2] / best[1]:7.2f}", flush=True)
-        checks.append((f"{name}: 1 thread {best[1]:.2f} s within 1.1x of 2 threads ({best[2]:.2f} s): the default "
-                       f"of 1 holds", best[1] <= 1.1 * best[2]))
+        # the default of 1 thread trades at most ~2x on an idle 2-core machine (the cores it leaves
+        # unused) against the 10-90x that 2 threads lost on a busy one (README, "Threads")
+        checks.append((f"{name}: 1 thread {best[1]:.2f} s within 3x of 2 threads ({best[2]:.2f} s)",
+                       best[1] <= 3 * best[2]))
     return check_targets(checks, args.check)
 
 
