@@ -23,7 +23,7 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
-from graspnet_torch.solver.baselines import cmaes_search
+from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.table import format_table
 
@@ -94,12 +94,13 @@ def cmaes_rows(runs: int, results: dict) -> dict:
         starts = results[env, "r3"].outcome.start
         stats = []
         t0 = time.perf_counter()
-        for k in range(runs):
-            o = cmaes_search(environment, starts[k], reward_cfg("r3"), budget=2000, seed=k)
-            config, ev = environment.finish(o.config.unsqueeze(0), o.evaluation, solver.final_refine)
-            fields = environment.report(config, ev)[0]
+        cmaes = SolverCfg.paper(method="cmaes", max_iterations=2000, history=False)  # one CMA-ES per start
+        o = run_cmaes(environment, runs, 0, cmaes, reward_cfg("r3"), start=starts[:runs])
+        config, ev = environment.finish(o.config, o.evaluation, solver.final_refine)
+        for k, fields in enumerate(environment.report(config, ev)):
             collisions = scene.count(trial_posture(robot, fields))
-            stats.append((o.success, o.success and collisions == 0, o.evaluations, fields["error"] * 1000))
+            ok = bool(o.success[k])
+            stats.append((ok, ok and collisions == 0, int(o.iterations[k]), fields["error"] * 1000))
         evals = [s[2] for s in stats if s[0]]
         out[env] = {"success": sum(s[0] for s in stats), "free": sum(s[1] for s in stats),
                     "evals": float(np.mean(evals)) if evals else float("nan"), "seconds": time.perf_counter() - t0}

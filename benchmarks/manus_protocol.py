@@ -28,7 +28,7 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
-from graspnet_torch.solver.baselines import cmaes_search
+from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
@@ -77,10 +77,11 @@ def baselines(runs: int, every: int) -> dict:
         ev0 = env.evaluate(starts)
         cfg, ev = env.finish(starts, ev0, 1200)
         _collect(out["dls"], env, cfg, ev, robot, scene)
-        for r in range(runs):
-            o = cmaes_search(env, starts[r], reward, budget=1000, seed=r)
-            cfg, ev = env.finish(o.config.unsqueeze(0), o.evaluation, solver.final_refine)
-            _collect(out["cmaes"], env, cfg, ev, robot, scene)
+        cmaes = SolverCfg(**{**solver.__dict__, "method": "cmaes", "max_iterations": 1000, "stop": None,
+                             "history": False})  # one CMA-ES per start
+        o = run_cmaes(env, runs, 0, cmaes, reward, start=starts)
+        cfg, ev = env.finish(o.config, o.evaluation, solver.final_refine)
+        _collect(out["cmaes"], env, cfg, ev, robot, scene)
     return {name: summary(*(np.array(v) for v in vals)) for name, vals in out.items()}
 
 
