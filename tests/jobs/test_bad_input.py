@@ -147,7 +147,11 @@ def test_oversized_non_utf8_and_special_problem_files(tmp_path):
     latin.write_bytes(GLASS3.replace("Drinking glass", "Verre à boire").encode("latin-1"))
     _refused(tmp_path, "solve_grasp.py", f"problem={latin}", message="not UTF-8 text")
     _refused(tmp_path, "solve_grasp.py", "problem=/dev/zero", message="the problem file is not a regular file")
-    _refused(tmp_path, "solve_grasp.py", f"problem={tmp_path}", message="the problem file is not a regular file")
+    # a folder is many problems: each file is checked, the first bad one named; an empty one is refused
+    _refused(tmp_path, "solve_grasp.py", f"problem={tmp_path}", message="big.yaml: 1800026 bytes")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    _refused(tmp_path, "solve_grasp.py", f"problem={empty}", message="no problem files (*.yaml, *.yml, *.json)")
 
 
 # ------------------------------------------------------------------ paths
