@@ -5,7 +5,8 @@ CMA-ES and damped least squares, behind the same ``gt.solve`` (same result, same
 
 Sections (every wall time is a whole ``gt.solve`` call, median per problem, 1 torch thread):
 
-1. random reachable hand problems (``gt.random_reachable_problem``, 2-5 fingers), 20 trials each;
+1. random reachable hand problems (``gt.random_reachable_problem``, 2-5 fingers), 20 trials each,
+   with the default's additions turned off one at a time (its ablations);
 2. the Table 2 tasks (glass3, glass4, videotape5), 20 trials, 5 seeds;
 3. noisy sensing: block5 and glass4 at sigma_n = 0.05 / 0.1 / 0.2, 2000 observations per trial,
    20 trials: the noise presets (``noise=sigma...``: a = 20, s(r_hat) scale 0.5) against CMA-ES with
@@ -46,33 +47,36 @@ NOISE_MM = 3.0
 MANY_PER_S = 200.0
 HAND = {"srv (default)": {}, "solver=paper": dict(PAPER_PROTOCOL), "cmaes": {"method": "cmaes"},
         "dls": {"method": "dls", "max_iterations": 100}}
+ABLATIONS = {"srv, no whole polish (polish=fingers)": {"polish": "fingers"},  # the additions one at a time
+             "srv, no batch stop (stop=null)": {"stop": None},
+             "srv, polish after the loop only (polish_from=null)": {"polish_from": None}}
 
 
 def _median_ms(x: list[float]) -> float:
     return float(np.median(x)) * 1000
 
 
-def random_hand(n: int, trials: int) -> tuple[str, dict]:
+def random_hand(n: int, trials: int, variants: dict[str, dict]) -> tuple[str, dict]:
     robot = gt.load_robot("hand")
     problems = [gt.random_reachable_problem(robot, seed) for seed in range(n)]
     for p in problems:  # warm-up: every finger set's kernels, shared by every solver, built once
-        for cfg in HAND.values():
+        for cfg in variants.values():
             gt.solve(p, trials=2, seed=0, solver={**cfg, "max_iterations": 2})
-    err = {k: [] for k in HAND}
-    wall = {k: [] for k in HAND}
-    its = {k: [] for k in HAND}
+    err = {k: [] for k in variants}
+    wall = {k: [] for k in variants}
+    its = {k: [] for k in variants}
     for k, p in enumerate(problems):
-        order = list(HAND) if k % 2 == 0 else list(HAND)[::-1]  # drifts of a shared machine hit all alike
+        order = list(variants) if k % 2 == 0 else list(variants)[::-1]  # drifts of a shared machine hit all alike
         for name in order:
             t0 = time.perf_counter()
-            res = gt.solve(p, trials=trials, seed=k, solver=HAND[name])
+            res = gt.solve(p, trials=trials, seed=k, solver=variants[name])
             wall[name].append(time.perf_counter() - t0)
             err[name].append(res.total_error_mm)
             its[name].append(res.best.iterations)
     fingers = np.array([len(p.contacts) for p in problems])
     base = np.median(wall["dls"])
     rows = []
-    for name in HAND:
+    for name in variants:
         e = np.asarray(err[name])
         per = " / ".join(f"{np.mean(e[fingers == f] < 1) * 100:.0f}" for f in range(2, 6))
         rows.append([name, f"{np.mean(e < 1) * 100:.1f}", f"{np.mean(e < 10) * 100:.1f}", per, f"{np.median(e):.2g}",
@@ -205,7 +209,7 @@ def main() -> int:
     quick = args.quick
     t0 = time.perf_counter()
     sections = []
-    text, hand = random_hand(20 if quick else args.problems, 20)
+    text, hand = random_hand(20 if quick else args.problems, 20, {**HAND, **ABLATIONS})
     print(text + "\n", flush=True)
     sections.append(text)
     for fn in (lambda: table2(2 if quick else 5), lambda: arm(2 if quick else 5),
