@@ -184,6 +184,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 best_config, best_ev, best_r, best_obs, landed = _polish_near(
                     env, near, best_config, best_ev, best_r, best_obs, reward, k + 1, threshold, solver)
                 observed = torch.where(landed, best_obs, observed)  # the stop below sees the landed ones
+                r = torch.where(landed, best_r, r)  # a landed trial is where the polish put it: its curves
+                ev = best_ev.where(landed, ev)  # end there, and its collision count is the landed one's
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
                                ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
