@@ -23,7 +23,8 @@ from graspnet_torch.jobs.solve_many import prepare_job, run_job
 @hydra.main(config_path="../configs", config_name="solve_grasp", version_base="1.3")
 @user_errors_exit_2
 def main(cfg: DictConfig) -> None:
-    run_job(container(cfg), HydraConfig.get().runtime.output_dir)
+    hydra_cfg = HydraConfig.get()
+    run_job(container(cfg), hydra_cfg.runtime.output_dir, list(hydra_cfg.overrides.task))
 
 
 if __name__ == "__main__":

@@ -245,9 +245,12 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
             once here and handed to ``prepare(cfg, run_dir)``, the job's own checks (problem,
             output path, memory...), so that a refusal happens before Hydra makes any folder.
     """
+    import torch
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    # the checks run on one thread (a busy machine, README "Threads"); every job sets its own count
+    torch.set_num_threads(1)
     if argv is None:
         sys.argv[1:] = robot_path_overrides(sys.argv[1:])  # Hydra's main reads sys.argv
         argv = sys.argv[1:]

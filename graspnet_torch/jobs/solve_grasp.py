@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -32,8 +32,8 @@ from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["check_problem", "job_settings", "log_tensorboard", "posture_of", "prepare_solve", "resolve_problem",
-           "solve_grasp", "with_robot_defaults"]
+__all__ = ["check_problem", "hparams_of", "job_settings", "log_hparams", "log_tensorboard", "posture_of",
+           "prepare_solve", "resolve_problem", "solve_grasp", "with_robot_defaults"]
 
 
 def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | RobotCfg | None,
@@ -95,6 +95,39 @@ def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...]
                                           steps[k])
                 if "collisions" in history:
                     writer.add_scalar(f"{tag}/collisions", float(history["collisions"][k, t]), steps[k])
+
+
+def hparams_of(result: GraspResult, overrides: Sequence[str] = ()) -> tuple[dict, dict]:
+    """The settings of a job (its command-line ``overrides`` as ``key=value``, numbers parsed,
+    over the solver, seed, trials, noise sigma and reward slope it ran with) and its metrics
+    (success, best error in mm, iterations, wall time, collisions): TensorBoard's hparams."""
+    settings = result.settings
+    hp: dict[str, Any] = {"solver": settings.get("solver", "srv"),
+                          "seed": result.seed if result.seed is not None else 0,
+                          "trials": settings.get("trials", len(result.trials)),
+                          "noise_sigma": settings.get("noise_sigma", 0.0), "reward_a": settings.get("reward_a", 1.0)}
+    for item in overrides:
+        key, sep, value = str(item).partition("=")
+        if not sep or key.startswith(("hydra", "~")):
+            continue
+        try:
+            hp[key.lstrip("+")] = float(value) if any(c in value for c in ".eE") else int(value)
+        except ValueError:
+            hp[key.lstrip("+")] = value
+    best = result.best
+    metrics = {"hparam/success": float(result.success), "hparam/error_mm": float(best.error_mm),
+               "hparam/iterations": float(best.iterations), "hparam/wall_time_s": float(best.wall_time_s),
+               "hparam/collisions": float(best.collisions)}
+    return hp, metrics
+
+
+def log_hparams(log_dir: Path, result: GraspResult, overrides: Sequence[str] = ()) -> None:
+    """TensorBoard hparams of the job (:func:`hparams_of`), in the job's own log folder."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    hp, metrics = hparams_of(result, overrides)
+    with SummaryWriter(str(log_dir)) as writer:
+        writer.add_hparams(hp, metrics, run_name=".")
 
 
 def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
@@ -184,12 +217,15 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     return job, problem, device, out, solver
 
 
-def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> GraspResult:
+def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
+                overrides: Sequence[str] = ()) -> GraspResult:
     """The job behind ``scripts/solve_grasp.py``; ``cfg`` is the composed Hydra config as a dict.
 
     Everything is checked before any work (settings, device, problem, output path, memory); a
     refusal is a :class:`~graspnet_torch.errors.GraspnetError` and writes nothing. The result is
-    written only if finite; pictures and TensorBoard come after it and only warn if they fail.
+    written only if finite; pictures and TensorBoard (curves, and the hparams of the job: its
+    command-line ``overrides`` against its metrics, for sweeps) come after it and only warn if
+    they fail.
     """
     job, problem, device, out, solver = prepare_solve(cfg, run_dir)
     run_dir = Path(run_dir)
@@ -225,6 +261,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     print(f"result: {out}")
     if job.tensorboard:
         _warn_on_failure("TensorBoard logs", log_tensorboard, run_dir / "tb", result, fingers, every=job.log_every)
+        _warn_on_failure("TensorBoard hparams", log_hparams, run_dir / "tb", result, overrides)
     if job.pictures:
         _warn_on_failure("pictures", _pictures, robot, problem, result, run_dir)
     return result

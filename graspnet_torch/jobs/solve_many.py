@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import re
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -203,8 +203,12 @@ def prepare_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) 
     (prepare_many if is_many(_problem_setting(cfg)) else prepare_solve)(cfg, run_dir)
 
 
-def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> None:
-    """``solve_grasp.py``: many problems (a folder, a ``.jsonl`` file) or one."""
+def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path, overrides: Sequence[str] = ()) -> None:
+    """``solve_grasp.py``: many problems (a folder, a ``.jsonl`` file) or one (``overrides``: the
+    job's command line, its TensorBoard hparams)."""
     from graspnet_torch.jobs.solve_grasp import solve_grasp
 
-    (solve_grasps if is_many(_problem_setting(cfg)) else solve_grasp)(cfg, run_dir)
+    if is_many(_problem_setting(cfg)):
+        solve_grasps(cfg, run_dir)
+    else:
+        solve_grasp(cfg, run_dir, overrides)
