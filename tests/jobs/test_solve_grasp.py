@@ -264,3 +264,18 @@ def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
     assert res.returncode == 2
     assert f"{path}:3: not valid JSON" in res.stderr and len(res.stderr.strip().splitlines()) == 1
     assert not out.exists() and not (tmp_path / "run").exists()
+
+
+def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(tmp_path):
+    """problem=DIR writes into a folder: out naming a file, or batch=0, is refused before any work."""
+    folder = tmp_path / "problems"
+    for k, data in enumerate(_write_random_problems(folder, 2)):
+        (folder / f"p{k}.json").write_text(json.dumps(data))
+    taken = tmp_path / "taken.json"
+    taken.write_text("{}")
+    res = _run(f"problem={folder}", f"out={taken}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2 and "exists and is not a folder" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and taken.read_text() == "{}"
+    res = _run(f"problem={folder}", "batch=0", f"out={tmp_path / 'out'}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2 and "batch=0" in res.stderr
+    assert not (tmp_path / "out").exists() and not (tmp_path / "run").exists()
