@@ -63,16 +63,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--out", default="reports/table2.md")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)  # README "Threads"
     ap.add_argument("--check", action="store_true", help="exit 1 when a task's mean error is above the paper's")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     gt.solve("glass3", trials=1, max_iterations=50)  # warm-up (loading, first compilations)
     lines = ["# HCNN: the paper's Table 2 protocol", "",
              f"`python benchmarks/hcnn_table2.py` ({args.trials} single-trial runs per column, seeds "
-             f"0..{args.trials - 1}, no noise, {args.threads} CPU threads, default settings: sigma scale 3, a = 1, "
-             "FCNN competition in the loop, 3 refinement iterations of the reported fingers). Errors in mm, "
-             "mean +- std; ours / paper.", ""]
+             f"0..{args.trials - 1}, no noise, {args.threads} torch thread(s), the paper's protocol: sigma "
+             "scale 3, a = 1, FCNN competition in the loop, 3 refinement iterations of the reported fingers). "
+             "Errors in mm, mean +- std; ours / paper.", ""]
     summary = []
     started = time.perf_counter()
     for task, label, budgets, iterations in TASKS:
