@@ -118,13 +118,14 @@ class GripperEnvironment:
             self.proxy = CollisionProxy(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
-    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
+    def evaluate(self, config: Tensor, trials: Tensor | None = None, settle: bool = True) -> Evaluation:
         """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
         proxy, the collision count. ``trials`` (B,): the trials the rows of ``config`` (B, n)
-        belong to, when the loop evaluates only its active trials (None: all, in order)."""
+        belong to, when the loop evaluates only its active trials (None: all, in order).
+        ``settle``: first the ``refine`` settling steps (the loop's proposals), else as given."""
         proposal = config
         targets, lower, upper, pid = self._per_trial(trials)
-        if self.refine > 0:
+        if self.refine > 0 and settle:
             config, levels, points = self._refine(config, self.refine, targets, lower, upper)
         else:
             levels, points, _ = self._kinematics(config)
@@ -286,15 +287,7 @@ class GripperEnvironment:
                      ) -> tuple[Tensor, Evaluation]:
         """The configurations (T, n) of solved rows and their evaluation (no settling steps)."""
         config = solved.x.to(like)
-        levels, points, _ = self._kinematics(config)
-        _r, alignment, _r2, d = manus_reward(points, self.targets.expand_as(points))
-        count = None
-        if self.proxy is not None:
-            end = levels[:, -1] @ self._palm_offset
-            none = self._no_fingers.expand(config.shape[0], 0, 0)
-            count = self.proxy.count((end[:, :3, :3], end[:, :3, 3]), none, config, list(levels.unbind(1)),
-                                     self.problem_index)
-        return config, Evaluation(error=d, alignment=alignment, collisions=count)
+        return config, self.evaluate(config, settle=False)
 
     def _count(self, q: Tensor, pid: Tensor | None = None) -> Tensor:
         """(B,) the proxy's collision count of configurations (B, n) of the trials of problems
