@@ -156,7 +156,7 @@ def test_arm_among_obstacles_from_the_command_line(tmp_path):
     assert "collision-free (FCL" in res.stdout
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    events = EventAccumulator(str(next((tmp_path / "tb").glob("events.out.tfevents.*"))))
+    events = EventAccumulator(str(tmp_path / "tb"))  # every event file in the folder (the run's and its hparams')
     events.Reload()
     assert "trial_00/collisions" in events.Tags()["scalars"]
 
