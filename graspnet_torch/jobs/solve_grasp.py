@@ -277,8 +277,10 @@ def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:
               file=sys.stderr)
 
 
-def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
-    from graspnet_torch.viz import Panel, plot_learning_curves, render_robot
+def posture_panels(robot, problem: GraspProblem, result: GraspResult) -> list:
+    """Two views (:class:`~graspnet_torch.viz.Panel`) of the best trial's posture with the object,
+    obstacles and contacts (a gripper: the object's two points and its own), colliding links red."""
+    from graspnet_torch.viz import Panel
 
     posture = posture_of(robot, result.best)
     meshes = tuple(s.trimesh() for s in ((problem.object,) if problem.object else ()) + problem.obstacles)
@@ -297,9 +299,14 @@ def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) 
                         | {link for pair in report.self_pairs for link in pair})
     caption = (f"{problem.name or 'problem'}: best trial, error {result.best.error_mm:.2f} mm, "
                f"{result.best.collisions} collision(s){' (red)' if red else ''}")
-    panels = [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),
-              Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]
-    path = render_robot(robot, panels, run_dir / "posture.png")
+    return [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),
+            Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]
+
+
+def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
+    from graspnet_torch.viz import plot_learning_curves, render_robot
+
+    path = render_robot(robot, posture_panels(robot, problem, result), run_dir / "posture.png")
     print(f"pictures: {path}", end="")
     history = result.outcome.history if result.outcome is not None else None
     if history is not None:

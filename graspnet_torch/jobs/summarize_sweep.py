@@ -22,7 +22,7 @@ import yaml
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.settings import clip
-from graspnet_torch.table import format_table
+from graspnet_torch.table import markdown_table
 
 __all__ = ["collect_sweep", "summarize_sweep"]
 
@@ -91,8 +91,8 @@ def summarize_sweep(sweep: str | Path, out: str | Path | None = None) -> dict[st
                     f"{e.max():.3g}", f"{np.median([r['wall_time_s'] for r in rs]):.3g}"])
     md = (f"# Sweep {clip(str(sweep), 200)}\n\n{len(rows)} jobs; swept: {', '.join(swept) or 'nothing'}.\n\n"
           "## Per setting (over seeds)\n\n"
-          + format_table([*groups, "jobs", "success %", "median error mm", "worst mm", "median wall s"], agg)
-          + "\n\n## Per job\n\n" + format_table(header, per_job, floatfmt=".4g") + "\n")
+          + markdown_table([*groups, "jobs", "success %", "median error mm", "worst mm", "median wall s"], agg)
+          + "\n\n## Per job\n\n" + markdown_table(header, per_job, floatfmt=".4g") + "\n")
     paths["md"] = atomic_write_text(folder / "summary.md", md)
     try:
         paths["png"] = _plot(rows, groups, folder / "summary.png", str(sweep))

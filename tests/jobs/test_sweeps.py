@@ -39,8 +39,8 @@ def test_the_summary_tables_agree_with_the_job_results(tmp_path):
     assert len(csv) == 5
     md = paths["md"].read_text()
     assert f"{np.median([4.0, 10.0]):.3g}" in md and "sigma0.2" in md
-    line = next(t for t in md.splitlines() if t.startswith("sigma0.2"))
-    assert line.split()[:4] == ["sigma0.2", "20", "2", "50"]  # 2 jobs, 1 of 2 succeeded
+    line = next(t for t in md.splitlines() if t.startswith("| sigma0.2"))  # a markdown table's row
+    assert [c.strip() for c in line.strip("|").split("|")][:4] == ["sigma0.2", "20", "2", "50"]  # 1 of 2 succeeded
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"
 
 

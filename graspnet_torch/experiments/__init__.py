@@ -1,0 +1,57 @@
+"""The paper's experiments, each a function of its settings that returns an :class:`ExperimentReport`.
+
+=========  ==========================================================  =====================
+name       what (paper section)                                        settings
+=========  ==========================================================  =====================
+table2     Table 2 and Fig. 4: the HCNN on three grasps (5.2)          :class:`Table2Cfg`
+fig3       Fig. 3: learning with a noisy reinforcement (5.1)           :class:`NoiseStudyCfg`
+table3     Tables 3-4, ANOVA + Bonferroni, Figs. 6, 8, 9 (6.3)         :class:`ObstaclesCfg`
+fig10      Fig. 10: the arm among three obstacles (6.3)                :class:`Fig10Cfg`
+manus      the MANUS 64 x 30 protocol and Fig. 12 (7.2)                :class:`ManusCfg`
+solvers    every solver on the same problems (beyond the paper)        :class:`SolversCfg`
+=========  ==========================================================  =====================
+
+Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
+
+    python scripts/reproduce.py +experiment=table3 experiments.table3.runs=10
+    python scripts/reproduce.py                      # every experiment -> REPRODUCTION.md
+
+and a plain function (``run_table2(Table2Cfg(trials=5), Path("out"))``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
+from graspnet_torch.experiments.manus import ManusCfg, run_manus
+from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig10, run_tables
+from graspnet_torch.experiments.report import ExperimentReport, Figure
+from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
+from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
+
+__all__ = ["EXPERIMENTS", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg", "NoiseStudyCfg",
+           "ObstaclesCfg", "SolversCfg", "Table2Cfg", "run_fig10", "run_manus", "run_noise_study", "run_solvers",
+           "run_table2", "run_tables"]
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One experiment: its settings class and the function that runs it into a folder."""
+
+    name: str
+    cfg: type
+    run: Callable[[Any, Path], ExperimentReport]
+
+
+EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
+    Experiment("table2", Table2Cfg, run_table2),
+    Experiment("fig3", NoiseStudyCfg, run_noise_study),
+    Experiment("table3", ObstaclesCfg, run_tables),
+    Experiment("fig10", Fig10Cfg, run_fig10),
+    Experiment("manus", ManusCfg, run_manus),
+    Experiment("solvers", SolversCfg, run_solvers),
+)}

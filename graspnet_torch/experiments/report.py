@@ -1,0 +1,130 @@
+"""What every experiment of the paper returns, and the helpers they share.
+
+An experiment (:mod:`graspnet_torch.experiments`) runs one part of the paper's evaluation and
+returns an :class:`ExperimentReport`: a markdown body (ours beside the paper's numbers), its
+figures (PNG files beside their captions), the numbers that the same seeds must reproduce exactly,
+the wall-clock figures that differ from run to run, and what does not match the paper, said plainly.
+:func:`graspnet_torch.jobs.reproduce.reproduce` puts the reports together in ``REPRODUCTION.md``.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+__all__ = ["ExperimentReport", "Figure", "machine", "mean_std", "progress", "quick_settings"]
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A PNG written by an experiment (``file``: its name in the output folder) and its caption."""
+
+    file: str
+    caption: str
+
+
+@dataclass
+class ExperimentReport:
+    """One experiment's results.
+
+    Attributes:
+        name: the experiment (``table2``: ``+experiment=table2``).
+        title: the section heading (``Table 2: ...``).
+        body: markdown: how it was run, then ours beside the paper's numbers.
+        figures: the PNGs it wrote, in order, with their captions.
+        tables: the paper's tables this body holds (``Table 2``), checked for by ``reproduce``.
+        numbers: every result that the same seeds reproduce exactly (errors, counts, statistics).
+        timings: wall-clock results (seconds, rates, and what a time budget bought): they vary.
+        mismatches: what does not match the paper, one sentence each.
+        checks: this project's own targets (the issues'): (what, met).
+        settings: the experiment's settings as run.
+        seconds: its wall time.
+    """
+
+    name: str
+    title: str
+    body: str
+    figures: list[Figure] = field(default_factory=list)
+    tables: list[str] = field(default_factory=list)
+    numbers: dict[str, float] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    mismatches: list[str] = field(default_factory=list)
+    checks: list[tuple[str, bool]] = field(default_factory=list)
+    settings: dict[str, Any] = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def mean_std(values: Iterable[float], digits: int = 2) -> str:
+    """``"m +- s"`` (sample standard deviation; 0 for one value)."""
+    v = np.asarray(list(values), dtype=float)
+    s = v.std(ddof=1) if v.size > 1 else 0.0
+    return f"{v.mean():.{digits}f} +- {s:.{digits}f}"
+
+
+def progress(iterable: Iterable[T], total: int | None = None, desc: str = "", unit: str = "it") -> Iterator[T]:
+    """``iterable`` with a progress bar and an estimate of the time left on stderr; quiet when
+    stderr is not a terminal (a log, CI)."""
+    from tqdm.auto import tqdm
+
+    return iter(tqdm(iterable, total=total, desc=desc, unit=unit, disable=None, leave=False, dynamic_ncols=True))
+
+
+def quick_settings(cls: type[T], data: Mapping[str, Any] | None, quick: bool, where: str = "") -> T:
+    """``cls`` from an experiment's config: its settings, and with ``quick`` its ``quick`` block of
+    overrides on top (the reduced protocol: fewer runs, the same code path); ``where`` names the
+    settings in messages (``experiments.table2``)."""
+    from graspnet_torch.errors import ConfigError
+    from graspnet_torch.settings import build, short
+
+    if data is not None and not isinstance(data, Mapping):
+        raise ConfigError(f"{where or cls.__name__}: expected a mapping of settings, got {short(data)}")
+    data = dict(data or {})
+    overrides = data.pop("quick", None) or {}
+    if not isinstance(overrides, Mapping):
+        raise ConfigError(f"{where}.quick: expected a mapping of settings, got {short(overrides)}")
+    build(cls, overrides, f"{where}.quick")  # its keys and values are checked even when not used
+    return build(cls, {**data, **(dict(overrides) if quick else {})}, where)
+
+
+def _cpu_name() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git_commit(root: Path) -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                             timeout=5, check=False)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    commit = out.stdout.strip() or "unknown"
+    return commit + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
+
+
+def machine() -> dict[str, str]:
+    """The machine a reproduction ran on: CPU, cores, Python, torch and its threads, the commit."""
+    import torch
+
+    from graspnet_torch.paths import repo_root
+
+    return {"cpu": _cpu_name(), "cores": str(os.cpu_count()), "os": f"{platform.system()} {platform.release()}",
+            "python": sys.version.split()[0], "torch": torch.__version__, "torch threads": str(torch.get_num_threads()),
+            "commit": _git_commit(repo_root())}
