@@ -1,27 +1,11 @@
 """Every solver on the same problems, in one run: the paper's SRV loop (default and ``solver=paper``),
-CMA-ES and damped least squares, behind the same ``gt.solve`` (same result, same float64 errors).
+CMA-ES and damped least squares, behind the same ``gt.solve`` (the experiment ``solvers`` of
+:mod:`graspnet_torch.experiments`, whose docstring lists the sections and the targets).
 
     python benchmarks/solvers.py [--problems 100] [--quick] [--check] [--out reports/solvers.md]
 
-Sections (every wall time is a whole ``gt.solve`` call, median per problem, 1 torch thread):
-
-1. random reachable hand problems (``gt.random_reachable_problem``, 2-5 fingers), 20 trials each,
-   with the default's additions turned off one at a time (its ablations);
-2. the Table 2 tasks (glass3, glass4, videotape5), 20 trials, 5 seeds;
-3. noisy sensing: block5 and glass4 at sigma_n = 0.05 / 0.1 / 0.2, 2000 observations per trial,
-   20 trials: the noise presets (``noise=sigma...``: a = 20, s(r_hat) scale 0.5) against CMA-ES with
-   the same reward, noise and budget; the true error (float64, from the reported configuration),
-   median over trials, and the paper's a = 1 for reference;
-4. the arm environments env1 and env2 (R3, obstacles), 16 trials, 5 seeds: collision-free success
-   (FCL) and wall time;
-5. the MANUS cube protocol on 16 of the 64 positions, 30 learners each (``gt.solve_many``);
-6. ``gt.solve_many`` throughput: 1000 random reachable hand problems x 4 trials as one
-   vectorised search (the default solver), problems per second to < 1 mm.
-
-Targets (``--check`` exits 1 when one is missed): the default solver solves >= 99 % of the random
-hand problems to < 1 mm with a median wall time <= 1.5x that of ``solver=dls``; under noise
-(sigma_n = 0.2) its median true error is < 3 mm on block5 and glass4; ``gt.solve_many`` solves
->= 200 random hand problems per second to < 1 mm (>= 99 % of them).
+``--check`` exits 1 when a target is missed; ``--quick`` is the reduced protocol of
+``make reproduce-quick`` (a smoke run: its throughput is not the target's).
 """
 
 from __future__ import annotations
@@ -31,216 +15,33 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
-import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets
+from graspnet_torch.experiments import SolversCfg, run_solvers
+from graspnet_torch.experiments.report import quick_settings
 from graspnet_torch.io import atomic_write_text
-from graspnet_torch.solver.config import PAPER_PROTOCOL
-from graspnet_torch.table import format_table
-from graspnet_torch.tasks.manus import cube_problem, protocol_positions
-
-SOLVED_PCT = 99.0
-RATIO_VS_DLS = 1.5
-NOISE_MM = 3.0
-MANY_PER_S = 200.0
-HAND = {"srv (default)": {}, "solver=paper": dict(PAPER_PROTOCOL), "cmaes": {"method": "cmaes"},
-        "dls": {"method": "dls", "max_iterations": 100}}
-ABLATIONS = {"srv, no whole polish (polish=fingers)": {"polish": "fingers"},  # the additions one at a time
-             "srv, no batch stop (stop=null)": {"stop": None},
-             "srv, polish after the loop only (polish_from=null)": {"polish_from": None}}
-
-
-def _median_ms(x: list[float]) -> float:
-    return float(np.median(x)) * 1000
-
-
-def random_hand(n: int, trials: int, variants: dict[str, dict]) -> tuple[str, dict]:
-    robot = gt.load_robot("hand")
-    problems = [gt.random_reachable_problem(robot, seed) for seed in range(n)]
-    for p in problems:  # warm-up: every finger set's kernels, shared by every solver, built once
-        for cfg in variants.values():
-            gt.solve(p, trials=2, seed=0, solver={**cfg, "max_iterations": 2})
-    err = {k: [] for k in variants}
-    wall = {k: [] for k in variants}
-    its = {k: [] for k in variants}
-    for k, p in enumerate(problems):
-        order = list(variants) if k % 2 == 0 else list(variants)[::-1]  # drifts of a shared machine hit all alike
-        for name in order:
-            t0 = time.perf_counter()
-            res = gt.solve(p, trials=trials, seed=k, solver=variants[name])
-            wall[name].append(time.perf_counter() - t0)
-            err[name].append(res.total_error_mm)
-            its[name].append(res.best.iterations)
-    fingers = np.array([len(p.contacts) for p in problems])
-    base = np.median(wall["dls"])
-    rows = []
-    for name in variants:
-        e = np.asarray(err[name])
-        per = " / ".join(f"{np.mean(e[fingers == f] < 1) * 100:.0f}" for f in range(2, 6))
-        rows.append([name, f"{np.mean(e < 1) * 100:.1f}", f"{np.mean(e < 10) * 100:.1f}", per, f"{np.median(e):.2g}",
-                     f"{np.median(its[name]):g}", f"{_median_ms(wall[name]):.1f}",
-                     f"{np.median(wall[name]) / base:.2f}"])
-    text = (f"### Random reachable hand problems\n\n{n} problems (2-5 fingers: "
-            f"{' / '.join(str(int((fingers == f).sum())) for f in range(2, 6))}), {trials} trials each, seed k for "
-            f"problem k.\n\n" + format_table(["solver", "< 1 mm %", "< 10 mm %", "< 1 mm % by 2/3/4/5 fingers",
-                                             "median error mm", "best trial's iterations (median)",
-                                             "median wall ms", "wall vs dls"], rows))
-    solved = float(np.mean(np.asarray(err["srv (default)"]) < 1) * 100)
-    ratio = float(np.median(wall["srv (default)"]) / base)
-    return text, {"solved": solved, "ratio": ratio}
-
-
-def table2(seeds: int) -> str:
-    rows = []
-    for task in ("glass3", "glass4", "videotape5"):
-        for name, cfg in HAND.items():
-            err, wall = [], []
-            for s in range(seeds):
-                t0 = time.perf_counter()
-                res = gt.solve(task, trials=20, seed=s, solver=cfg)
-                wall.append(time.perf_counter() - t0)
-                err.append(res.total_error_mm)
-            e = np.asarray(err)
-            rows.append([task, name, f"{np.mean(e < 1) * 100:.0f}", f"{np.median(e):.2g}", f"{e.max():.2g}",
-                         f"{_median_ms(wall):.0f}"])
-    return (f"### Table 2 tasks\n\n20 trials, seeds 0-{seeds - 1}; the best trial of each solve.\n\n"
-            + format_table(["task", "solver", "< 1 mm %", "median error mm", "worst mm", "median wall ms"], rows))
-
-
-def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
-    from hydra import compose, initialize_config_dir
-
-    from graspnet_torch.paths import configs_dir
-
-    rows, at = [], {}
-    for sigma in levels:
-        with initialize_config_dir(config_dir=str(configs_dir()), version_base=None):
-            preset = compose("solve_grasp", overrides=[f"noise=sigma{sigma:g}"])
-        a, scale = float(preset.reward.a), float(preset.srv.sigma.scale)
-        solver = {"threshold": None, "polish": preset.solver.polish, "max_iterations": 2000, "history": False}
-        variants = {f"srv, preset (a = {a:g}, scale {scale:g})": (gt.RewardCfg(a=a), gt.SRVNetCfg(
-                        sigma=gt.SigmaCfg(scale=scale)), solver),
-                    f"cmaes (a = {a:g})": (gt.RewardCfg(a=a), None, {**solver, "method": "cmaes"}),
-                    "srv, the paper's a = 1": (gt.RewardCfg(a=1.0), None, solver)}
-        for task in ("block5", "glass4"):
-            for name, (reward, srv, cfg) in variants.items():
-                t0 = time.perf_counter()
-                res = gt.solve(task, trials=trials, seed=0, noise=sigma, reward=reward, srv=srv, solver=cfg)
-                wall = time.perf_counter() - t0
-                e = np.array([t.total_error_mm for t in res.trials])
-                rows.append([f"{sigma:g}", task, name, f"{np.median(e):.2f}", f"{np.percentile(e, 90):.2f}",
-                             f"{wall:.1f}"])
-                if name.startswith("srv, preset"):
-                    at[sigma, task] = float(np.median(e))
-    text = (f"### Noisy sensing\n\n{trials} trials, 2000 observations each, seed 0; true error of every trial's "
-            "reported configuration (float64), median and 90th percentile over trials.\n\n"
-            + format_table(["sigma_n", "task", "solver", "median error mm", "p90 mm", "wall s"], rows))
-    return text, at
-
-
-def arm(seeds: int) -> str:
-    variants = {"srv (default)": {}, "solver=paper": dict(PAPER_PROTOCOL), "cmaes": {"method": "cmaes"},
-                "dls": {"method": "dls"}}
-    rows = []
-    for env in ("env1", "env2"):
-        for name, cfg in variants.items():
-            ok, wall, err = 0, [], []
-            for s in range(seeds):
-                t0 = time.perf_counter()
-                res = gt.solve(env, trials=16, seed=1000 + s, solver=cfg)
-                wall.append(time.perf_counter() - t0)
-                ok += res.best.collisions == 0 and res.best.total_error_mm < 1.0
-                err.append(res.best.total_error_mm)
-            rows.append([env, name, f"{ok}/{seeds}", f"{np.median(err):.2g}", f"{np.median(wall):.2f}"])
-    return (f"### Arm among obstacles (R3)\n\n16 trials, seeds 1000-{999 + seeds}; success = the best trial is "
-            "collision-free (FCL) with total error < 1 mm.\n\n"
-            + format_table(["environment", "solver", "success", "median error mm", "median wall s"], rows))
-
-
-def manus(positions: int, runs: int) -> str:
-    grid = protocol_positions()[:: 64 // positions][:positions]
-    problems = [cube_problem(x, y) for x, y in grid]
-    variants = {"srv (robot defaults), every learner to its stop": {"stop": None}, "srv (default)": {},
-                "cmaes": {"method": "cmaes"}, "dls": {"method": "dls"}}
-    rows = []
-    for name, cfg in variants.items():
-        t0 = time.perf_counter()
-        results = gt.solve_many(problems, trials=runs, seed=0, solver=cfg)
-        wall = time.perf_counter() - t0
-        d = np.array([t.distance_mm for r in results for t in r.trials])
-        co = np.array([t.collisions for r in results for t in r.trials])
-        best_ok = np.mean([r.best.distance_mm < 1 and r.best.collisions == 0 for r in results]) * 100
-        rows.append([name, f"{best_ok:.0f}", f"{np.mean((d < 1) & (co == 0)) * 100:.0f}", f"{np.median(d):.2g}",
-                     f"{wall / len(problems):.2f}"])
-    return (f"### MANUS\n\n{len(problems)} of the protocol's 64 cube positions x {runs} learners "
-            "(gt.solve_many, seed 0); solved = d < 1 mm, collision-free (FCL).\n\n"
-            + format_table(["solver", "problems solved (best trial) %", "learners solved %", "median d mm",
-                            "wall s per problem"], rows))
-
-
-def many(n: int, trials: int) -> tuple[str, dict]:
-    robot = gt.load_robot("hand")
-    problems = [gt.random_reachable_problem(robot, 10_000 + k) for k in range(n)]
-    gt.solve_many(problems[:8], trials=trials, seed=0)  # warm-up
-    t0 = time.perf_counter()
-    results = gt.solve_many(problems, trials=trials, seed=0)
-    wall = time.perf_counter() - t0
-    e = np.array([r.total_error_mm for r in results])
-    per_s = n / wall
-    solved = float(np.mean(e < 1) * 100)
-    text = (f"### gt.solve_many\n\n{n} random reachable hand problems (2-5 fingers) x {trials} trials as one "
-            f"vectorised search (default solver, seed 0): {wall:.2f} s, **{per_s:.0f} problems/s**; best trial "
-            f"< 1 mm: {solved:.1f} % (median {np.median(e):.2g} mm, worst {e.max():.3g} mm).")
-    return text, {"per_s": per_s, "solved": solved}
+from graspnet_torch.jobs.reproduce import shipped_experiments
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=100)
-    ap.add_argument("--quick", action="store_true", help="fewer problems, seeds and levels (a smoke run)")
+    ap.add_argument("--quick", action="store_true", help="the reduced protocol (a smoke run)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--check", action="store_true")
-    ap.add_argument("--out", default="reports/solvers.md")
+    ap.add_argument("--out", type=Path, default=Path("reports/solvers.md"))
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(f"torch threads: {torch.get_num_threads()}")
-    quick = args.quick
+    cfg = quick_settings(SolversCfg, {**shipped_experiments()["solvers"], "problems": args.problems}, args.quick)
     t0 = time.perf_counter()
-    sections = []
-    text, hand = random_hand(20 if quick else args.problems, 20, {**HAND, **ABLATIONS})
-    print(text + "\n", flush=True)
-    sections.append(text)
-    for fn in (lambda: table2(2 if quick else 5), lambda: arm(2 if quick else 5),
-               lambda: manus(4 if quick else 16, 8 if quick else 30)):
-        text = fn()
-        print(text + "\n", flush=True)
-        sections.append(text)
-    text, noisy = noise(8 if quick else 20, (0.2,) if quick else (0.05, 0.1, 0.2))
-    print(text + "\n", flush=True)
-    sections.append(text)
-    text, batch = many(200 if quick else 1000, 4)
-    print(text + "\n", flush=True)
-    sections.append(text)
-    checks = [(f"default solver: {hand['solved']:.1f} % of random hand problems < 1 mm >= {SOLVED_PCT:g} %",
-               hand["solved"] >= SOLVED_PCT),
-              (f"default solver: median wall {hand['ratio']:.2f}x solver=dls <= {RATIO_VS_DLS:g}x",
-               hand["ratio"] <= RATIO_VS_DLS),
-              *((f"noise preset, sigma_n = 0.2, {task}: median true error {noisy[0.2, task]:.2f} mm < {NOISE_MM:g} mm",
-                 noisy[0.2, task] < NOISE_MM) for task in ("block5", "glass4")),
-              (f"gt.solve_many: {batch['per_s']:.0f} problems/s >= {MANY_PER_S:g}, {batch['solved']:.1f} % < 1 mm "
-               f">= {SOLVED_PCT:g} %", batch["per_s"] >= MANY_PER_S and batch["solved"] >= SOLVED_PCT)]
-    status = check_targets(checks, args.check)
-    lines = [f"{'met   ' if ok else 'MISSED'}  {t}" for t, ok in checks]
-    elapsed = time.perf_counter() - t0
-    report = ("# Solvers side by side\n\n"
-              f"`python benchmarks/solvers.py{' --quick' if quick else ''}` ({elapsed / 60:.1f} min, "
-              f"{torch.get_num_threads()} torch thread). Every wall time is a whole `gt.solve` call.\n\n"
-              + "\n\n".join(sections) + "\n\n## Targets\n\n" + "\n".join(f"- {t}" for t in lines) + "\n")
-    atomic_write_text(Path(args.out), report)
-    print(f"wrote {args.out} ({elapsed / 60:.1f} min)")
-    return status
+    report = run_solvers(cfg, args.out.parent)
+    report.seconds = time.perf_counter() - t0
+    command = f"python benchmarks/solvers.py --problems {cfg.problems}{' --quick' if args.quick else ''}"
+    path = atomic_write_text(args.out, report.markdown(command, quick=args.quick, mismatches=False))
+    print(f"wrote {path} ({report.seconds / 60:.1f} min)")
+    return check_targets(report.checks, args.check)
 
 
 if __name__ == "__main__":

@@ -92,4 +92,6 @@ def run_noise_study(cfg: NoiseStudyCfg, out: Path) -> ExperimentReport:
                             figures=[Figure("fig3_noise_study.png", "Fig. 3: a/ the obtained (noisy) reinforcement "
                                             "and b/ the corresponding deterministic error against the step, for "
                                             "each noise level (medians over trials).")],
-                            tables=["Fig. 3"], numbers=numbers, mismatches=mismatches)
+                            tables=["Fig. 3"], numbers=numbers, mismatches=mismatches,
+                            checks=[(f"sigma_n {sigma:g}: the error falls {start / final:.0f}x >= 3x",
+                                     start / final >= 3) for sigma, start, final, *_ in rows])

@@ -49,6 +49,7 @@ class ExperimentReport:
         checks: this project's own targets (the issues'): (what, met).
         settings: the experiment's settings as run.
         seconds: its wall time.
+        results: the raw results, for a caller that goes on with them (not written anywhere).
     """
 
     name: str
@@ -62,6 +63,26 @@ class ExperimentReport:
     checks: list[tuple[str, bool]] = field(default_factory=list)
     settings: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
+    results: Any = field(default=None, repr=False)
+
+    def markdown(self, command: str, heading: str = "#", quick: bool = False, mismatches: bool = True) -> str:
+        """The report as markdown: its title under ``heading``, the command that made it, the body,
+        each figure beside its caption, this project's targets, and (``mismatches``) what does not
+        match the paper."""
+        lines = [f"{heading} {self.title}", "", f"_`{command}` ({self.seconds:.0f} s here)_", "", self.body.rstrip(),
+                 ""]
+        for fig in self.figures:
+            lines += [f"![{fig.caption}]({fig.file})", "", f"*{fig.caption}*", ""]
+        if self.checks:
+            scope = " (they apply to the full protocol, not to this reduced one)" if quick else ""
+            lines += [f"This project's targets{scope}:", ""]
+            lines += [f"- {'met' if ok else 'MISSED'}: {what}" for what, ok in self.checks]
+            lines.append("")
+        if mismatches:
+            lines += [f"{heading}# What does not match the paper", ""]
+            lines += [f"- {m}" for m in self.mismatches] or ["- Nothing measured here differs from the paper."]
+            lines.append("")
+        return "\n".join(lines)
 
 
 def mean_std(values: Iterable[float], digits: int = 2) -> str:

@@ -165,14 +165,7 @@ def render(reports: list, info: Mapping[str, str], seconds: float, quick: bool, 
               "- [Machine, settings and seeds](#machine-settings-and-seeds)",
               "- [Numbers that vary from run to run](#numbers-that-vary-from-run-to-run)", ""]
     for r in reports:
-        lines += [f"## {r.title}", "", f"_`python scripts/reproduce.py +experiment={r.name}` ({r.seconds:.0f} s "
-                  "here)_", "", r.body.rstrip(), ""]
-        for fig in r.figures:
-            lines += [f"![{fig.caption}]({fig.file})", "", f"*{fig.caption}*", ""]
-        if r.checks:
-            lines += ["This project's targets:", ""]
-            lines += [f"- {'met' if ok else 'MISSED'}: {what}" for what, ok in r.checks]
-            lines.append("")
+        lines.append(r.markdown(f"python scripts/reproduce.py +experiment={r.name}", "##", quick, mismatches=False))
     lines += ["## What does not match the paper", ""]
     mismatches = [(r.title, m) for r in reports for m in r.mismatches]
     lines += [f"- {m}" for _, m in mismatches] or ["- Nothing measured here differs from the paper."]
