@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -28,6 +28,12 @@ robots: $(STAMP)  ## table of the shipped robots and a picture of each -> output
 test: $(STAMP)  ## ruff check + pytest
 	$(PY) -m ruff check .
 	$(PY) -m pytest
+
+reproduce: $(STAMP)  ## every experiment of the paper -> reports/REPRODUCTION.md and its figures (~30 min on 2 cores)
+	$(PY) scripts/reproduce.py out=reports hydra.run.dir=outputs/reproduce/full
+
+reproduce-quick: $(STAMP)  ## the reduced protocol of every experiment (~2 min) -> outputs/reproduce-quick/REPRODUCTION.md
+	$(PY) scripts/reproduce.py quick=true out=outputs/reproduce-quick hydra.run.dir=outputs/reproduce-quick
 
 lint: $(STAMP)  ## ruff check
 	$(PY) -m ruff check .
