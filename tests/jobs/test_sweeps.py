@@ -94,3 +94,6 @@ def test_a_submitit_local_sweep_runs_real_jobs_and_summarizes(tmp_path):
     assert {"hparam/error_mm", "hparam/success"} <= tags
     swept, jobs = collect_sweep(sweep)
     assert swept == ["seed"] and len(jobs) == 2
+    # the progress count crosses processes: the sweep's start and one marker per job that ended
+    assert json.loads((sweep / ".progress" / "start.json").read_text())["total"] == 2
+    assert sorted(p.name for p in (sweep / ".progress").iterdir() if p.name.isdigit()) == ["0", "1"]
