@@ -71,30 +71,40 @@ def posture_of(robot, trial: TrialResult):
 def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...], every: int = 10) -> None:
     """Per trial: reinforcement, total and per-finger error, what the solver has of expected
     reinforcement and mean sigma (SRV) or step size (CMA-ES) and, when it counted them (rewards
-    R2-R4 with an object or obstacles), collisions; x: the iteration (CMA-ES: evaluations used)."""
+    R2-R4 with an object or obstacles), collisions; x: the iteration (CMA-ES: evaluations used).
+
+    Every value of a logged iteration goes in one event (a summary with one value per tag, as
+    ``add_scalar`` writes them one event each): the same curves, about 20x fewer writes."""
     history = result.outcome.history if result.outcome is not None else None
     if history is None:
         return
-    from torch.utils.tensorboard import SummaryWriter
+    from tensorboard.compat.proto.summary_pb2 import Summary
+    from torch.utils.tensorboard.writer import FileWriter
 
-    with SummaryWriter(str(log_dir)) as writer:
-        K, T = history["total"].shape
-        steps = history["iteration"].tolist() if "iteration" in history else list(range(1, K + 1))
+    h = {key: value.double().numpy() for key, value in history.items()}
+    K, T = h["total"].shape
+    steps = h["iteration"].astype(int).tolist() if "iteration" in h else list(range(1, K + 1))
+    curves = [(key, name, 1.0) for key, name in (("reinforcement", "reinforcement"),
+                                                   ("expected", "expected_reinforcement"), ("sigma", "sigma_mean"),
+                                                   ("step_size", "cmaes_step_size"))  # what the solver has
+              if key in h] + [("total", "total_error_mm", 1000.0)]
+    if "collisions" in h:
+        curves.append(("collisions", "collisions", 1.0))
+    writer = FileWriter(str(log_dir))
+    try:
         for k in list(range(0, K, every)) + ([K - 1] if (K - 1) % every else []):
+            values = []
             for t in range(T):
                 tag = f"trial_{t:02d}"
-                writer.add_scalar(f"{tag}/reinforcement", float(history["reinforcement"][k, t]), steps[k])
-                for key, name in (("expected", "expected_reinforcement"), ("sigma", "sigma_mean"),
-                                  ("step_size", "cmaes_step_size")):  # what the solver has (SRV, CMA-ES)
-                    if key in history:
-                        writer.add_scalar(f"{tag}/{name}", float(history[key][k, t]), steps[k])
-                writer.add_scalar(f"{tag}/total_error_mm", float(history["total"][k, t]) * 1000, steps[k])
-                if "errors" in history:
-                    for f, finger in enumerate(fingers):
-                        writer.add_scalar(f"{tag}/error_mm/{finger}", float(history["errors"][k, t, f]) * 1000,
-                                          steps[k])
-                if "collisions" in history:
-                    writer.add_scalar(f"{tag}/collisions", float(history["collisions"][k, t]), steps[k])
+                values += [Summary.Value(tag=f"{tag}/{name}", simple_value=float(h[key][k, t] * scale))
+                           for key, name, scale in curves]
+                if "errors" in h:
+                    values += [Summary.Value(tag=f"{tag}/error_mm/{finger}",
+                                             simple_value=float(h["errors"][k, t, f] * 1000))
+                               for f, finger in enumerate(fingers)]
+            writer.add_summary(Summary(value=values), steps[k])
+    finally:
+        writer.close()
 
 
 def hparams_of(result: GraspResult, overrides: Sequence[str] = ()) -> tuple[dict, dict]:

@@ -279,3 +279,25 @@ def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(tmp_path):
     res = _run(f"problem={folder}", "batch=0", f"out={tmp_path / 'out'}", f"hydra.run.dir={tmp_path / 'run'}")
     assert res.returncode == 2 and "batch=0" in res.stderr
     assert not (tmp_path / "out").exists() and not (tmp_path / "run").exists()
+
+
+def test_tensorboard_curves_read_back_equal_the_history(tmp_path):
+    """Every logged point (each 10th iteration and the last) of every trial is the history's value."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    import graspnet_torch as gt
+    from graspnet_torch.jobs.solve_grasp import log_tensorboard
+
+    res = gt.solve("glass3", trials=3, seed=0, max_iterations=25, solver={"stop": None, "threshold": None})
+    log_tensorboard(tmp_path, res, ("thumb", "index", "middle"), every=10)
+    events = EventAccumulator(str(tmp_path), size_guidance={"scalars": 0})
+    events.Reload()
+    h = res.outcome.history
+    for t in range(3):
+        points = events.Scalars(f"trial_{t:02d}/total_error_mm")
+        assert [p.step for p in points] == [1, 11, 21, 25]
+        expected = [float(h["total"][k, t]) * 1000 for k in (0, 10, 20, 24)]
+        assert [p.value for p in points] == pytest.approx(expected, rel=1e-6)
+        index = events.Scalars(f"trial_{t:02d}/error_mm/index")
+        assert index[-1].value == pytest.approx(float(h["errors"][24, t, 1]) * 1000, rel=1e-6)
+        assert len(events.Scalars(f"trial_{t:02d}/sigma_mean")) == 4
