@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
+from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
 from graspnet_torch.srv import SigmaCfg, SRVNetCfg
@@ -37,6 +37,9 @@ class NoiseStudyCfg:
     a: float = setting(RewardCfg.a, lo=0.0, lo_open=True, hi=1e6)
     s: str = setting(SigmaCfg.kind, choices=("linear", "quadratic"))
     scale: float = setting(SigmaCfg.scale, lo=0.0, lo_open=True, hi=1e6)
+
+    def __post_init__(self) -> None:
+        require(len(self.levels) > 0, "experiments.fig3.levels: expected at least one noise level")
 
 
 def run_noise_study(cfg: NoiseStudyCfg, out: Path) -> ExperimentReport:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
+from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
 from graspnet_torch.table import markdown_table
@@ -44,6 +44,9 @@ class ObstaclesCfg:
     seed: int = setting(0, lo=0, hi=2**31)
     environments: tuple[str, ...] = setting(("env1", "env2"), choices=("env1", "env2"))
     cmaes: bool = True  # CMA-ES from the R3 learners' starts
+
+    def __post_init__(self) -> None:
+        require(len(self.environments) > 0, "experiments.table3.environments: expected at least one of env1, env2")
 
 
 @dataclass(frozen=True)

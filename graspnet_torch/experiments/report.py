@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-__all__ = ["ExperimentReport", "Figure", "machine", "mean_std", "progress", "quick_settings"]
+__all__ = ["ExperimentReport", "Figure", "machine", "mean_std", "progress", "quick_settings", "require"]
 
 T = TypeVar("T")
 
@@ -100,6 +100,14 @@ def progress(iterable: Iterable[T], total: int | None = None, desc: str = "", un
     return iter(tqdm(iterable, total=total, desc=desc, unit=unit, disable=None, leave=False, dynamic_ncols=True))
 
 
+def require(ok: bool, message: str) -> None:
+    """A settings check beyond a field's type and range: :class:`ConfigError` with ``message``."""
+    if not ok:
+        from graspnet_torch.errors import ConfigError
+
+        raise ConfigError(message)
+
+
 def quick_settings(cls: type[T], data: Mapping[str, Any] | None, quick: bool, where: str = "") -> T:
     """``cls`` from an experiment's config: its settings, and with ``quick`` its ``quick`` block of
     overrides on top (the reduced protocol: fewer runs, the same code path); ``where`` names the
@@ -113,7 +121,7 @@ def quick_settings(cls: type[T], data: Mapping[str, Any] | None, quick: bool, wh
     overrides = data.pop("quick", None) or {}
     if not isinstance(overrides, Mapping):
         raise ConfigError(f"{where}.quick: expected a mapping of settings, got {short(overrides)}")
-    build(cls, overrides, f"{where}.quick")  # its keys and values are checked even when not used
+    build(cls, overrides, f"{where}.quick" if where else "quick")  # its keys and values are checked even when not used
     return build(cls, {**data, **(dict(overrides) if quick else {})}, where)
 
 

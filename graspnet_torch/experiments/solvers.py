@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import graspnet_torch as gt
-from graspnet_torch.experiments.report import ExperimentReport, progress
+from graspnet_torch.experiments.report import ExperimentReport, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.config import PAPER_PROTOCOL
 from graspnet_torch.table import markdown_table
@@ -206,6 +206,15 @@ class SolversCfg:
     noise_trials: int = setting(20, lo=1, hi=10_000)
     noise_levels: tuple[float, ...] = setting((0.05, 0.1, 0.2), lo=0.0, hi=10.0)
     many: int = setting(1000, lo=8, hi=1_000_000)  # gt.solve_many's problems
+
+    def __post_init__(self) -> None:
+        from graspnet_torch.paths import configs_dir
+
+        presets = sorted(p.stem.removeprefix("sigma") for p in (configs_dir() / "noise").glob("sigma*.yaml"))
+        require(len(self.noise_levels) > 0 and all((configs_dir() / "noise" / f"sigma{s:g}.yaml").is_file()
+                                                   for s in self.noise_levels),
+                f"experiments.solvers.noise_levels: expected levels with a noise preset ({', '.join(presets)}; "
+                f"configs/noise/), got {list(self.noise_levels)}")
 
 
 def run_solvers(cfg: SolversCfg, out: Path) -> ExperimentReport:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graspnet_torch.experiments.report import ExperimentReport, Figure, mean_std, progress
+from graspnet_torch.experiments.report import ExperimentReport, Figure, mean_std, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import SolverCfg
 
@@ -47,7 +47,10 @@ class Table2Cfg:
     time_scale: float = setting(1.0, lo=0.0, lo_open=True, hi=100.0)  # times the paper's time budgets
     larger_trials: int = setting(20, lo=0, hi=10_000)  # 0: no larger-budget run (and no Fig. 4)
     larger_iterations: int = setting(20_000, lo=1, hi=10_000_000)
-    tasks: tuple[str, ...] = ("glass3", "glass4", "videotape5")
+    tasks: tuple[str, ...] = setting(("glass3", "glass4", "videotape5"), choices=("glass3", "glass4", "videotape5"))
+
+    def __post_init__(self) -> None:
+        require(len(self.tasks) > 0, "experiments.table2.tasks: expected at least one of glass3, glass4, videotape5")
 
 
 def run_column(task: str, seeds: range, solver: SolverCfg, desc: str = "") -> dict:

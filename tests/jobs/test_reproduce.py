@@ -39,6 +39,10 @@ def test_one_experiment_writes_the_report_numbers_and_figure(tmp_path):
     (["+experiment=fig10", "experiments.fig10.trials=0"], "experiments.fig10.trials"),
     (["+experiment=fig10", "experiments.fig10.trialz=2"], "experiments.fig10.trialz"),
     (["quick=maybe"], "quick"),
+    (["+experiment=table2", "experiments.table2.tasks=[glass9]"], "experiments.table2.tasks"),
+    (["+experiment=table3", "experiments.table3.environments=[]"], "experiments.table3.environments"),
+    (["+experiment=solvers", "experiments.solvers.noise_levels=[0.3]"], "noise preset"),
+    (["+experiment=fig3", "experiments.fig3.quick.steps=10"], "experiments.fig3.quick.steps"),
 ])
 def test_bad_settings_are_one_line_exit_2_and_nothing_written(tmp_path, args, message):
     out = tmp_path / "out"
