@@ -334,9 +334,12 @@ class CollisionProxy:
             thr = np.nan_to_num(thr, nan=-np.inf)
             g["pos"] = torch.as_tensor(thr > 0, device=device)
             g["thr_sq"] = torch.as_tensor(np.where(thr > 0, thr, 0.0) ** 2, **kw)
-            # broad phase: the cluster's bounding sphere within reach
+            # broad phase: the cluster's bounding sphere within reach (of a convex piece's bounding sphere)
             bthr = np.broadcast_to(bound_r[:, None, None] - np.array([margin[k] for k in g["index"]]),
                                    (C, 1, len(g["index"])))[:, 0]  # (C, O_g)
+            if g["kind"] == "convex":
+                g["bound_r"] = torch.as_tensor(bthr, **kw)  # (C, O_g): + the piece's radius, per problem
+                bthr = bthr + g["radius"].amax(0).cpu().numpy()[None]
             g["bound_pos"] = (torch.as_tensor(bthr > 0, device=device) & g["pos"].any(1)).unsqueeze(1)  # (C, 1, O_g)
             g["bound_thr_sq"] = torch.as_tensor(np.where(bthr > 0, bthr, 0.0) ** 2, **kw).unsqueeze(1)
             g["columns"] = torch.as_tensor(g["index"], device=device)
@@ -344,6 +347,9 @@ class CollisionProxy:
             g["R_cols"] = g["R"].permute(0, 2, 1, 3).reshape(P, 3, -1)  # per problem [R_1 .. R_O]
             g["Rt"] = torch.einsum("poji,poj->poi", g["R"], g["t"]).reshape(P, -1)  # per problem [R_o^T t_o]
         self._true = torch.ones((), dtype=torch.bool, device=device)
+        # elementwise tests per sphere: one per primitive, one per plane of a convex piece
+        self._dense_cost = sum(len(g["index"]) * (g["size"].shape[-2] if g["kind"] == "convex" else 1)
+                               for g in self._groups)
         # the robot's own links (self_collision: true): capsules and boxes (self_collision_primitives),
         # every primitive of one link of a pair against every primitive of the other
         self.self_pairs = self_collision_pairs(robot)
@@ -537,19 +543,29 @@ class CollisionProxy:
         C = frames.shape[0]
         flat = frames.reshape(C, T * 3, 4)
         pid = problem_index if self.n_problems > 1 else None
-        if T * C * CLUSTER * self.n_elements <= DENSE_LIMIT:  # small batches: every sphere, no gathers
+        if T * C * CLUSTER * self._dense_cost <= DENSE_LIMIT:  # small batches: every sphere, no gathers
             centres = torch.bmm(flat, self._cluster_local).view(C, T, 3, CLUSTER).transpose(2, 3)  # (C, T, K, 3)
             for g in self._groups:
                 size = None if pid is None else g["size"][pid].unsqueeze(1)  # (T, 1, O_g, s)
                 hit = _hit(g, _local(g, centres, pid), g["pos"].unsqueeze(1), g["thr_sq"].unsqueeze(1),
                            size).any(2)  # (C, T, O_g)
                 per_link = torch.einsum("cto,cl->tlo", hit.to(self._link_of_cluster.dtype), self._link_of_cluster)
-                out[..., g["columns"]] |= per_link > 0
+                if g["kind"] == "convex":  # the pieces of one mesh share its column
+                    per_link = torch.zeros(T, len(self.links), self.n_elements, dtype=per_link.dtype,
+                                           device=per_link.device).index_add_(2, g["columns"], per_link)
+                    out |= per_link > 0
+                else:
+                    out[..., g["columns"]] |= per_link > 0
             return out
         bound = torch.bmm(flat, self._cluster_bound).view(C, T, 1, 3)  # bounding-sphere centres
         for g in self._groups:
             size = None if pid is None else g["size"][pid]  # (T, O_g, s)
-            near = _hit(g, _local(g, bound, pid).squeeze(2), g["bound_pos"], g["bound_thr_sq"], size)  # (C, T, O_g)
+            if g["kind"] == "convex":  # bounding spheres: the cluster's and the piece's
+                gap = _local(g, bound, pid).squeeze(2) - (g["centre"][0] if pid is None else g["centre"][pid])
+                reach = g["bound_r"].unsqueeze(1) + (g["radius"][0] if pid is None else g["radius"][pid])
+                near = g["bound_pos"] & (gap.square().sum(-1) < reach.clamp(min=0).square())  # (C, T, O_g)
+            else:
+                near = _hit(g, _local(g, bound, pid).squeeze(2), g["bound_pos"], g["bound_thr_sq"], size)
             c, t, o = near.nonzero(as_tuple=True)
             if c.numel() == 0:
                 continue
@@ -633,6 +649,10 @@ def _hit(g: dict, p: Tensor, positive: Tensor, thr_sq: Tensor, size: Tensor | No
         d = p
     elif g["kind"] == "sphere":
         d = (torch.linalg.vector_norm(p, dim=-1) - _size(g, size)[..., 0]).unsqueeze(-1)
+    elif g["kind"] == "convex":  # max over the piece's planes: (..., O_g, 3) against (..., O_g, F, 4)
+        from graspnet_torch.collision.convex import pieces_distance
+
+        d = pieces_distance(p, _size(g, size)).unsqueeze(-1)
     elif g["kind"] == "box":
         d = p.abs() - _size(g, size)
     else:
@@ -709,52 +729,84 @@ def _size(g: dict, size: Tensor | None) -> Tensor:
 
 def _primitive_groups(batch: list[list[Shape]], kw: dict, floor: int | None = None) -> list[dict]:
     """Elements grouped by kind, stacked over the problems of a batch (the same kinds in the same
-    order in each): rotations (P, O, 3, 3), origins (P, O, 3), half sizes (P, O, s); a mesh becomes
-    its bounding box in its own frame. Element ``floor`` (the robot's floor slab, the same in
-    every problem) becomes a half-space, kind ``plane``: only a height is compared."""
+    order in each): rotations (P, O, 3, 3), origins (P, O, 3), half sizes (P, O, s). A mesh is its
+    convex pieces (:func:`~graspnet_torch.collision.convex.convex_pieces`), one entry of kind
+    ``convex`` each, in the mesh's frame: planes (P, O, F, 4) as its size, and bounding spheres
+    ``centre`` (P, O, 3), ``radius`` (P, O); a problem whose mesh has fewer pieces is padded with
+    pieces that never hit. Element ``floor`` (the robot's floor slab, the same in every problem)
+    becomes a half-space, kind ``plane``: only a height is compared."""
+    from graspnet_torch.collision.convex import FAR, convex_pieces
     from graspnet_torch.robot.chain import rpy_matrix_np
 
     groups: dict[str, dict] = {}
+    slots: dict[tuple[int, int], int] = {}  # (element, piece) -> the convex group's entry
     for p, elements in enumerate(batch):
         for k, e in enumerate(elements):
             R, t = rpy_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
             if e.kind == "mesh":
-                import trimesh
-
-                mesh = trimesh.load(e.mesh, force="mesh")
-                lo, hi = np.asarray(mesh.bounds[0]), np.asarray(mesh.bounds[1])
-                kind, half = "box", (hi - lo) / 2
-                t = t + R @ ((hi + lo) / 2)
+                pieces = convex_pieces(e.mesh, e.scale)
+                entries = [("convex", pieces.planes[j], pieces.centres[j], pieces.radii[j])
+                           for j in range(pieces.n_pieces)]
             elif k == floor:
-                kind, half = "plane", np.zeros(3)
+                entries = [("plane", np.zeros(3), None, None)]
                 t = t + R @ np.array([0.0, 0.0, e.size[2] / 2])  # the slab's top
             elif e.kind == "box":
-                kind, half = "box", np.asarray(e.size) / 2
+                entries = [("box", np.asarray(e.size) / 2, None, None)]
             elif e.kind == "cylinder":
-                kind, half = "cylinder", np.array([e.size[0], e.size[1] / 2, 0.0])
+                entries = [("cylinder", np.array([e.size[0], e.size[1] / 2, 0.0]), None, None)]
             else:
-                kind, half = "sphere", np.array([e.size[0], 0.0, 0.0])
-            g = groups.setdefault(kind, {"kind": kind, "index": [], "R": [], "t": [], "size": []})
-            if p == 0:
-                g["index"].append(k)
-                g["R"].append([])
-                g["t"].append([])
-                g["size"].append([])
-            col = g["index"].index(k)
-            g["R"][col].append(R)
-            g["t"][col].append(t)
-            g["size"][col].append(half)
+                entries = [("sphere", np.array([e.size[0], 0.0, 0.0]), None, None)]
+            for j, (kind, size, centre, radius) in enumerate(entries):
+                g = groups.setdefault(kind, {"kind": kind, "index": [], "R": [], "t": [], "size": [], "centre": [],
+                                             "radius": []})
+                if (k, j) not in slots:
+                    slots[k, j] = len(g["index"])
+                    g["index"].append(k)
+                    for key in ("R", "t", "size", "centre", "radius"):
+                        g[key].append({})
+                col = slots[k, j]
+                g["R"][col][p], g["t"][col][p], g["size"][col][p] = R, t, size
+                g["centre"][col][p], g["radius"][col][p] = centre, radius
     out = []
-    for kind in ("box", "cylinder", "sphere", "plane"):
-        if kind in groups:
-            g = groups[kind]
-            size = np.asarray(g["size"]).transpose(1, 0, 2)[..., :{"box": 3, "plane": 1}.get(kind, 2)]
-            out.append({"kind": kind, "index": g["index"],
-                        "R": torch.as_tensor(np.asarray(g["R"]).transpose(1, 0, 2, 3), **kw),
-                        "t": torch.as_tensor(np.asarray(g["t"]).transpose(1, 0, 2), **kw),
-                        "size": torch.as_tensor(size, **kw)})
-            if kind == "plane":
-                out[-1]["top"] = float(g["t"][0][0][2])
+    P = len(batch)
+    for kind in ("box", "cylinder", "sphere", "convex", "plane"):
+        if kind not in groups:
+            continue
+        g = groups[kind]
+        if kind == "convex":  # pad to one face count; a piece a problem lacks never hits
+            F = max(s.shape[0] for col in g["size"] for s in col.values())
+            never = np.zeros((F, 4))
+            never[:, 3] = -FAR
+            size = np.stack([np.stack([_pad_planes(col.get(p), F, never) for col in g["size"]]) for p in range(P)])
+            first = [next(iter(col.values())) for col in g["R"]]
+            R = np.stack([np.stack([col.get(p, first[c]) for c, col in enumerate(g["R"])]) for p in range(P)])
+            t = np.stack([np.stack([col.get(p, np.zeros(3)) for col in g["t"]]) for p in range(P)])
+            centre = np.stack([np.stack([col.get(p, np.zeros(3)) for col in g["centre"]]) for p in range(P)])
+            radius = np.stack([np.array([col.get(p, 0.0) for col in g["radius"]]) for p in range(P)])
+            entry = {"centre": torch.as_tensor(centre, **kw), "radius": torch.as_tensor(radius, **kw)}
+        else:
+            s = {"box": 3, "plane": 1}.get(kind, 2)
+            size = np.stack([np.stack([col[p][:s] for col in g["size"]]) for p in range(P)])
+            R = np.stack([np.stack([col[p] for col in g["R"]]) for p in range(P)])
+            t = np.stack([np.stack([col[p] for col in g["t"]]) for p in range(P)])
+            entry = {}
+        out.append({"kind": kind, "index": g["index"], "R": torch.as_tensor(R, **kw), "t": torch.as_tensor(t, **kw),
+                    "size": torch.as_tensor(size, **kw), **entry})
+        if kind == "plane":
+            out[-1]["top"] = float(t[0, 0, 2])
+    return out
+
+
+def _pad_planes(planes: np.ndarray | None, F: int, never: np.ndarray) -> np.ndarray:
+    """(F, 4): a piece's planes padded with planes that are never the largest; a missing piece
+    (None): ``never``, planes that put every point far outside."""
+    from graspnet_torch.collision.convex import FAR
+
+    if planes is None:
+        return never
+    out = np.zeros((F, 4))
+    out[:, 3] = FAR
+    out[: len(planes)] = planes
     return out
 
 
@@ -764,8 +816,8 @@ def _elements_like(robot: Robot, problem: GraspProblem, first: list[Shape], k: i
     from graspnet_torch.errors import ProblemError
 
     elements = environment_obstacles(robot, problem) + ([problem.object] if problem.object is not None else [])
-    kinds = ["box" if e.kind == "mesh" else e.kind for e in elements]
-    if kinds != ["box" if e.kind == "mesh" else e.kind for e in first]:
+    kinds = [e.kind for e in elements]
+    if kinds != [e.kind for e in first]:
         raise ProblemError(f"{problem.source}: problem {k} of the batch has obstacles and object {kinds}; the "
                            f"batch's first has {[e.kind for e in first]} (one batch needs the same kinds in order)")
     return elements

@@ -147,12 +147,30 @@ def _environment_object(shape: Shape):
     T[:3, :3] = rpy_matrix_np(shape.pose[3:])
     T[:3, 3] = shape.pose[:3]
     if shape.kind == "mesh":
-        import trimesh
+        from pathlib import Path
 
-        geometry = fcl_geometry("mesh", (), trimesh.load(shape.mesh, force="mesh"))
+        from graspnet_torch.collision.mesh import mesh_bvh
+
+        geometry = mesh_bvh(Path(shape.mesh).resolve(), shape.scale)
     else:
         geometry = fcl_geometry(shape.kind, shape.size)
     return fcl.CollisionObject(geometry, _transform(T))
+
+
+def _mesh_query(shape: Shape) -> tuple:
+    """A mesh shape's :class:`~graspnet_torch.collision.mesh.MeshQuery` (its convex pieces stand for
+    the inside of a mesh that is not closed) and its pose (4, 4) in the world."""
+    from pathlib import Path
+
+    from graspnet_torch.collision.convex import convex_pieces
+    from graspnet_torch.collision.mesh import MeshQuery, load_mesh
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    path = Path(shape.mesh).resolve()
+    mesh = load_mesh(path, shape.scale)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
+    return MeshQuery(mesh, None if mesh.is_watertight else convex_pieces(path, shape.scale)), T
 
 
 @dataclass
@@ -187,6 +205,12 @@ class CollisionScene:
         self.self_pairs = self_collision_pairs(robot)
         self.object = _environment_object(problem.object) if problem.object is not None else None
         self.touching = self.distal_links(robot, self.shapes, problem.fingers)
+        # meshes: FCL finds where a link crosses the surface; inside and depth are measured (collision/mesh.py)
+        elements = environment_obstacles(robot, problem)
+        self._mesh_obstacles = {k: _mesh_query(o) for k, o in enumerate(elements) if o.kind == "mesh"}
+        self._mesh_object = _mesh_query(problem.object) if problem.object is not None and \
+            problem.object.kind == "mesh" else None
+        self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
         self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
         self.links = fcl.DynamicAABBTreeCollisionManager()
@@ -234,19 +258,51 @@ class CollisionScene:
                     pairs.add((link, owner))
             if not pairs and data.result.is_collision:  # contacts not reported: fall back to pairwise tests
                 pairs = self._pairwise()
+            for k, (query, pose) in self._mesh_obstacles.items():  # a link wholly inside a mesh obstacle
+                for i, shape in enumerate(self.shapes):
+                    if (shape.link, k) not in pairs and self._inside(i, query, pose, first=True):
+                        pairs.add((shape.link, k))
         depths: dict[str, float] = {}
         if self.object is not None:
             request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
-            for obj, shape in zip(self.link_objects, self.shapes, strict=True):
+            for i, (obj, shape) in enumerate(zip(self.link_objects, self.shapes, strict=True)):
                 if shape.link in self.touching:
                     continue
                 result = fcl.CollisionResult()
-                if fcl.collide(obj, self.object, request, result):
+                crossing = fcl.collide(obj, self.object, request, result)
+                if self._mesh_object is not None:  # a mesh: the depth of the link's points below its surface
+                    query, pose = self._mesh_object
+                    depth = self._depth(i, query, pose) if crossing or self._inside(i, query, pose, first=True) \
+                        else 0.0
+                elif crossing:
                     depth = max((c.penetration_depth for c in result.contacts), default=0.0)
-                    if depth > self.object_tolerance:
-                        depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
+                else:
+                    depth = 0.0
+                if depth > self.object_tolerance:
+                    depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
         own = [(a, b) for a, b in self.self_pairs if self._links_collide(a, b)]
         return CollisionReport(len(pairs) + len(depths) + len(own), sorted(pairs), depths, own)
+
+    def _shape_points(self, i: int, pose: np.ndarray) -> np.ndarray:
+        """Link shape i's points (:func:`~graspnet_torch.collision.mesh.shape_points`) placed where
+        the last :meth:`place` put it, in the frame ``pose`` (4, 4) of a mesh."""
+        from graspnet_torch.collision.mesh import shape_points
+
+        if i not in self._points:
+            s = self.shapes[i]
+            self._points[i] = shape_points(s.kind, s.size, s.mesh)
+        tf = self.link_objects[i].getTransform()
+        world = self._points[i] @ np.asarray(tf.getRotation()).T + np.asarray(tf.getTranslation())
+        return (world - pose[:3, 3]) @ pose[:3, :3]
+
+    def _inside(self, i: int, query, pose: np.ndarray, first: bool = False) -> bool:
+        """Whether link shape i lies in a mesh (``first``: its first point, enough for a link that
+        does not cross the surface)."""
+        points = self._shape_points(i, pose)
+        return bool(query.inside(points[:1] if first else points).any())
+
+    def _depth(self, i: int, query, pose: np.ndarray) -> float:
+        return query.depth(self._shape_points(i, pose))
 
     def _links_collide(self, a: str, b: str) -> bool:
         import fcl

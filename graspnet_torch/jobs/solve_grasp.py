@@ -249,13 +249,16 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     print(_trial_table(result, fingers))
     n_ok = sum(t.success for t in result.trials)
     errors = np.array([t.error_mm for t in result.trials])
-    if solver.stop_threshold is not None:
-        stops = f"{n_ok}/{trials} trials reached r > {solver.stop_threshold:g}"
-        if solver.stop is not None and solver.stop < trials:
-            plural = "es" if solver.stop > 1 else ""
-            stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{plural})"
-    else:  # noise presets: a noisy signal crosses any threshold by chance
-        stops = f"no stopping threshold: {trials} trials ran their whole budget"
+    clear = ", collision-free" if any(t.collisions for t in result.trials) or _has_environment(robot, problem) else ""
+    stops = f"{n_ok}/{trials} trials succeeded (within {solver.tolerance_mm:g} mm{clear})"
+    if solver.stop_threshold is None:  # noise presets: a noisy signal crosses any threshold by chance
+        stops += f"; no stopping threshold: the trials ran their whole budget"
+    elif solver.stop_rule == "reinforcement" or job.noise.sigma > 0:
+        stops += f"; {sum(t.reinforcement > solver.stop_threshold for t in result.trials)} reached r > " \
+                 f"{solver.stop_threshold:g}"
+    if solver.stop is not None and solver.stop < trials and solver.stop_threshold is not None:
+        plural = "es" if solver.stop > 1 else ""
+        stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{plural})"
     free = sum(t.collisions == 0 for t in result.trials)
     if best.distance_mm is not None:  # a gripper: d (eq. 26) and the alignment (eq. 24)
         quality = (f"best d {best.distance_mm:.3f} mm, alignment {best.alignment:.6f} "
@@ -267,6 +270,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
           f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials "
           f"collision-free (FCL, INTERFACE.md); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
+    if result.failure is not None:
+        print(f"no grasp: {result.failure}")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
     if job.tensorboard:
@@ -275,6 +280,12 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     if job.pictures:
         _warn_on_failure("pictures", _pictures, robot, problem, result, run_dir)
     return result
+
+
+def _has_environment(robot, problem: GraspProblem) -> bool:
+    from graspnet_torch.collision.scene import has_environment
+
+    return has_environment(robot, problem)
 
 
 def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:

@@ -18,7 +18,7 @@ from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_c
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.arm import ArmHandEnvironment
-from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import ALIGNMENT_MIN, NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded, run_loop
@@ -81,6 +81,7 @@ def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, rew
 
 def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> dict:
     return {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
+            "tolerance_mm": solver.tolerance_mm, "stop_rule": solver.stop_rule,
             "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
             "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
             "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
@@ -91,9 +92,9 @@ def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: Rewar
 def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
     fields = env.report(outcome.config, outcome.evaluation)
-    return GraspResult(robot=robot.name, trials=_trials(robot, problem, fields, outcome, reward, solver),
-                       problem=problem.name or problem.source, seed=seed,
-                       settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome)
+    results, failure = _trials(robot, problem, fields, outcome, reward, solver)
+    return GraspResult(robot=robot.name, trials=results, problem=problem.name or problem.source, seed=seed,
+                       settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome, failure=failure)
 
 
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
@@ -193,9 +194,10 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
         rows = slice(k * trials, (k + 1) * trials)
         part = outcome.select(rows)
         part.wall_time_s = outcome.wall_time_s / len(batch)  # the batch's time, shared out
-        results.append(GraspResult(robot=robot.name, trials=_trials(robot, problem, fields[rows], part, reward, solver),
-                                   problem=problem.name or problem.source, seed=seed,
-                                   settings=_settings_dict(trials, solver, srv, reward, noise), outcome=part))
+        trial_results, failure = _trials(robot, problem, fields[rows], part, reward, solver)
+        results.append(GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source,
+                                   seed=seed, settings=_settings_dict(trials, solver, srv, reward, noise),
+                                   outcome=part, failure=failure))
     return results
 
 
@@ -266,34 +268,81 @@ def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
 
 
 def _trials(robot: Robot, problem: GraspProblem, fields: list[dict], outcome: LoopOutcome, reward: RewardCfg,
-            solver: SolverCfg) -> list[TrialResult]:
+            solver: SolverCfg) -> tuple[list[TrialResult], str | None]:
     """Per-trial results of one problem from the environment's float64 fields of its reported
-    configurations: the noise-free reinforcement recomputed from them, success against the
-    threshold, and the collision count by FCL (INTERFACE.md) of each reported posture when the
-    problem has an object or obstacles."""
+    configurations: the collision count by FCL (INTERFACE.md) of each reported posture when the
+    problem has an object or obstacles, the noise-free reinforcement recomputed from them, and
+    ``success``: the grasp (every contact finger within ``solver.tolerance_mm``, a gripper's d
+    within it and aligned, no collision). Also the one-line reason no trial succeeded, or None."""
     from graspnet_torch.collision.scene import has_environment
 
+    reports = None
     if has_environment(robot, problem):
         from graspnet_torch.collision import CollisionScene
 
         scene = CollisionScene(robot, problem)
-        collisions = torch.tensor([scene.count(trial_posture(robot, f)) for f in fields])
-    else:
-        collisions = None
+        reports = [scene.check(trial_posture(robot, f)) for f in fields]
+    collisions = None if reports is None else torch.tensor([c.count for c in reports])
     error = torch.tensor([f["error"] for f in fields], dtype=torch.float64)
-    evaluation = Evaluation(error=error, collisions=None if collisions is None else collisions.cpu())
-    r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
-    threshold = math.inf if solver.stop_threshold is None else solver.stop_threshold
+    evaluation = Evaluation(error=error, collisions=collisions)
     if outcome.evaluation.alignment is not None:  # a gripper: the base of R is eq. 29's
         evaluation.alignment = torch.tensor([f["alignment"] for f in fields], dtype=torch.float64)
-        r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
+    r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
     out = []
     for t, f in enumerate(fields):
         f = dict(f)
         if "distance_mm" not in f:
             f["total_error_mm"] = f["error"] * 1000
         f.pop("error")
-        out.append(TrialResult(success=bool(r[t] > threshold), iterations=int(outcome.iterations[t]),
-                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s,
-                               collisions=0 if collisions is None else int(collisions[t]), **f))
-    return out
+        count = 0 if collisions is None else int(collisions[t])
+        out.append(TrialResult(success=count == 0 and _on_contacts(f, solver.tolerance_mm),
+                               iterations=int(outcome.iterations[t]), reinforcement=float(r[t]),
+                               wall_time_s=outcome.wall_time_s, collisions=count, **f))
+    failure = None
+    if not any(t.success for t in out):
+        failure = failure_reason(robot, problem, out, reports, solver.tolerance_mm)
+    return out, failure
+
+
+def _on_contacts(fields: dict, tolerance_mm: float) -> bool:
+    """Every contact finger within the tolerance of its contact (a gripper: d within it, aligned)."""
+    if fields.get("distance_mm") is not None:
+        return fields["distance_mm"] <= tolerance_mm and fields["alignment"] > ALIGNMENT_MIN
+    return max(fields["fingertip_error_mm"].values()) <= tolerance_mm
+
+
+def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult],
+                   reports: Sequence | None, tolerance_mm: float) -> str:
+    """Why no trial is a grasp, in one line: a contact out of reach of the search space (no palm
+    position or arm configuration in it brings that finger there), else every configuration that
+    reached the contacts colliding (with what, by FCL), else the budget ended far away (the best
+    trial's errors)."""
+    from graspnet_torch.solver.search_space import unreachable_contacts
+
+    far = unreachable_contacts(robot, problem)
+    if far:
+        return (f"out of reach: no configuration in the search space brings the {', '.join(far)} fingertip"
+                f"{'s' if len(far) > 1 else ''} to {'their contacts' if len(far) > 1 else 'its contact'}")
+    landed = [k for k, t in enumerate(trials) if _on_contacts(t.to_dict(), tolerance_mm)]
+    if landed and reports is not None:
+        what: dict[str, int] = {}
+        names = [f"obstacles[{k}]" for k in range(len(problem.obstacles))] + ["the floor"]
+        for k in landed:
+            rep = reports[k]
+            for link, o in rep.obstacle_pairs:
+                key = f"{link} with {names[o] if o < len(names) else f'obstacle {o}'}"
+                what[key] = what.get(key, 0) + 1
+            for link in rep.object_links:
+                what[f"{link} in the object"] = what.get(f"{link} in the object", 0) + 1
+            for a, b in rep.self_pairs:
+                what[f"{a} with {b}"] = what.get(f"{a} with {b}", 0) + 1
+        common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:3])
+        return (f"colliding: all {len(landed)} configuration(s) that reached the contacts collide (FCL: {common})")
+    best = min(trials, key=lambda t: t.error_mm)
+    if best.fingertip_error_mm is not None:
+        worst = max(best.fingertip_error_mm, key=best.fingertip_error_mm.get)
+        detail = f"{best.total_error_mm:.3g} mm from its contacts ({worst} {best.fingertip_error_mm[worst]:.3g} mm)"
+    else:
+        detail = f"d = {best.distance_mm:.3g} mm, alignment {best.alignment:.4f}"
+    return (f"far: the budget ended with the best trial {detail} after {best.iterations} iteration(s) "
+            f"(tolerance {tolerance_mm:g} mm)")

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from graspnet_torch.settings import build, setting
 
-__all__ = ["PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
+__all__ = ["ALIGNMENT_MIN", "PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,9 @@ SOLVERS = ("srv", "cmaes", "dls")
 
 # The paper's protocol (section 2.4, Tables 2-4): every trial runs to its own stop and only the
 # fingers are refined after the loop (the palm pose is what the network chose).
-PAPER_PROTOCOL = {"stop": None, "polish": "fingers", "polish_from": None}
+PAPER_PROTOCOL = {"stop": None, "polish": "fingers", "polish_from": None, "stop_rule": "reinforcement"}
+
+ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
 
 
 @dataclass(frozen=True)
@@ -74,8 +76,19 @@ class SolverCfg:
         method: 'srv', 'cmaes' or 'dls'.
         max_iterations: iteration budget per trial (srv: loop iterations; cmaes: evaluations;
             dls: Levenberg-Marquardt steps).
-        threshold: a trial stops once its (noise-free) reinforcement exceeds this (paper: 0.99);
-            ``None`` or > 1 (at most 2) never stops early (fixed-length runs such as the noise study).
+        threshold: with ``stop_rule: reinforcement`` (the paper), a trial stops once its observed
+            reinforcement exceeds this (paper: 0.99, i.e. E < 10 mm at a = 1); ``None`` or > 1 (at
+            most 2) never stops early, whatever the rule (fixed-length runs such as the noise study).
+        tolerance_mm: a contact finger within this of its contact (a gripper: d of eq. 26) is on
+            it. A result's ``success`` means the grasp: every contact finger within it and, where
+            the problem has an object or obstacles, no collision (FCL).
+        stop_rule: 'grasp' (default): a trial stops once its configuration is a grasp in the
+            model (every contact finger within ``tolerance_mm``, a gripper aligned to
+            ``ALIGNMENT_MIN``, and clear where the collision proxy counts collisions);
+            'reinforcement': once its observed reinforcement exceeds ``threshold`` (the paper's
+            rule, ``solver=paper``). With sensor noise the model's error is not observed, so the
+            reinforcement rule applies (the noise presets run their whole budget). CMA-ES stops on
+            the reinforcement rule either way (it has no in-loop polish).
         refine: steps inside the loop, per evaluation: FCNN refinement iterations (eq. 5) for a
             hand (0: the paper's FCNN, competition among experts only); for a gripper (MANUS),
             damped least-squares steps that settle each proposal before it is evaluated.
@@ -124,6 +137,8 @@ class SolverCfg:
     method: str = setting("srv", choices=SOLVERS)
     max_iterations: int = setting(2000, lo=1, hi=10_000_000)
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
+    tolerance_mm: float = setting(1.0, lo=0.0, lo_open=True, hi=1000.0)
+    stop_rule: str = setting("grasp", choices=("grasp", "reinforcement"))
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
     stop: int | None = setting(1, lo=1, hi=1_000_000)
     approach_m: float = setting(0.2, lo=0.0, lo_open=True, hi=10.0)

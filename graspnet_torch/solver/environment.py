@@ -82,6 +82,19 @@ class Evaluation:
     def clone(self) -> Evaluation:
         return replace(self, **{k: v.clone() for k, v in self.tensors().items()})
 
+    def grasped(self, tolerance: float, alignment: float = 0.999) -> Tensor:
+        """(T,) whether each configuration is a grasp in the model: every finger within
+        ``tolerance`` metres of its contact (without per-finger errors, ``error`` within it: a
+        gripper's d), a gripper's alignment above ``alignment``, and no collision where they are
+        counted."""
+        far = self.finger_errors.amax(-1) if self.finger_errors is not None else self.error
+        ok = far < tolerance
+        if self.alignment is not None:
+            ok = ok & (self.alignment > alignment)
+        if self.collisions is not None:
+            ok = ok & (self.collisions == 0)
+        return ok
+
 
 class Environment(Protocol):
     """What the loop needs from a robot-specific environment."""
@@ -116,6 +129,7 @@ class FingerEnvironment:
     n: int
     lower: Tensor
     upper: Tensor
+    frame64: tuple[Tensor, Tensor] | None = None  # the search frame in the world (R, t), per trial or one
     subsets = False  # every trial evaluated every iteration: fixed-seed results stay bit-for-bit what they were
 
     def __init__(self, robot, problem, ik, refine: int, candidates: int, dtype: torch.dtype,
@@ -388,8 +402,15 @@ class FingerEnvironment:
             chosen = torch.where(self.mask.cpu().unsqueeze(-1) > 0, chosen, home[:, self.idx])
         q[:, self.idx] = chosen
         R, t = self.palm_frame(exact)
+        contacts = self.contacts64
+        if self.frame64 is not None:  # the search frame G -> the world: the palm G o pose, the contacts G c
+            from graspnet_torch.robot.transforms import compose
+
+            G_R, G_t = self.frame64
+            R, t = compose(G_R, G_t, R, t)
+            contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
         tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
-        err = torch.linalg.vector_norm(tips - self.contacts64, dim=-1)  # (T, F), metres
+        err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
         palm = rt_to_pose(R, t)
         deg = 180.0 / math.pi
         column = {f: k for k, f in enumerate(self.fingers)}

@@ -20,21 +20,28 @@ from graspnet_torch.robot.transforms import pose_to_rt
 from graspnet_torch.solver.environment import FingerEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["HandEnvironment", "check_reach"]
+__all__ = ["HandEnvironment", "check_reach", "finger_reach_bound"]
 
 
 def check_reach(robot: Robot, problem: GraspProblem) -> None:
     """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther from
     the box of palm positions than the finger can reach (its base offset plus the lengths of its
-    links, an upper bound whatever the joints). For a robot with an arm: farther from the arm's
-    first joint than the arm's links, their prismatic travel and the finger can reach."""
+    links, an upper bound whatever the joints); without bounds, contacts that no palm position
+    reaches together (:func:`~graspnet_torch.solver.search_space.palm_search_space`). For a robot
+    with an arm: farther from the arm's first joint than the arm's links, their prismatic travel
+    and the finger can reach."""
     if robot.has_body:
         _check_arm_reach(robot, problem)
         return
     bounds = problem.bounds()
+    if bounds is None:
+        from graspnet_torch.solver.search_space import palm_search_space
+
+        palm_search_space(robot, problem)
+        return
     lo, hi = bounds.lower[:3], bounds.upper[:3]
     for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
-        reach = _finger_reach(robot, contact.finger)
+        reach = finger_reach_bound(robot, contact.finger)
         gap = float(np.linalg.norm(point - np.clip(point, lo, hi)))
         if gap > reach:
             raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the palm's "
@@ -44,9 +51,15 @@ def check_reach(robot: Robot, problem: GraspProblem) -> None:
 class HandEnvironment(FingerEnvironment):
     """Evaluates palm poses for one problem, batched over trials.
 
+    Each problem is solved in its palm search space's frame G
+    (:func:`~graspnet_torch.solver.search_space.palm_search_space`): the problem is moved by G^-1
+    (contacts, object, obstacles), the configuration is the palm pose in that frame, and
+    :meth:`report` gives the palm pose in the world (G o pose).
+
     Attributes:
         n: size of the configuration (6: x, y, z, rx, ry, rz).
-        lower, upper: (6,) search bounds (m, rad).
+        lower, upper: (6,) search bounds (m, rad), in the search frame.
+        spaces: each problem's :class:`~graspnet_torch.solver.search_space.PalmSearchSpace`.
         fingers: the contact fingers, in problem order.
     """
 
@@ -55,17 +68,26 @@ class HandEnvironment(FingerEnvironment):
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], ik: FingerIK, refine: int = 1,
                  candidates: int = 1, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
                  collisions: bool = False, runs: int = 1):
+        from graspnet_torch.solver.search_space import palm_search_space
+
+        problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         if robot.has_body:
-            first = problem if isinstance(problem, GraspProblem) else problem[0]
-            raise ProblemError(f"{first.source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions, runs)
-        bounds = [p.bounds() for p in self.problems]
-        lo = np.stack([b.lower for b in bounds])
-        hi = np.stack([b.upper for b in bounds])
+            raise ProblemError(f"{problems[0].source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
+        self.spaces = [palm_search_space(robot, p) for p in problems]
+        local = [p.moved(np.linalg.inv(s.frame)) for p, s in zip(problems, self.spaces, strict=True)]
+        super().__init__(robot, local if len(local) > 1 else local[0], ik, refine, candidates, dtype, device,
+                         collisions, runs)
+        self.world_problems = problems
+        frames = np.stack([s.frame for s in self.spaces])
+        lo = np.stack([s.lower for s in self.spaces])
+        hi = np.stack([s.upper for s in self.spaces])
         if len(self.problems) > 1:
             lo, hi = np.repeat(lo, runs, axis=0), np.repeat(hi, runs, axis=0)  # (T, 6)
+            frames = np.repeat(frames, runs, axis=0)
         else:
             lo, hi = lo[0], hi[0]  # (6,)
+        frames = torch.as_tensor(frames, dtype=torch.float64)
+        self.frame64 = (frames[:, :3, :3], frames[:, :3, 3])  # (T or 1, 3, 3), (T or 1, 3): G in the world
         self._bounds64 = (torch.as_tensor(lo, dtype=torch.float64), torch.as_tensor(hi, dtype=torch.float64))
         self.lower = torch.as_tensor(lo, dtype=dtype, device=device)
         self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
@@ -78,7 +100,7 @@ class HandEnvironment(FingerEnvironment):
         return self._bounds64
 
 
-def _finger_reach(robot: Robot, finger: str) -> float:
+def finger_reach_bound(robot: Robot, finger: str) -> float:
     """Upper bound of a fingertip's distance from the palm origin, whatever the joints: its base
     offset, the lengths of its links and the travel of its prismatic joints."""
     f = robot.fingers[finger]
@@ -95,7 +117,7 @@ def _check_arm_reach(robot: Robot, problem: GraspProblem) -> None:
     arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
                if kind == "prismatic")
     for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
-        reach = arm + _finger_reach(robot, contact.finger)
+        reach = arm + finger_reach_bound(robot, contact.finger)
         gap = float(np.linalg.norm(point - origin))
         if gap > reach:
             raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the arm's first "

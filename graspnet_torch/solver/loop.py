@@ -27,7 +27,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.rewards import Reward, add_noise
-from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import ALIGNMENT_MIN, NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
@@ -46,7 +46,8 @@ class LoopOutcome:
         evaluation: the environment's evaluation of it.
         reinforcement: (T,) noise-free reinforcement there.
         iterations: iterations each trial ran (its stop, or the budget).
-        success: reinforcement exceeded the threshold.
+        success: the trial met its stopping rule (a grasp in the model, or a reinforcement above
+            the threshold: ``solver.stop_rule``).
         wall_time_s: the whole loop; per-iteration wall times are ``history['time']``.
         start: (T, n) each trial's random start within the bounds (for baselines on the same starts).
     """
@@ -121,7 +122,12 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
             held = v.gather(0, stop.view(1, -1, *([1] * (v.dim() - 2))).expand(1, *v.shape[1:]))
             history[key] = torch.where(after.view(K, -1, *([1] * (v.dim() - 2))), held, v)
         history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
-    success = best_r > threshold if threshold is not None else torch.zeros(T, dtype=torch.bool, device=device)
+    if threshold is None:
+        success = torch.zeros(T, dtype=torch.bool, device=device)
+    elif solver.stop_rule == "grasp" and noise.sigma == 0:
+        success = best_ev.grasped(solver.tolerance_mm / 1000, ALIGNMENT_MIN)
+    else:
+        success = best_r > threshold
     start = torch.addcmul(env.lower, env.upper - env.lower, o_start)
     return LoopOutcome(config=best_config, evaluation=best_ev, reinforcement=best_r, iterations=iterations,
                        success=success, wall_time_s=wall, history=history, start=start)
@@ -147,6 +153,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             and noise.sigma == 0 and threshold is not None):
         polish_from = solver.polish_from
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
+    grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
+    tolerance = solver.tolerance_mm / 1000
     problem_index = getattr(env, "problem_index", None)  # (T,) a batch of problems: each trial's
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
@@ -182,7 +190,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             if bool(near.any()):
                 polished_at = torch.where(near, observed, polished_at)
                 best_config, best_ev, best_r, best_obs, landed = _polish_near(
-                    env, near, best_config, best_ev, best_r, best_obs, reward, k + 1, threshold, solver)
+                    env, near, best_config, best_ev, best_r, best_obs, reward, k + 1, threshold, solver,
+                    tolerance if grasp_rule else None)
                 observed = torch.where(landed, best_obs, observed)  # the stop below sees the landed ones
                 r = torch.where(landed, best_r, r)  # a landed trial is where the polish put it: its curves
                 ev = best_ev.where(landed, ev)  # end there, and its collision count is the landed one's
@@ -199,9 +208,12 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             iterations = torch.where(active, torch.full_like(iterations, k + 1), iterations)
             break
         if threshold is not None:
-            done = active & (observed > threshold)
-            if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
-                done &= ev.collisions == 0
+            if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
+                done = active & ev.grasped(tolerance, ALIGNMENT_MIN)
+            else:  # the paper's rule: the observed reinforcement exceeds the threshold
+                done = active & (observed > threshold)
+                if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
+                    done &= ev.collisions == 0
             if bool(done.any()):
                 succeeded |= done
                 if solver.stop is not None:  # a problem with enough successes ends: its other trials too
@@ -216,12 +228,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
 
 
 def _polish_near(env: Environment, near: Tensor, config: Tensor, ev: Evaluation, r: Tensor, obs: Tensor,
-                 reward: Reward, iteration: int, threshold: float, solver: SolverCfg
+                 reward: Reward, iteration: int, threshold: float, solver: SolverCfg, tolerance: float | None = None
                  ) -> tuple[Tensor, Evaluation, Tensor, Tensor, Tensor]:
     """Polish the best configurations of the trials ``near`` (T,) (the environment's whole polish,
     ``solver.polish_iterations`` steps to ``solver.polish_tolerance_mm``) and keep each where it
     is better; returns the best configuration, evaluation, reinforcement and observed
-    reinforcement of every trial, and (T,) which polished trials now exceed the threshold."""
+    reinforcement of every trial, and (T,) which polished trials have now landed: are a grasp
+    within ``tolerance`` (metres; None: exceed the threshold)."""
     idx = near.nonzero().squeeze(1)
     part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
     done = None
@@ -240,7 +253,8 @@ def _polish_near(env: Environment, near: Tensor, config: Tensor, ev: Evaluation,
     full_ev = ev.put(idx, new_ev.where(better, part), full_config)
     full_r = r.index_copy(0, idx, torch.where(better, new_r, r[idx]))
     full_obs = torch.where(take, full_r, obs)
-    return full_config, full_ev, full_r, full_obs, take & (full_r > threshold)
+    landed = full_r > threshold if tolerance is None else full_ev.grasped(tolerance, ALIGNMENT_MIN)
+    return full_config, full_ev, full_r, full_obs, take & landed
 
 
 def enough_succeeded(succeeded: Tensor, problem_index: Tensor | None, stop: int) -> Tensor:

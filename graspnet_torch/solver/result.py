@@ -20,7 +20,10 @@ __all__ = ["GraspResult", "TrialResult"]
 
 @dataclass
 class TrialResult:
-    """One trial: the configuration it found and how good it is. Hand and arm_hand results have
+    """One trial: the configuration it found and how good it is. ``success`` means the grasp: every
+    contact finger within ``solver.tolerance_mm`` of its contact (a gripper: d within it, aligned)
+    and, where the problem has an object or obstacles, no collision (FCL); ``reinforcement`` is
+    the reward's value there (the paper's threshold applies to it). Hand and arm_hand results have
     the finger fields; a gripper (MANUS) result has ``distance_mm``, ``alignment`` and
     ``gripper_points`` instead (INTERFACE.md); fields that do not apply are left out of the JSON."""
 
@@ -58,6 +61,7 @@ class GraspResult:
     settings: dict = field(default_factory=dict)
 
     outcome: object | None = field(default=None, repr=False, compare=False)  # the loop's tensors and curves
+    failure: str | None = None  # why no trial succeeded (one line), or None
 
     @property
     def best(self) -> TrialResult:
@@ -95,6 +99,8 @@ class GraspResult:
 
     def to_dict(self) -> dict:
         out = {"robot": self.robot, **self.best.to_dict(), "trials": [t.to_dict() for t in self.trials]}
+        if self.failure is not None:
+            out["failure"] = self.failure
         if self.problem is not None:
             out["problem"] = self.problem
         if self.seed is not None:

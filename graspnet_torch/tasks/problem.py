@@ -13,7 +13,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -59,14 +59,17 @@ class Shape:
     Attributes:
         kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
         size: box (x, y, z); cylinder (radius, height) along its z; sphere (radius,); mesh: ().
-        pose: (6,) frame of the shape in the world (m, rad); the shape is centred on it.
-        mesh: path of a mesh file (kind 'mesh').
+        pose: (6,) frame of the shape in the world (m, rad); the shape is centred on it (a mesh:
+            its file's origin is there).
+        mesh: path of a mesh file (kind 'mesh'): STL, OBJ, PLY, GLB, what trimesh reads.
+        scale: a mesh's uniform scale (its file's units to metres, e.g. 0.001 for millimetres).
     """
 
     kind: str
     size: tuple[float, ...]
     pose: np.ndarray
     mesh: Path | None = None
+    scale: float = 1.0
 
     @classmethod
     def from_mapping(cls, data: Any, where: str, folder: Path | None = None,
@@ -75,9 +78,12 @@ class Shape:
         repository, and must stay within those or an installed package unless ``allow_outside_paths``."""
         if not isinstance(data, Mapping):
             raise ProblemError(f"{where}: expected a mapping with shape, size and pose")
-        unknown = _keys(data, {"shape", "size", "pose", "name"})
+        unknown = _keys(data, {"shape", "size", "pose", "name", "scale"})
         if unknown:
             raise ProblemError(f"{where}: unknown key(s) {', '.join(unknown)}")
+        if data.get("scale") is not None and data.get("shape") != "mesh":
+            raise ProblemError(f"{where}.scale: only a mesh takes a scale (give a {short(data.get('shape'))}'s size "
+                               f"in metres)")
         kind = data.get("shape")
         if kind not in (*SHAPES, "mesh"):
             raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {short(kind)}")
@@ -89,8 +95,14 @@ class Shape:
                 raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
             bases = (folder, repo_root()) if folder is not None else (repo_root(),)
             path = confined_file(paths[0], f"{where}.size", bases, ProblemError, allow_outside_paths)
-            _check_mesh(path, f"{where}.size")
-            return cls(kind, (), pose, path)
+            scale = 1.0
+            if data.get("scale") is not None:
+                scale = float(_numbers([data["scale"]], 1, f"{where}.scale", "a number (the mesh's scale)", 1e-6,
+                                       1e6)[0])
+                if scale <= 0:
+                    raise ProblemError(f"{where}.scale: must be positive, got {short(data['scale'])}")
+            _check_mesh(path, f"{where}.size", scale)
+            return cls(kind, (), pose, path, scale)
         size = _numbers(data.get("size"), SHAPES[kind], f"{where}.size")
         if np.any(size <= 0):
             raise ProblemError(f"{where}.size: dimensions must be positive, got {short(data.get('size'))}")
@@ -99,7 +111,10 @@ class Shape:
     def to_mapping(self) -> dict:
         pose = [*self.pose[:3].tolist(), *np.degrees(self.pose[3:]).tolist()]
         size = [str(self.mesh)] if self.kind == "mesh" else list(self.size)
-        return {"shape": self.kind, "size": size, "pose": pose}
+        out = {"shape": self.kind, "size": size, "pose": pose}
+        if self.kind == "mesh" and self.scale != 1.0:
+            out["scale"] = self.scale
+        return out
 
     def trimesh(self):
         """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
@@ -114,19 +129,21 @@ class Shape:
         elif self.kind == "sphere":
             mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
         else:
-            mesh = trimesh.load(self.mesh, force="mesh")
+            from graspnet_torch.collision.mesh import load_mesh
+
+            mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
         T = np.eye(4)
         T[:3, :3] = rpy_matrix_np(self.pose[3:])
         T[:3, 3] = self.pose[:3]
         return mesh.apply_transform(T)
 
 
-def _check_mesh(path: Path, where: str) -> None:
-    """The file must load as a triangle mesh with finite vertices within +-10 m."""
-    import trimesh
+def _check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
+    """The file must load as a triangle mesh with finite vertices within +-10 m once scaled."""
+    from graspnet_torch.collision.mesh import load_mesh
 
     try:
-        mesh = trimesh.load(path, force="mesh")
+        mesh = load_mesh(Path(path).resolve(), scale)
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         faces = len(mesh.faces)
     except Exception as exc:  # trimesh raises assorted errors on files it cannot read
@@ -136,7 +153,7 @@ def _check_mesh(path: Path, where: str) -> None:
         raise ProblemError(f"{where}: {clip(path.name, 80)} holds no triangles")
     if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > MAX_LENGTH_M:
         raise ProblemError(f"{where}: {clip(path.name, 80)} has vertices that are not finite or beyond "
-                           f"+-{MAX_LENGTH_M:g} m (metres expected)")
+                           f"+-{MAX_LENGTH_M:g} m at scale {scale:g} (metres expected: give scale, e.g. 0.001 for mm)")
 
 
 def _obstacles(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:
@@ -213,7 +230,9 @@ class GraspProblem:
         contacts: one per finger (2 to the number of fingers), positions in the object frame.
         object: the grasped object (optional; pictures and collisions); its pose places the
             object frame in the world. Without an object, the object frame is the world.
-        palm_bounds: search space of the palm pose, or None for the robot's default.
+        palm_bounds: search space of the palm pose (a free hand): a box in the world, ``"robot"``
+            (the robot config's box, as the paper's tasks use), or None: built from the contacts
+            (any orientation; :mod:`graspnet_torch.solver.search_space`).
         joint_bounds: robots with an arm: (min, max) of its joints in chain order, as written
             (degrees for revolute joints, metres for prismatic ones), or None for the joint limits.
         obstacles: other shapes in the world.
@@ -229,7 +248,7 @@ class GraspProblem:
     robot: str
     contacts: tuple[Contact, ...]
     object: Shape | None = None
-    palm_bounds: PoseBounds | None = None
+    palm_bounds: PoseBounds | Literal["robot"] | None = None
     obstacles: tuple[Shape, ...] = ()
     name: str | None = None
     description: str | None = None
@@ -307,7 +326,14 @@ class GraspProblem:
         if data.get("object") is not None:
             obj = Shape.from_mapping(data["object"], f"{source}: object", **shape)
         bounds = None
-        if data.get("palm_bounds") is not None:
+        if data.get("palm_bounds") == "robot":
+            if robot_cfg.palm_bounds is None:
+                raise ProblemError(f"{source}: palm_bounds: robot '{robot}' has no palm_bounds in its config (give "
+                                   f"{{min: [...], max: [...]}}, or leave palm_bounds out to search around the contacts)")
+            bounds = "robot"
+        elif data.get("palm_bounds") is not None:
+            if robot_cfg.arm is not None:
+                raise ProblemError(f"{source}: 'palm_bounds' are a free hand's; robot '{robot}' has an arm (use bounds)")
             try:
                 bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
             except ConfigError as exc:
@@ -444,13 +470,32 @@ class GraspProblem:
     def fingers(self) -> tuple[str, ...]:
         return tuple(c.finger for c in self.contacts)
 
-    def bounds(self) -> PoseBounds:
-        """The palm search space: the problem's, else the robot's default."""
-        if self.palm_bounds is not None:
-            return self.palm_bounds
-        if self.robot_cfg is not None and self.robot_cfg.palm_bounds is not None:
+    def bounds(self) -> PoseBounds | None:
+        """The palm search space as a box in the world: the problem's, or the robot config's
+        (``palm_bounds: robot``); None when it is built from the contacts (the default)."""
+        if self.palm_bounds == "robot":
             return self.robot_cfg.palm_bounds
-        raise ProblemError(f"{self.source}: no palm_bounds in the problem nor in robot '{self.robot}'")
+        return self.palm_bounds
+
+    def moved(self, transform: np.ndarray) -> GraspProblem:
+        """The same problem moved and turned by a rigid transform (4, 4) of the world: the object,
+        the obstacles and (without an object) the contacts; a box of palm poses cannot turn with
+        it, so explicit ``palm_bounds`` are dropped (the moved problem's search space is built
+        from its contacts)."""
+        from dataclasses import replace
+
+        def move(shape: Shape) -> Shape:
+            return replace(shape, pose=_pose_of(transform @ _matrix_of(shape.pose)))
+
+        contacts = self.contacts
+        if self.object is None:
+            contacts = tuple(Contact(c.finger, transform[:3, :3] @ c.position + transform[:3, 3]) for c in contacts)
+        points = self.points
+        if self.object is None and points is not None:
+            points = points @ transform[:3, :3].T + transform[:3, 3]
+        return replace(self, contacts=contacts, object=None if self.object is None else move(self.object),
+                       obstacles=tuple(move(o) for o in self.obstacles), points=points, palm_bounds=None,
+                       reference=None)
 
     def contacts_object(self) -> np.ndarray:
         """(F, 3) contact positions in the object frame ((0, 3) for a two-point gripper problem)."""
@@ -476,10 +521,28 @@ class GraspProblem:
             out["object"] = self.object.to_mapping()
         out["contacts"] = [{"finger": c.finger, "position": c.position.tolist()} for c in self.contacts]
         if self.palm_bounds is not None:
-            out["palm_bounds"] = self.palm_bounds.to_degrees()
+            out["palm_bounds"] = "robot" if self.palm_bounds == "robot" else self.palm_bounds.to_degrees()
         if self.obstacles:
             out["obstacles"] = [o.to_mapping() for o in self.obstacles]
         return out
+
+
+def _matrix_of(pose: np.ndarray) -> np.ndarray:
+    """(6,) pose (m, rad) -> (4, 4)."""
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_matrix_np(pose[3:]), pose[:3]
+    return T
+
+
+def _pose_of(T: np.ndarray) -> np.ndarray:
+    """(4, 4) -> (6,) pose (m, rad), R = Rz Ry Rx."""
+    import torch
+
+    from graspnet_torch.robot.transforms import matrix_to_pose
+
+    return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
 
 
 def available_tasks() -> list[str]:

@@ -1,0 +1,172 @@
+"""Mesh objects and obstacles as convex pieces, for the loop's collision proxy.
+
+A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (V-HACD, through
+``trimesh.decomposition`` and the ``vhacdx`` package; a mesh that is already convex is its own
+hull, one exact piece), and the pieces are cached on disk per mesh content and scale
+(:func:`convex_pieces`). Each piece is the intersection of its faces' half-spaces n . x <= b
+(n unit, outward), so its signed distance, batched in torch, is
+
+    sd(x) = max_f (n_f . x - b_f)                                         (:func:`pieces_distance`)
+
+exact inside the piece and wherever the nearest feature is a face; near an edge or a vertex it
+is a lower bound (the piece looks up to sqrt(3) times closer from beyond a corner), so a sphere
+(c, rho) hits the piece when sd(c) < rho: a conservative test. The mesh is the union of its
+pieces (sd = min over pieces).
+
+FCL, the engine of record, checks the mesh itself (a BVH of its triangles:
+:mod:`graspnet_torch.collision.scene`); tests measure how often the two verdicts agree.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from graspnet_torch.collision.mesh import load_mesh
+from graspnet_torch.io import atomic_path
+
+__all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "pieces_distance"]
+
+VERSION = 2  # of the cached files: bump when the decomposition or its settings change
+VHACD = {"maxConvexHulls": 16, "resolution": 100_000, "maxNumVerticesPerCH": 32, "asyncACD": False,
+         "minimumVolumePercentErrorAllowed": 1.0}
+CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
+MAX_PLANES = 64  # faces of a piece beyond which its hull is bounded by this many face directions
+FAR = 1e9  # padding planes: n = 0, b = FAR, never the largest
+
+
+@dataclass(frozen=True)
+class ConvexPieces:
+    """A mesh as convex pieces, in the mesh's own frame (its file's coordinates times its scale).
+
+    Attributes:
+        planes: (K, F, 4) float64, each piece's face planes (n_x, n_y, n_z, b): inside n . x <= b,
+            n unit and outward; pieces with fewer faces are padded with (0, 0, 0, FAR).
+        centres, radii: (K, 3), (K,) each piece's bounding sphere.
+        vertices: each piece's hull vertices (V_k, 3).
+        exact: the mesh is convex, and its one piece is its hull.
+    """
+
+    planes: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+    vertices: tuple[np.ndarray, ...]
+    exact: bool
+
+    @property
+    def n_pieces(self) -> int:
+        return len(self.vertices)
+
+
+def cache_dir() -> Path:
+    """Where decompositions are cached: ``$GRASPNET_TORCH_CACHE``, else ``$XDG_CACHE_HOME`` or
+    ``~/.cache``, then ``graspnet_torch``."""
+    root = os.environ.get("GRASPNET_TORCH_CACHE")
+    if root:
+        return Path(root)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "graspnet_torch"
+
+
+def _planes(vertices: np.ndarray) -> np.ndarray:
+    """(F, 4) the distinct face planes of the convex hull of points (coplanar triangles merged).
+
+    A hull of more than ``MAX_PLANES`` faces (a finely tessellated convex mesh) is bounded instead
+    by ``MAX_PLANES`` of its face directions, spread by farthest-point sampling over the unit
+    sphere from its largest face, each pushed out to the hull's support value b = max_v n . v:
+    a polytope that holds the hull and exceeds it by about r (1 / cos(theta) - 1) on a curved
+    part of radius r, theta the angular spacing of the directions (about 3 % of r for a sphere)."""
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(vertices)
+    eq = hull.equations  # (n, d): n . x + d <= 0 inside, n unit
+    planes = np.concatenate([eq[:, :3], -eq[:, 3:]], axis=1)
+    _, keep = np.unique(np.round(planes, 9), axis=0, return_index=True)
+    planes = planes[np.sort(keep)]
+    if len(planes) <= MAX_PLANES:
+        return planes
+    normals = planes[:, :3]
+    tri = vertices[hull.simplices]
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    chosen = [int(np.argmax(area))]
+    gap = 1.0 - normals @ eq[chosen[0], :3]  # cosine distance to the nearest chosen direction
+    for _ in range(MAX_PLANES - 1):
+        chosen.append(int(np.argmax(gap)))
+        gap = np.minimum(gap, 1.0 - normals @ normals[chosen[-1]])
+    n = normals[chosen]
+    return np.concatenate([n, (vertices @ n.T).max(0)[:, None]], axis=1)
+
+
+def _decompose(mesh) -> tuple[list[np.ndarray], bool]:
+    """The hull vertices of each piece, and whether the mesh is convex (one exact piece)."""
+    import trimesh
+
+    hull = mesh.convex_hull
+    volume = abs(mesh.volume) if mesh.is_watertight else 0.0
+    if mesh.is_convex or (volume > 0 and hull.volume <= CONVEX_VOLUME_RATIO * volume):
+        return [np.asarray(hull.vertices, dtype=np.float64)], True
+    pieces = trimesh.decomposition.convex_decomposition(mesh, **VHACD)
+    pieces = pieces if isinstance(pieces, list) else [pieces]
+    out = []
+    for p in pieces:
+        v = np.asarray(p["vertices"] if isinstance(p, dict) else p.vertices, dtype=np.float64)
+        if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3:
+            out.append(v)
+    if not out:  # V-HACD found nothing usable (a flat or broken mesh): its hull
+        return [np.asarray(hull.vertices, dtype=np.float64)], False
+    return out, False
+
+
+def convex_pieces(path: str | Path, scale: float = 1.0) -> ConvexPieces:
+    """The convex pieces of a mesh file at a scale, from the cache (``cache_dir()/convex``, keyed
+    by the file's bytes, the scale and the decomposition's settings) or computed and cached."""
+    return _convex_pieces(Path(path).resolve(), float(scale))
+
+
+@lru_cache(maxsize=32)
+def _convex_pieces(path: Path, scale: float) -> ConvexPieces:
+    key = hashlib.sha256(path.read_bytes() + repr((scale, VERSION, sorted(VHACD.items()))).encode()).hexdigest()
+    file = cache_dir() / "convex" / f"{key[:32]}.npz"
+    if file.is_file():
+        try:
+            with np.load(file) as data:
+                vertices = [data[f"v{k}"] for k in range(int(data["n"]))]
+                return _pieces(vertices, bool(data["exact"]))
+        except (OSError, ValueError, KeyError):  # a broken cache file: computed again below
+            pass
+    vertices, exact = _decompose(load_mesh(path, scale))
+    try:
+        with atomic_path(file, ".npz") as tmp:
+            np.savez(tmp, n=len(vertices), exact=exact, **{f"v{k}": v for k, v in enumerate(vertices)})
+    except OSError:  # a read-only cache: decompose again next time
+        pass
+    return _pieces(vertices, exact)
+
+
+def _pieces(vertices: list[np.ndarray], exact: bool) -> ConvexPieces:
+    planes = [_planes(v) for v in vertices]
+    F = max(len(p) for p in planes)
+    padded = np.zeros((len(planes), F, 4))
+    padded[..., 3] = FAR
+    for k, p in enumerate(planes):
+        padded[k, : len(p)] = p
+    lo = np.stack([v.min(0) for v in vertices])
+    hi = np.stack([v.max(0) for v in vertices])
+    centres = (lo + hi) / 2
+    radii = np.array([np.linalg.norm(v - c, axis=1).max() for v, c in zip(vertices, centres, strict=True)])
+    return ConvexPieces(padded, centres, radii, tuple(vertices), exact)
+
+
+def pieces_distance(points: Tensor, planes: Tensor) -> Tensor:
+    """Signed distance (lower bound outside) of points to convex pieces, batched.
+
+    points: (..., K, 3) each point in its piece's frame; planes: (..., K, F, 4) -> (..., K):
+    max_f (n_f . x - b_f).
+    """
+    return ((points.unsqueeze(-2) * planes[..., :3]).sum(-1) - planes[..., 3]).amax(-1)

@@ -1,0 +1,177 @@
+"""Where a free hand's palm is searched for: a space that follows the problem.
+
+Without ``palm_bounds`` in the problem, the palm's search space is built from the contacts, so
+that moving and turning a problem (object, contacts, obstacles) moves and turns the space, and
+with it the grasp the solver finds:
+
+- a *contact frame* C made from the contact points alone (:func:`contact_frame`): origin at their
+  centroid, x from the first contact (the thumb's, in robot finger order) to the centroid of the
+  others, z the oriented normal of the polygon they make in finger order (Newell's method), y = z
+  x x. It is equivariant: moving the contacts by a rigid motion M moves C to M C. With two
+  contacts, or contacts on a line, the rotation about x is fixed by a reference direction (the
+  object's z axis, else the world's);
+- the same frame made from the robot's own fingertips of those fingers at mid-range joints, H in
+  the palm frame: the palm pose that lays the hand's frame onto the contacts' is G = C H^-1;
+- the search frame is G; the palm pose is searched in it as (x, y, z, rx, ry, rz): any
+  orientation (rx, rz in [-pi, pi], ry in [-pi/2, pi/2]; the centre, 0, is the aligned pose) and
+  the positions from which every contact finger can reach its contact: the palm origin lies
+  within a finger's reach (the farthest its fingertip gets from the palm origin, sampled over
+  its joint range) of that finger's contact, so within the intersection of one box per contact.
+
+A problem's explicit ``palm_bounds`` (a box in the world) or ``palm_bounds: robot`` (the robot
+config's, the paper's Table 1 for ``hand``) are searched as given, in the world frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import torch
+
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space", "unreachable_contacts"]
+
+ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
+REACH_SAMPLES = 4096
+REACH_MARGIN = 0.002  # m added to a finger's sampled reach
+
+
+@dataclass(frozen=True)
+class PalmSearchSpace:
+    """A palm search space: a box of poses in a frame.
+
+    Attributes:
+        frame: (4, 4) float64, the search frame in the world (identity for a box in the world).
+        lower, upper: (6,) float64, the palm pose bounds in that frame (m, rad).
+        kind: 'contacts' (built from the contacts), 'problem' (the problem's box) or 'robot'
+            (the robot config's box).
+    """
+
+    frame: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    kind: str
+
+
+def contact_frame(points: np.ndarray, reference: np.ndarray | None = None) -> np.ndarray:
+    """A frame made from contact points, equivariant under rigid motions (module docstring).
+
+    Args:
+        points: (K, 3) K >= 2 points, the first the thumb's (robot finger order).
+        reference: (3,) a direction that fixes the rotation about x when the points are (nearly)
+            on a line; default the world's z (then x).
+    Returns:
+        (4, 4) float64.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    centre = p.mean(0)
+    x = p[0] - p[1:].mean(0)
+    if np.linalg.norm(x) < 1e-9:  # the thumb at the others' centroid: any direction through the points
+        x = p[1] - p[0]
+    x = x / np.linalg.norm(x)
+    normal = np.zeros(3)  # Newell: the polygon's area-weighted normal, oriented by the finger order
+    for a, b in zip(p, np.roll(p, -1, axis=0), strict=True):
+        normal += np.cross(a - centre, b - centre)
+    z = normal - (normal @ x) * x
+    if np.linalg.norm(z) < 1e-6 * max(1.0, float(np.abs(p - centre).max()) ** 2):  # on a line
+        for ref in ([] if reference is None else [np.asarray(reference, dtype=np.float64)]) + [np.eye(3)[2],
+                                                                                               np.eye(3)[0]]:
+            z = ref - (ref @ x) * x
+            if np.linalg.norm(z) > 1e-6:
+                break
+    z = z / np.linalg.norm(z)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, centre
+    return T
+
+
+@lru_cache(maxsize=64)
+def _reach_and_mid(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """Per finger: the farthest its fingertip gets from the palm origin (sampled over the joint
+    range, plus a margin; at most the bound of its link lengths) and its fingertip at mid-range
+    joints, in the palm frame: (F,), (F, 3)."""
+    from graspnet_torch.solver.hand import finger_reach_bound
+
+    g = torch.Generator().manual_seed(0)
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = lo + (hi - lo) * torch.rand(REACH_SAMPLES, *lo.shape, generator=g, dtype=torch.float64)
+    q = torch.cat([q, lo.unsqueeze(0), hi.unsqueeze(0)])
+    far = robot.fingertips_palm(q).norm(dim=-1).amax(0).numpy() + REACH_MARGIN
+    bound = np.array([finger_reach_bound(robot, f) for f in robot.finger_names])
+    mid = robot.fingertips_palm((lo + hi) / 2).numpy()
+    return np.minimum(far, bound), mid
+
+
+def finger_reach(robot: Robot) -> np.ndarray:
+    """(F,) the farthest each finger's tip gets from the palm origin, metres (sampled, + 2 mm)."""
+    return _reach_and_mid(robot)[0]
+
+
+def hand_frame(robot: Robot, fingers: tuple[str, ...]) -> np.ndarray:
+    """(4, 4) :func:`contact_frame` of the robot's own fingertips of ``fingers`` (robot order) at
+    mid-range joints, in the palm frame."""
+    mid = _reach_and_mid(robot)[1]
+    order = [robot.finger_index(f) for f in robot.finger_names if f in fingers]
+    return contact_frame(mid[order], np.array([0.0, 0.0, 1.0]))
+
+
+def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
+    """The palm search space of a free-hand problem (module docstring). Refuses (ProblemError) a
+    problem whose contacts no palm position can reach together."""
+    box = problem.bounds()
+    if box is not None:
+        return PalmSearchSpace(np.eye(4), box.lower.copy(), box.upper.copy(),
+                               "robot" if problem.palm_bounds == "robot" else "problem")
+    order = [k for f in robot.finger_names for k, c in enumerate(problem.contacts) if c.finger == f]
+    fingers = tuple(problem.contacts[k].finger for k in order)
+    world = problem.contacts_world()[order]
+    reference = None
+    if problem.object is not None:
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        reference = rpy_matrix_np(problem.object.pose[3:])[:, 2]
+    C = contact_frame(world, reference)
+    G = C @ np.linalg.inv(hand_frame(robot, fingers))
+    local = (world - G[:3, 3]) @ G[:3, :3]  # the contacts in the search frame
+    reach = finger_reach(robot)[[robot.finger_index(f) for f in fingers]]
+    lo = (local - reach[:, None]).max(0)
+    hi = (local + reach[:, None]).min(0)
+    if np.any(lo > hi):
+        far = np.linalg.norm(world[:, None] - world[None], axis=-1)
+        i, j = np.unravel_index(np.argmax(far - reach[:, None] - reach[None]), far.shape)
+        raise ProblemError(f"{problem.source}: the {fingers[i]} and {fingers[j]} contacts lie {far[i, j]:.3f} m apart "
+                           f"but those fingertips reach at most {reach[i] + reach[j]:.3f} m apart (no palm position "
+                           f"reaches both)")
+    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
+                           "contacts")
+
+
+def unreachable_contacts(robot: Robot, problem: GraspProblem) -> list[str]:
+    """The contact fingers whose contact no configuration of the search space brings the fingertip
+    to, by the fingers' sampled reach (:func:`finger_reach`): a free hand's contact farther from
+    the box of palm positions, an arm's farther from its first joint than the arm's links (and
+    prismatic travel) and the finger reach. (Problems beyond the bound of the link lengths are
+    refused before any work: :func:`~graspnet_torch.solver.hand.check_reach`.)"""
+    if not problem.contacts:
+        return []
+    reach = finger_reach(robot)
+    world = problem.contacts_world()
+    fingers = [c.finger for c in problem.contacts]
+    if robot.has_body:
+        body = robot.body
+        arm = float(np.linalg.norm(body.offsets[1:, :3, 3], axis=1).sum())
+        arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
+                   if kind == "prismatic")
+        gap = np.linalg.norm(world - body.offsets[0][:3, 3], axis=1) - arm
+    else:
+        space = palm_search_space(robot, problem)
+        G = space.frame
+        local = (world - G[:3, 3]) @ G[:3, :3]
+        gap = np.linalg.norm(local - np.clip(local, space.lower[:3], space.upper[:3]), axis=1)
+    return [f for f, g in zip(fingers, gap, strict=True) if g > reach[robot.finger_index(f)]]
