@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "shape_points"]
+__all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "shape_points"]
 
 SPACING = 0.001  # m between the points that measure a link's depth
 MAX_POINTS = 4000
@@ -109,3 +109,16 @@ class MeshQuery:
             return 0.0
         _, distance, _ = self._proximity.on_surface(points[inside])
         return float(np.max(distance))
+
+
+def mesh_query(shape) -> tuple[MeshQuery, np.ndarray]:
+    """A mesh shape's (a problem's ``Shape``) :class:`MeshQuery` in its own frame (its convex
+    pieces stand for the inside of a mesh that is not closed), and its pose (4, 4) in the world."""
+    from graspnet_torch.collision.convex import convex_pieces
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    path = Path(shape.mesh).resolve()
+    mesh = load_mesh(path, shape.scale)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
+    return MeshQuery(mesh, None if mesh.is_watertight else convex_pieces(path, shape.scale)), T

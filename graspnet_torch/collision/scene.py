@@ -157,22 +157,6 @@ def _environment_object(shape: Shape):
     return fcl.CollisionObject(geometry, _transform(T))
 
 
-def _mesh_query(shape: Shape) -> tuple:
-    """A mesh shape's :class:`~graspnet_torch.collision.mesh.MeshQuery` (its convex pieces stand for
-    the inside of a mesh that is not closed) and its pose (4, 4) in the world."""
-    from pathlib import Path
-
-    from graspnet_torch.collision.convex import convex_pieces
-    from graspnet_torch.collision.mesh import MeshQuery, load_mesh
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
-    path = Path(shape.mesh).resolve()
-    mesh = load_mesh(path, shape.scale)
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
-    return MeshQuery(mesh, None if mesh.is_watertight else convex_pieces(path, shape.scale)), T
-
-
 @dataclass
 class CollisionReport:
     """What :meth:`CollisionScene.check` found: ``count`` (INTERFACE.md's number), the colliding
@@ -206,9 +190,11 @@ class CollisionScene:
         self.object = _environment_object(problem.object) if problem.object is not None else None
         self.touching = self.distal_links(robot, self.shapes, problem.fingers)
         # meshes: FCL finds where a link crosses the surface; inside and depth are measured (collision/mesh.py)
+        from graspnet_torch.collision.mesh import mesh_query
+
         elements = environment_obstacles(robot, problem)
-        self._mesh_obstacles = {k: _mesh_query(o) for k, o in enumerate(elements) if o.kind == "mesh"}
-        self._mesh_object = _mesh_query(problem.object) if problem.object is not None and \
+        self._mesh_obstacles = {k: mesh_query(o) for k, o in enumerate(elements) if o.kind == "mesh"}
+        self._mesh_object = mesh_query(problem.object) if problem.object is not None and \
             problem.object.kind == "mesh" else None
         self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}

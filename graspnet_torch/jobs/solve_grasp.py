@@ -252,7 +252,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     clear = ", collision-free" if any(t.collisions for t in result.trials) or _has_environment(robot, problem) else ""
     stops = f"{n_ok}/{trials} trials succeeded (within {solver.tolerance_mm:g} mm{clear})"
     if solver.stop_threshold is None:  # noise presets: a noisy signal crosses any threshold by chance
-        stops += f"; no stopping threshold: the trials ran their whole budget"
+        stops += "; no stopping threshold: the trials ran their whole budget"
     elif solver.stop_rule == "reinforcement" or job.noise.sigma > 0:
         stops += f"; {sum(t.reinforcement > solver.stop_threshold for t in result.trials)} reached r > " \
                  f"{solver.stop_threshold:g}"

@@ -35,7 +35,8 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space", "unreachable_contacts"]
+__all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space",
+           "unreachable_contacts"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096

@@ -328,12 +328,14 @@ class GraspProblem:
         bounds = None
         if data.get("palm_bounds") == "robot":
             if robot_cfg.palm_bounds is None:
-                raise ProblemError(f"{source}: palm_bounds: robot '{robot}' has no palm_bounds in its config (give "
-                                   f"{{min: [...], max: [...]}}, or leave palm_bounds out to search around the contacts)")
+                raise ProblemError(f"{source}: palm_bounds: robot '{robot}' has no palm_bounds in its config "
+                                   f"(give {{min: [...], max: [...]}}, or leave palm_bounds out: the search "
+                                   f"follows the contacts)")
             bounds = "robot"
         elif data.get("palm_bounds") is not None:
             if robot_cfg.arm is not None:
-                raise ProblemError(f"{source}: 'palm_bounds' are a free hand's; robot '{robot}' has an arm (use bounds)")
+                raise ProblemError(f"{source}: 'palm_bounds' are a free hand's; robot '{robot}' has an arm "
+                                   f"(use bounds)")
             try:
                 bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
             except ConfigError as exc:

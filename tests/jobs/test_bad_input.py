@@ -267,10 +267,14 @@ def test_training_sizes_beyond_reason_or_memory_are_refused(tmp_path, args, mess
     _refused(tmp_path, "train_fcnn.py", *args, message=message)
 
 
-def test_a_contact_out_of_reach_is_refused_before_the_solve(tmp_path):
-    text = "robot: hand\ncontacts:\n  - {finger: thumb, position: [9.9, 9.9, 9.9]}\n" + INDEX
+@pytest.mark.parametrize(("bounds", "message"), [
+    ("palm_bounds: robot\n", "the thumb contact lies 16.888 m from the palm's"),  # the robot's box
+    ("", "the thumb and index contacts lie 17.147 m apart but those fingertips reach at most"),  # from the contacts
+])
+def test_a_contact_out_of_reach_is_refused_before_the_solve(tmp_path, bounds, message):
+    text = f"robot: hand\n{bounds}contacts:\n  - {{finger: thumb, position: [9.9, 9.9, 9.9]}}\n" + INDEX
     path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="the thumb contact lies 16.888 m from the palm's")
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message=message)
 
 
 ENV1 = (Path(__file__).resolve().parents[2] / "configs" / "task" / "env1.yaml").read_text()

@@ -26,7 +26,7 @@ def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
     assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
     assert "trial" in res.stdout and "glass3" in res.stdout
-    assert "trials reached r > 0.99" in res.stdout
+    assert "trials succeeded (within 1 mm, collision-free)" in res.stdout
 
 
 def test_problem_file_with_out_and_noise(tmp_path):
@@ -39,7 +39,7 @@ def test_problem_file_with_out_and_noise(tmp_path):
     data = json.loads(out.read_text())
     assert data["settings"]["noise_sigma"] == 0.1 and data["settings"]["threshold"] is None
     assert all(t["iterations"] == 30 for t in data["trials"])
-    assert "no stopping threshold: 2 trials ran their whole budget" in res.stdout
+    assert "no stopping threshold: the trials ran their whole budget" in res.stdout
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -167,7 +167,7 @@ def test_the_free_hand_with_r3_keeps_its_fingers_out_of_the_glass():
     import graspnet_torch as gt
 
     paper = gt.SolverCfg.paper()  # every trial to its own stop: the count compares the learners
-    r1 = gt.solve("glass3", trials=20, seed=0, solver=paper)
+    r1 = gt.solve("glass3", trials=20, seed=0, solver=paper, reward=gt.RewardCfg(kind="r1"))
     r3 = gt.solve("glass3", trials=20, seed=0, reward=gt.RewardCfg(kind="r3"), solver=paper)
     free1 = sum(t.collisions == 0 for t in r1.trials)
     free3 = sum(t.collisions == 0 for t in r3.trials)

@@ -22,7 +22,7 @@ def problem_from_posture(robot, fingers, seed=0):
     q = flo + (fhi - flo) * (0.2 + 0.6 * torch.rand(flo.shape, generator=g, dtype=torch.float64))
     tips = robot.fingertips_world(pose, q)
     return gt.GraspProblem.from_mapping(
-        {"robot": "hand",
+        {"robot": "hand", "palm_bounds": "robot",
          "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers]},
         source="from-posture")
 
@@ -30,9 +30,8 @@ def problem_from_posture(robot, fingers, seed=0):
 def test_loop_solves_a_reachable_problem(hand):
     problem = problem_from_posture(hand, ("thumb", "index", "middle"), seed=3)
     result = gt.solve(problem, trials=8, seed=0, max_iterations=1500, solver=SolverCfg.paper())
-    assert result.success
     assert result.total_error_mm < 10.0
-    assert sum(t.success for t in result.trials) >= 4
+    assert sum(t.reinforcement > 0.99 for t in result.trials) >= 4  # the paper's success: r > 0.99
 
 
 def test_same_seed_same_result_and_other_seed_differs(hand):
@@ -49,7 +48,7 @@ def test_same_seed_same_result_and_other_seed_differs(hand):
 def test_result_errors_are_fk_of_the_reported_configuration(hand):
     """Recompute the errors from the JSON alone (degrees -> FK in float64 -> distance to contacts)."""
     problem = gt.GraspProblem.from_task("glass4")
-    result = gt.solve(problem, trials=4, seed=1, max_iterations=200)
+    result = gt.solve(problem, trials=4, seed=1, max_iterations=200, reward=gt.RewardCfg(kind="r1"))
     data = json.loads(result.to_json())
     assert set(data) >= {"robot", "success", "palm_pose", "joints", "fingertip_error_mm", "total_error_mm",
                          "collisions", "iterations", "reinforcement", "wall_time_s", "trials"}
@@ -67,7 +66,7 @@ def test_result_errors_are_fk_of_the_reported_configuration(hand):
         assert math.isclose(trial["reinforcement"], 1 - math.tanh(trial["total_error_mm"] / 1000), rel_tol=1e-9)
         lo, hi = hand.finger_limits
         assert bool(((q.numpy() >= lo - 1e-9) & (q.numpy() <= hi + 1e-9)).all())
-    best = min(data["trials"], key=lambda t: (not t["success"], t["total_error_mm"]))
+    best = min(data["trials"], key=lambda t: (not t["success"], t["collisions"] > 0, t["total_error_mm"]))
     assert data["total_error_mm"] == best["total_error_mm"]
 
 
@@ -108,10 +107,11 @@ def test_fixed_seed_glass3_matches_the_recorded_result():
     from pathlib import Path
 
     recorded = json.loads((Path(__file__).parent / "data" / "glass3_seed0_T6_K300.json").read_text())
-    result = gt.solve("glass3", trials=6, seed=0, max_iterations=300, solver=SolverCfg.paper()).to_dict()
+    result = gt.solve("glass3", trials=6, seed=0, max_iterations=300, solver=SolverCfg.paper(),
+                      reward=gt.RewardCfg(kind="r1")).to_dict()  # the paper's section 5 (the hand's default is R3)
     assert [t["iterations"] for t in result["trials"]] == [t["iterations"] for t in recorded["trials"]]
     for got, want in zip(result["trials"], recorded["trials"], strict=True):
-        assert got["success"] == want["success"]
+        assert (got["reinforcement"] > 0.99) == want["success"]  # recorded when success meant r > 0.99
         assert got["palm_pose"] == pytest.approx(want["palm_pose"], rel=1e-5, abs=1e-5)
         assert got["total_error_mm"] == pytest.approx(want["total_error_mm"], abs=1e-3)
         # the refined finger joints are not compared: a redundant finger reaches the same contact
@@ -138,14 +138,16 @@ class _Colliding:
         return Evaluation(error=torch.zeros(config.shape[0]), collisions=hits)
 
 
-@pytest.mark.parametrize("stop_clear, stops_at", [(False, 1), (True, 6)])
-def test_stop_clear_waits_for_a_clear_configuration(stop_clear, stops_at):
+@pytest.mark.parametrize("rule, stop_clear, stops_at", [("reinforcement", False, 1), ("reinforcement", True, 6),
+                                                        ("grasp", False, 6), ("grasp", True, 6)])
+def test_stop_clear_waits_for_a_clear_configuration(rule, stop_clear, stops_at):
     """R3 at i << p barely shapes a collision, so the paper's rule stops on the first (colliding)
-    evaluation; with ``stop_clear`` the trial goes on until the proxy finds it clear."""
+    evaluation; with ``stop_clear`` the trial goes on until the proxy finds it clear. The grasp
+    rule (the default) never stops on a colliding configuration."""
     from graspnet_torch.solver.loop import run_loop
 
-    out = run_loop(_Colliding(), 2, 0, SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0),
-                   reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
+    cfg = SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0, stop_rule=rule)
+    out = run_loop(_Colliding(), 2, 0, cfg, reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
     assert out.iterations.tolist() == [stops_at, stops_at]
 
 

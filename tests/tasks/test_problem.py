@@ -32,7 +32,10 @@ def test_valid_problem_file(tmp_path, name):
     np.testing.assert_allclose(p.object.pose[3:], [0, 0, math.pi / 2])
     world = p.contacts_world()  # rotated 90 deg about z, then lifted
     np.testing.assert_allclose(world[0], [0.0, 0.035, 0.08], atol=1e-12)
-    np.testing.assert_allclose(p.bounds().lower, gt.load_robot_cfg("hand").palm_bounds.lower)
+    assert p.palm_bounds is None and p.bounds() is None  # the search space follows the contacts
+    robot_box = gt.GraspProblem.from_mapping({**GOOD, "palm_bounds": "robot"})
+    np.testing.assert_allclose(robot_box.bounds().lower, gt.load_robot_cfg("hand").palm_bounds.lower)
+    assert robot_box.to_mapping()["palm_bounds"] == "robot"
 
 
 @pytest.mark.parametrize("task", ["block5", "glass3", "glass4", "videotape5"])
