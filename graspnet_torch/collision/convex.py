@@ -1,9 +1,11 @@
 """Mesh objects and obstacles as convex pieces, for the loop's collision proxy.
 
-A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (V-HACD, through
-``trimesh.decomposition`` and the ``vhacdx`` package; a mesh that is already convex is its own
-hull, one exact piece), and the pieces are cached on disk per mesh content and scale
-(:func:`convex_pieces`). Each piece is the intersection of its faces' half-spaces n . x <= b
+A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (CoACD, the
+``coacd`` package: approximate convex decomposition by collision-aware concavity and tree search;
+a mesh that is already convex is its own hull, one piece), and the pieces are cached on disk per
+mesh content and scale (:func:`convex_pieces`). Measured against V-HACD (``vhacdx``) on the
+Stanford bunny: 42 pieces in 6 s with 15 % of the points within 4 mm outside the surface falsely
+inside, against 32 % for V-HACD's 16 pieces and 17 % for its 128 (19 s). Each piece is the intersection of its faces' half-spaces n . x <= b
 (n unit, outward), so its signed distance, batched in torch, is
 
     sd(x) = max_f (n_f . x - b_f)                                         (:func:`pieces_distance`)
@@ -26,16 +28,16 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import torch
 from torch import Tensor
 
 from graspnet_torch.collision.mesh import load_mesh
 from graspnet_torch.io import atomic_path
 
-__all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "pieces_distance"]
+__all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
 
-VERSION = 2  # of the cached files: bump when the decomposition or its settings change
-VHACD = {"maxConvexHulls": 16, "resolution": 100_000, "maxNumVerticesPerCH": 32, "asyncACD": False,
-         "minimumVolumePercentErrorAllowed": 1.0}
+VERSION = 4  # of the cached files: bump when the decomposition or its settings change
+COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
 MAX_PLANES = 64  # faces of a piece beyond which its hull is bounded by this many face directions
 FAR = 1e9  # padding planes: n = 0, b = FAR, never the largest
@@ -86,15 +88,16 @@ def _planes(vertices: np.ndarray) -> np.ndarray:
     hull = ConvexHull(vertices)
     eq = hull.equations  # (n, d): n . x + d <= 0 inside, n unit
     planes = np.concatenate([eq[:, :3], -eq[:, 3:]], axis=1)
-    _, keep = np.unique(np.round(planes, 9), axis=0, return_index=True)
-    planes = planes[np.sort(keep)]
-    if len(planes) <= MAX_PLANES:
-        return planes
+    _, keep, which = np.unique(np.round(planes, 9), axis=0, return_index=True, return_inverse=True)
+    if len(keep) <= MAX_PLANES:
+        return planes[np.sort(keep)]
+    planes = planes[keep]
     normals = planes[:, :3]
     tri = vertices[hull.simplices]
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = np.bincount(which.ravel(), np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1),
+                       minlength=len(planes))  # each distinct face's area
     chosen = [int(np.argmax(area))]
-    gap = 1.0 - normals @ eq[chosen[0], :3]  # cosine distance to the nearest chosen direction
+    gap = 1.0 - normals @ normals[chosen[0]]  # cosine distance to the nearest chosen direction
     for _ in range(MAX_PLANES - 1):
         chosen.append(int(np.argmax(gap)))
         gap = np.minimum(gap, 1.0 - normals @ normals[chosen[-1]])
@@ -103,21 +106,21 @@ def _planes(vertices: np.ndarray) -> np.ndarray:
 
 
 def _decompose(mesh) -> tuple[list[np.ndarray], bool]:
-    """The hull vertices of each piece, and whether the mesh is convex (one exact piece)."""
-    import trimesh
+    """The hull vertices of each piece, and whether the mesh is convex (one exact piece). CoACD
+    (collision-aware concavity, tree search; deterministic in its seed) cuts a closed mesh as it
+    is and first makes one that is not closed manifold (its preprocessing)."""
+    import coacd
 
     hull = mesh.convex_hull
     volume = abs(mesh.volume) if mesh.is_watertight else 0.0
     if mesh.is_convex or (volume > 0 and hull.volume <= CONVEX_VOLUME_RATIO * volume):
         return [np.asarray(hull.vertices, dtype=np.float64)], True
-    pieces = trimesh.decomposition.convex_decomposition(mesh, **VHACD)
-    pieces = pieces if isinstance(pieces, list) else [pieces]
-    out = []
-    for p in pieces:
-        v = np.asarray(p["vertices"] if isinstance(p, dict) else p.vertices, dtype=np.float64)
-        if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3:
-            out.append(v)
-    if not out:  # V-HACD found nothing usable (a flat or broken mesh): its hull
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)),
+                            preprocess_mode="off" if mesh.is_watertight else "on", **COACD)
+    out = [np.asarray(v, dtype=np.float64) for v, _f in parts]
+    out = [v for v in out if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3]
+    if not out:  # nothing usable (a flat or broken mesh): its hull
         return [np.asarray(hull.vertices, dtype=np.float64)], False
     return out, False
 
@@ -130,7 +133,7 @@ def convex_pieces(path: str | Path, scale: float = 1.0) -> ConvexPieces:
 
 @lru_cache(maxsize=32)
 def _convex_pieces(path: Path, scale: float) -> ConvexPieces:
-    key = hashlib.sha256(path.read_bytes() + repr((scale, VERSION, sorted(VHACD.items()))).encode()).hexdigest()
+    key = hashlib.sha256(path.read_bytes() + repr((scale, VERSION, sorted(COACD.items()))).encode()).hexdigest()
     file = cache_dir() / "convex" / f"{key[:32]}.npz"
     if file.is_file():
         try:
@@ -168,4 +171,13 @@ def pieces_distance(points: Tensor, planes: Tensor) -> Tensor:
     points: (..., K, 3) each point in its piece's frame; planes: (..., K, F, 4) -> (..., K):
     max_f (n_f . x - b_f).
     """
-    return ((points.unsqueeze(-2) * planes[..., :3]).sum(-1) - planes[..., 3]).amax(-1)
+    return (torch.matmul(points.unsqueeze(-2), planes[..., :3].transpose(-1, -2)).squeeze(-2)
+            - planes[..., 3]).amax(-1)
+
+
+def piece_distance(points: Tensor, planes: Tensor) -> Tensor:
+    """Signed distance (lower bound outside) of B sets of points to one piece each.
+
+    points: (B, K, 3); planes: (B, F, 4) -> (B, K): max_f (n_f . x - b_f), one batched product.
+    """
+    return torch.baddbmm(-planes[:, None, :, 3], points, planes[..., :3].transpose(1, 2)).amax(-1)

@@ -10,7 +10,9 @@ engine of record adds two measurements of its own, against the mesh itself:
   stand for it;
 - *depth* of a link: the largest depth below the surface of points spread over the link's
   geometry (its surface, at most ``SPACING`` apart, and its vertices), i.e. how far the link
-  reaches into the object.
+  reaches into the object: for the points inside, their distance to the surface
+  (:meth:`MeshQuery.distance`: a KD-tree of the finely subdivided surface, and exact point-triangle
+  distances where that bound cannot decide against the tolerance).
 """
 
 from __future__ import annotations
@@ -21,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "shape_points"]
+__all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "point_triangle_distance", "shape_points"]
 
-SPACING = 0.001  # m between the points that measure a link's depth
-MAX_POINTS = 4000
+SPACING = 0.002  # m between the points that measure a link's depth
+MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
+CHUNK = 64  # inside points measured at a time
+MAX_POINTS = 1500
 
 
 @lru_cache(maxsize=32)
@@ -68,6 +72,38 @@ def shape_points(kind: str, size: tuple[float, ...], mesh=None) -> np.ndarray:
     return np.concatenate([np.asarray(surface.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
 
 
+def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(N, M) distances from points (N, 3) to triangles (M, 3, 3): the closest point of each
+    triangle by its Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised."""
+    p = points[:, None, :]
+    a, b, c = (triangles[None, :, k, :] for k in range(3))
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = p - b
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = p - c
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v_face, w_face = vb / denom, vc / denom
+        v_ab = d1 / (d1 - d3)
+        w_ac = d2 / (d2 - d6)
+        w_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    closest = a + ab * v_face[..., None] + ac * w_face[..., None]  # inside the face
+    regions = [  # (condition, closest point), the first that holds wins
+        ((d1 <= 0) & (d2 <= 0), a),
+        ((d3 >= 0) & (d4 <= d3), b),
+        ((d6 >= 0) & (d5 <= d6), c),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + ab * np.nan_to_num(v_ab)[..., None]),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + ac * np.nan_to_num(w_ac)[..., None]),
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + (c - b) * np.nan_to_num(w_bc)[..., None]),
+    ]
+    for cond, point in reversed(regions):
+        closest = np.where(cond[..., None], np.broadcast_to(point, closest.shape), closest)
+    return np.linalg.norm(p - closest, axis=-1)
+
+
 class MeshQuery:
     """Inside and depth queries on one mesh in its own frame.
 
@@ -77,13 +113,17 @@ class MeshQuery:
     """
 
     def __init__(self, mesh, pieces=None):
-        import trimesh
+        from scipy.spatial import cKDTree
 
         self.mesh = mesh
         self.closed = bool(mesh.is_watertight)
         self.pieces = pieces
-        self._proximity = trimesh.proximity.ProximityQuery(mesh)
         self.bounds = np.asarray(mesh.bounds, dtype=np.float64)
+        self.triangles = np.asarray(mesh.triangles, dtype=np.float64)  # (M, 3, 3)
+        centres = self.triangles.mean(1)
+        self._reach = float(np.linalg.norm(self.triangles - centres[:, None], axis=-1).max())
+        self._tree = cKDTree(centres)
+        self._fine = None
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """(N,) bool: points inside the mesh (a closed one by ray tests; else inside a convex piece)."""
@@ -101,24 +141,76 @@ class MeshQuery:
             out[box] = sd < 0
         return out
 
-    def depth(self, points: np.ndarray) -> float:
-        """The largest depth (m) of points below the surface (0 when none is inside)."""
-        points = np.asarray(points, dtype=np.float64)
+    def _vertices(self):
+        """A KD-tree over the mesh subdivided until every edge is at most ``s``, and ``h``: every
+        surface point lies within h = s / sqrt(3) of one of its vertices (a triangle's
+        circumradius). s = 1 mm, coarser for a large mesh (at most about 200,000 vertices)."""
+        if self._fine is None:
+            import trimesh
+            from scipy.spatial import cKDTree
+
+            s = max(SPACING / 2, math.sqrt(float(self.mesh.area) / 200_000))
+            vertices, _ = trimesh.remesh.subdivide_to_size(self.mesh.vertices, self.mesh.faces, max_edge=s)
+            self._fine = (cKDTree(vertices), s / math.sqrt(3))
+        return self._fine
+
+    def distance(self, points: np.ndarray, tolerance: float) -> np.ndarray:
+        """(N,) distances to the surface, decided exactly against ``tolerance``: the nearest vertex
+        of the subdivided mesh bounds a distance d within [d_v - h, d_v]; points whose bound
+        straddles ``tolerance`` get their exact distance to the triangles near them. Distances
+        beyond ``MEASURED`` (or beyond the tolerance plus h, if more) are reported as that."""
+        tree, h = self._vertices()
+        bound = max(MEASURED, tolerance + 2 * h)
+        d_v, _ = tree.query(points, distance_upper_bound=bound)  # inf beyond: no vertex that near
+        d_v = np.minimum(d_v, bound)
+        band = (d_v > tolerance) & (d_v - h <= tolerance)  # undecided against the tolerance
+        out = d_v.copy()
+        for i in np.nonzero(band)[0]:
+            near = self._tree.query_ball_point(points[i], d_v[i] + self._reach)
+            out[i] = point_triangle_distance(points[i:i + 1], self.triangles[near]).min()
+        return out
+
+    def depths_beyond(self, point_sets: list[np.ndarray], tolerance: float) -> list[float]:
+        """For sets of points (each a link's), a depth (m) below the surface that some of its points
+        reach beyond ``tolerance``, else 0: one inside test for all the points, then distances
+        (:meth:`distance`) of each set's inside points, ``CHUNK`` at a time, until a chunk goes
+        deeper than the tolerance (its deepest is reported: a depth reached, not always the
+        largest). Exact for the verdict 'deeper than the tolerance'."""
+        sizes = [len(p) for p in point_sets]
+        if not sum(sizes):
+            return [0.0] * len(point_sets)
+        points = np.concatenate(point_sets)
+        owner = np.repeat(np.arange(len(point_sets)), sizes)
         inside = self.inside(points)
-        if not inside.any():
-            return 0.0
-        _, distance, _ = self._proximity.on_surface(points[inside])
-        return float(np.max(distance))
+        out = [0.0] * len(point_sets)
+        for k in np.unique(owner[inside]):  # each set's inside points, a chunk at a time, until one is deeper
+            mine = points[inside & (owner == k)]
+            for start in range(0, len(mine), CHUNK):
+                depth = self.distance(mine[start:start + CHUNK], tolerance)
+                if depth.max() > tolerance:
+                    out[k] = float(depth.max())
+                    break
+        return out
+
+    def depth_beyond(self, points: np.ndarray, tolerance: float) -> float:
+        """:meth:`depths_beyond` of one set of points."""
+        return self.depths_beyond([np.asarray(points, dtype=np.float64)], tolerance)[0]
 
 
 def mesh_query(shape) -> tuple[MeshQuery, np.ndarray]:
     """A mesh shape's (a problem's ``Shape``) :class:`MeshQuery` in its own frame (its convex
-    pieces stand for the inside of a mesh that is not closed), and its pose (4, 4) in the world."""
-    from graspnet_torch.collision.convex import convex_pieces
+    pieces stand for the inside of a mesh that is not closed; cached per file and scale), and its
+    pose (4, 4) in the world."""
     from graspnet_torch.robot.chain import rpy_matrix_np
 
-    path = Path(shape.mesh).resolve()
-    mesh = load_mesh(path, shape.scale)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
-    return MeshQuery(mesh, None if mesh.is_watertight else convex_pieces(path, shape.scale)), T
+    return _query(Path(shape.mesh).resolve(), shape.scale), T
+
+
+@lru_cache(maxsize=32)
+def _query(path: Path, scale: float) -> MeshQuery:
+    from graspnet_torch.collision.convex import convex_pieces
+
+    mesh = load_mesh(path, scale)
+    return MeshQuery(mesh, None if mesh.is_watertight else convex_pieces(path, scale))

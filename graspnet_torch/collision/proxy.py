@@ -13,7 +13,10 @@ The robot. Every collision primitive of the URDF becomes a few spheres fixed in 
   union whose waist is >= 0.97 r, which covers the rim (to within 3 % of r) and overshoots the
   flat ends by 3r/4 on the axis (the URDF's joint spheres sit there for most links);
 - a box becomes spheres of radius rho (its smallest half-extent) on a grid over the box shrunk
-  by rho, at most rho apart: a slab with rounded edges;
+  by rho, close enough that its faces dip by at most ``BOX_DIMPLE`` (1 mm, or rho / 4) between
+  them: a slab with rounded edges; its twelve edges are lined with spheres of radius rho / 2,
+  rho / 2 inside the two faces that meet there, and its corners hold spheres of radius rho / 4
+  (an edge is missed by at most (sqrt(2) - 1) rho / 2, a corner by (sqrt(3) - 1) rho / 4);
 - a mesh becomes the spheres of its oriented bounding box, grown so that they cover the mesh
   (:func:`mesh_box`).
 
@@ -74,6 +77,7 @@ __all__ = [
 ]
 
 
+BOX_DIMPLE = 0.001  # m: how far a box's sphere model may dip below its faces between spheres
 SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this are capsules for self-collision
 
 
@@ -115,9 +119,13 @@ def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
     elif shape.kind == "box":
         h = np.asarray(shape.size, dtype=np.float64) / 2
         rho = float(h.min())
+        # grid spacing s: between four spheres the slab's face dips by rho - sqrt(rho^2 - s^2 / 2);
+        # at most BOX_DIMPLE (or rho / 4)
+        dip = min(BOX_DIMPLE, rho / 4)
+        spacing = math.sqrt(2 * (rho**2 - (rho - dip) ** 2))
         axes = []
         for hi in h - rho:
-            k = max(1, math.ceil(2 * hi / rho) + 1)
+            k = max(1, math.ceil(2 * hi / spacing) + 1)
             axes.append(np.linspace(-hi, hi, k) if k > 1 else np.zeros(1))
         local = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         radii = np.full(len(local), rho)
@@ -130,12 +138,26 @@ def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
         for u0, u1, v0, v1 in ((-hb, hb, -hc, -hc), (hb, hb, -hc, hc), (hb, -hb, hc, hc), (-hb, -hb, hc, -hc)):
             k = max(2, math.ceil(max(abs(u1 - u0), abs(v1 - v0)) / r2) + 1)
             rim += [(u, v) for u, v in zip(np.linspace(u0, u1, k)[:-1], np.linspace(v0, v1, k)[:-1], strict=True)]
+        points = []
         for side in (-1, 1):
             for u, v in rim:
                 point = np.zeros(3)
                 point[a], point[b], point[c] = side * (h[a] - r2), u, v
-                local = np.vstack([local, point])
-                radii = np.append(radii, r2)
+                points.append(point)
+        # the four edges across the slab (along its thin axis a), likewise
+        k = max(2, math.ceil(2 * (h[a] - r2) / r2) + 1)
+        for sb in (-1, 1):
+            for sc in (-1, 1):
+                for w in np.linspace(-(h[a] - r2), h[a] - r2, k):
+                    point = np.zeros(3)
+                    point[a], point[b], point[c] = w, sb * hb, sc * hc
+                    points.append(point)
+        radii = np.concatenate([radii, np.full(len(points), r2)])
+        # the eight corners: spheres of radius rho/4, rho/4 inside the three faces that meet there
+        r4 = rho / 4
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * (h - r4)
+        local = np.vstack([local, np.asarray(points).reshape(-1, 3), corners])
+        radii = np.concatenate([radii, np.full(8, r4)])
     else:  # pragma: no cover - link_shapes makes no other kinds
         raise ConfigError(f"link '{shape.link}': no sphere model for {shape.kind}")
     centres = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
@@ -338,7 +360,7 @@ class CollisionProxy:
             bthr = np.broadcast_to(bound_r[:, None, None] - np.array([margin[k] for k in g["index"]]),
                                    (C, 1, len(g["index"])))[:, 0]  # (C, O_g)
             if g["kind"] == "convex":
-                g["bound_r"] = torch.as_tensor(bthr, **kw)  # (C, O_g): + the piece's radius, per problem
+                g["bound_r"] = torch.as_tensor(np.array(bthr), **kw)  # (C, O_g): + the piece's radius, per problem
                 bthr = bthr + g["radius"].amax(0).cpu().numpy()[None]
             g["bound_pos"] = (torch.as_tensor(bthr > 0, device=device) & g["pos"].any(1)).unsqueeze(1)  # (C, 1, O_g)
             g["bound_thr_sq"] = torch.as_tensor(np.where(bthr > 0, bthr, 0.0) ** 2, **kw).unsqueeze(1)
@@ -560,22 +582,38 @@ class CollisionProxy:
         bound = torch.bmm(flat, self._cluster_bound).view(C, T, 1, 3)  # bounding-sphere centres
         for g in self._groups:
             size = None if pid is None else g["size"][pid]  # (T, O_g, s)
+            local = _local(g, bound, pid).squeeze(2)  # (C, T, O_g, 3)
             if g["kind"] == "convex":  # bounding spheres: the cluster's and the piece's
-                gap = _local(g, bound, pid).squeeze(2) - (g["centre"][0] if pid is None else g["centre"][pid])
+                gap = local - (g["centre"][0] if pid is None else g["centre"][pid])
                 reach = g["bound_r"].unsqueeze(1) + (g["radius"][0] if pid is None else g["radius"][pid])
                 near = g["bound_pos"] & (gap.square().sum(-1) < reach.clamp(min=0).square())  # (C, T, O_g)
             else:
-                near = _hit(g, _local(g, bound, pid).squeeze(2), g["bound_pos"], g["bound_thr_sq"], size)
+                near = _hit(g, local, g["bound_pos"], g["bound_thr_sq"], size)
             c, t, o = near.nonzero(as_tuple=True)
             if c.numel() == 0:
                 continue
             p_of = torch.zeros_like(t) if pid is None else pid[t]
+            if g["kind"] == "convex":  # then the cluster's bounding sphere against the piece's planes
+                from graspnet_torch.collision.convex import piece_distance
+
+                planes = g["size"][p_of, o]  # (N, F, 4)
+                keep = piece_distance(local[c, t, o].unsqueeze(1), planes).squeeze(1) < g["bound_r"][c, o]
+                c, t, o, p_of = c[keep], t[keep], o[keep], p_of[keep]
+                if c.numel() == 0:
+                    continue
             centres = torch.bmm(frames[c, t], self._cluster_local[c]).transpose(1, 2)  # (N, CLUSTER, 3)
             if g["kind"] == "plane":  # the height above the floor's top
                 p = centres[..., 2:3] - g["top"]
             else:
                 p = torch.bmm(centres - g["t"][p_of, o].unsqueeze(1), g["R"][p_of, o])  # rows: R^T (x - t)
-            hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][p_of, o].unsqueeze(1)).any(-1)  # (N,)
+            if g["kind"] == "convex":  # every sphere of the cluster against the piece's planes
+                from graspnet_torch.collision.convex import piece_distance
+
+                d = piece_distance(p, planes[keep])  # (N, CLUSTER)
+                thr_sq = g["thr_sq"][c, :, o]
+                hit = (g["pos"][c, :, o] & ((d.clamp(min=0).square() < thr_sq) | (d <= 0))).any(-1)
+            else:
+                hit = _hit(g, p, g["pos"][c, :, o], g["thr_sq"][c, :, o], g["size"][p_of, o].unsqueeze(1)).any(-1)
             out.index_put_((t[hit], self._cluster_link[c[hit]], g["columns"][o[hit]]), self._true)
         return out
 

@@ -251,21 +251,31 @@ class CollisionScene:
         depths: dict[str, float] = {}
         if self.object is not None:
             request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
+            measured = []  # a mesh object: the links that cross its surface or may lie wholly inside
             for i, (obj, shape) in enumerate(zip(self.link_objects, self.shapes, strict=True)):
                 if shape.link in self.touching:
                     continue
                 result = fcl.CollisionResult()
                 crossing = fcl.collide(obj, self.object, request, result)
-                if self._mesh_object is not None:  # a mesh: the depth of the link's points below its surface
-                    query, pose = self._mesh_object
-                    depth = self._depth(i, query, pose) if crossing or self._inside(i, query, pose, first=True) \
-                        else 0.0
+                if self._mesh_object is not None:
+                    measured.append((i, crossing))
                 elif crossing:
                     depth = max((c.penetration_depth for c in result.contacts), default=0.0)
-                else:
-                    depth = 0.0
-                if depth > self.object_tolerance:
-                    depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
+                    if depth > self.object_tolerance:
+                        depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
+            if measured:  # the depth of each link's points below the mesh's surface (collision/mesh.py)
+                query, pose = self._mesh_object
+                points = [self._shape_points(i, pose) for i, _ in measured]
+                points = [p if crossing else p[:1] for p, (_, crossing) in zip(points, measured, strict=True)]
+                inside = [k for k, (_, crossing) in enumerate(measured) if not crossing and query.inside(points[k]).any()]
+                for k in inside:  # wholly inside: all its points
+                    points[k] = self._shape_points(measured[k][0], pose)
+                    measured[k] = (measured[k][0], True)
+                sets = [p if crossing else p[:0] for p, (_, crossing) in zip(points, measured, strict=True)]
+                for (i, _), depth in zip(measured, query.depths_beyond(sets, self.object_tolerance), strict=True):
+                    if depth > self.object_tolerance:
+                        link = self.shapes[i].link
+                        depths[link] = max(depth, depths.get(link, 0.0))
         own = [(a, b) for a, b in self.self_pairs if self._links_collide(a, b)]
         return CollisionReport(len(pairs) + len(depths) + len(own), sorted(pairs), depths, own)
 
@@ -286,9 +296,6 @@ class CollisionScene:
         does not cross the surface)."""
         points = self._shape_points(i, pose)
         return bool(query.inside(points[:1] if first else points).any())
-
-    def _depth(self, i: int, query, pose: np.ndarray) -> float:
-        return query.depth(self._shape_points(i, pose))
 
     def _links_collide(self, a: str, b: str) -> bool:
         import fcl
