@@ -1,22 +1,25 @@
 """Mesh objects and obstacles as convex pieces, for the loop's collision proxy.
 
 A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (CoACD, the
-``coacd`` package: approximate convex decomposition by collision-aware concavity and tree search;
-a mesh that is already convex is its own hull, one piece), and the pieces are cached on disk per
-mesh content and scale (:func:`convex_pieces`). Measured against V-HACD (``vhacdx``) on the
-Stanford bunny: 42 pieces in 6 s with 15 % of the points within 4 mm outside the surface falsely
-inside, against 32 % for V-HACD's 16 pieces and 17 % for its 128 (19 s). Each piece is the intersection of its faces' half-spaces n . x <= b
-(n unit, outward), so its signed distance, batched in torch, is
+``coacd`` package: approximate convex decomposition by collision-aware concavity and tree
+search; a mesh that is already convex is its own hull, one piece), and the pieces are cached on
+disk per mesh content and scale (:func:`convex_pieces`). Measured against V-HACD (``vhacdx``) on
+the Stanford bunny: CoACD's 42 pieces (6 s) put 15 % of the points that lie within 4 mm outside
+the surface inside a piece, V-HACD's 16 pieces 32 % and its 128 pieces (19 s) 17 %.
 
-    sd(x) = max_f (n_f . x - b_f)                                         (:func:`pieces_distance`)
+Each piece is the intersection of its faces' half-spaces n . x <= b (n unit, outward), so its
+signed distance, batched in torch, is
+
+    sd(x) = max_f (n_f . x - b_f)                                        (:func:`pieces_distance`)
 
 exact inside the piece and wherever the nearest feature is a face; near an edge or a vertex it
 is a lower bound (the piece looks up to sqrt(3) times closer from beyond a corner), so a sphere
 (c, rho) hits the piece when sd(c) < rho: a conservative test. The mesh is the union of its
 pieces (sd = min over pieces).
 
-FCL, the engine of record, checks the mesh itself (a BVH of its triangles:
-:mod:`graspnet_torch.collision.scene`); tests measure how often the two verdicts agree.
+FCL, the engine of record, checks the mesh itself (a BVH of its triangles, with the inside and
+the depth measured against the mesh: :mod:`graspnet_torch.collision.mesh`); tests measure how
+often the two verdicts agree.
 """
 
 from __future__ import annotations

@@ -267,7 +267,8 @@ class CollisionScene:
                 query, pose = self._mesh_object
                 points = [self._shape_points(i, pose) for i, _ in measured]
                 points = [p if crossing else p[:1] for p, (_, crossing) in zip(points, measured, strict=True)]
-                inside = [k for k, (_, crossing) in enumerate(measured) if not crossing and query.inside(points[k]).any()]
+                inside = [k for k, (_, crossing) in enumerate(measured)
+                          if not crossing and query.inside(points[k]).any()]
                 for k in inside:  # wholly inside: all its points
                     points[k] = self._shape_points(measured[k][0], pose)
                     measured[k] = (measured[k][0], True)
