@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -62,6 +62,9 @@ bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (tar
 bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): train, solve 40 problems, verify from the URDF (~7 min)
 	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
 	$(PY) benchmarks/any_hand.py --check
+
+bench-meshes: $(STAMP)  ## mesh objects: proxy vs FCL verdicts near real meshes (>= 99 %), loop speed vs the primitive (>= 0.5x)
+	$(PY) benchmarks/mesh_objects.py --check
 
 bench-solvers: $(STAMP)  ## every solver (srv, paper, cmaes, dls) on the same problems, with targets (~10 min)
 	$(PY) benchmarks/solvers.py --check

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from graspnet_torch.solver.config import RewardCfg
+    from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["bench_args", "check_targets", "loop_rate", "rate_rows", "time_interleaved"]
 
@@ -57,10 +58,11 @@ def bench_args(doc: str) -> argparse.Namespace:
     return args
 
 
-def loop_rate(task: str, trials: int, iterations: int, repeats: int, reward: RewardCfg,
+def loop_rate(task: str | GraspProblem, trials: int, iterations: int, repeats: int, reward: RewardCfg,
               refine: int | None = None) -> float:
-    """Best of ``repeats`` solves of a task: trial-iterations per second of the loop (set-up
-    excluded), a fixed budget with no early stop and no polish; ``refine`` None: the robot's."""
+    """Best of ``repeats`` solves of a task (a name or a problem): trial-iterations per second of
+    the loop (set-up excluded), a fixed budget with no early stop and no polish; ``refine`` None:
+    the robot's."""
     import graspnet_torch as gt
     from graspnet_torch.solver import SolverCfg
 

@@ -141,6 +141,25 @@ class MeshQuery:
             out[box] = sd < 0
         return out
 
+    def winding(self, points: np.ndarray) -> np.ndarray:
+        """(N,) the generalised winding number of points: the solid angle the surface subtends, over
+        4 pi (Van Oosterom and Strackee's formula per triangle); 1 inside a closed mesh, 0 outside,
+        robust up to the surface (where ray tests can fail) and meaningful for an open mesh. Cost:
+        N x triangles."""
+        points = np.asarray(points, dtype=np.float64)
+        out = np.zeros(len(points))
+        for start in range(0, len(points), 64):
+            p = points[start:start + 64, None, None, :]
+            v = self.triangles[None] - p  # (n, M, 3, 3)
+            lengths = np.linalg.norm(v, axis=-1)  # (n, M, 3)
+            a, b, c = v[..., 0, :], v[..., 1, :], v[..., 2, :]
+            la, lb, lc = lengths[..., 0], lengths[..., 1], lengths[..., 2]
+            det = np.einsum("nmi,nmi->nm", a, np.cross(b, c))
+            div = la * lb * lc + np.einsum("nmi,nmi->nm", a, b) * lc + np.einsum("nmi,nmi->nm", a, c) * lb \
+                + np.einsum("nmi,nmi->nm", b, c) * la
+            out[start:start + 64] = (2 * np.arctan2(det, div)).sum(1) / (4 * np.pi)
+        return out
+
     def _vertices(self):
         """A KD-tree over the mesh subdivided until every edge is at most ``s``, and ``h``: every
         surface point lies within h = s / sqrt(3) of one of its vertices (a triangle's

@@ -9,6 +9,7 @@ table3     Tables 3-4, ANOVA + Bonferroni, Figs. 6, 8, 9 (6.3)         :class:`O
 fig10      Fig. 10: the arm among three obstacles (6.3)                :class:`Fig10Cfg`
 manus      the MANUS 64 x 30 protocol and Fig. 12 (7.2)                :class:`ManusCfg`
 solvers    every solver on the same problems (beyond the paper)        :class:`SolversCfg`
+objects    moved tasks, meshes and real objects (beyond the paper)     :class:`ObjectsCfg`
 =========  ==========================================================  =====================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -28,14 +29,15 @@ from typing import Any
 
 from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
 from graspnet_torch.experiments.manus import ManusCfg, run_manus
+from graspnet_torch.experiments.objects import ObjectsCfg, run_objects
 from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig10, run_tables
 from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
 from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
 
 __all__ = ["EXPERIMENTS", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg", "NoiseStudyCfg",
-           "ObstaclesCfg", "SolversCfg", "Table2Cfg", "run_fig10", "run_manus", "run_noise_study", "run_solvers",
-           "run_table2", "run_tables"]
+           "ObjectsCfg", "ObstaclesCfg", "SolversCfg", "Table2Cfg", "run_fig10", "run_manus", "run_noise_study",
+           "run_objects", "run_solvers", "run_table2", "run_tables"]
 
 
 @dataclass(frozen=True)
@@ -54,4 +56,5 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("fig10", Fig10Cfg, run_fig10),
     Experiment("manus", ManusCfg, run_manus),
     Experiment("solvers", SolversCfg, run_solvers),
+    Experiment("objects", ObjectsCfg, run_objects),
 )}

@@ -173,14 +173,15 @@ def solve_grasps(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path)
             results.extend(batch)
             bar.update(len(chunk))
     wall = time.perf_counter() - t0
-    rows = ["name,problem,success,error_mm,collisions,iterations"]
-    rows += [f"{name},{_csv(r.problem)},{int(r.success)},{r.best.error_mm:.6g},{r.best.collisions},{r.best.iterations}"
-             for (name, _), r in zip(named, results, strict=True)]
+    rows = ["name,problem,success,error_mm,collisions,iterations,failure"]
+    rows += [f"{name},{_csv(r.problem)},{int(r.success)},{r.best.error_mm:.6g},{r.best.collisions},{r.best.iterations},"
+             f"{_csv(r.failure)}" for (name, _), r in zip(named, results, strict=True)]
     atomic_write_text(out / "summary.csv", "\n".join(rows) + "\n")
     errors = np.array([r.best.error_mm for r in results])
     solved = sum(r.success for r in results)
     print(f"{len(results)} problems (solver={solver.method}, {job.trials} trials each, batches of "
-          f"{min(job.batch, len(results))}): {solved} succeeded; best error < 1 mm: {int((errors < 1).sum())}; "
+          f"{min(job.batch, len(results))}): {solved} succeeded (within {solver.tolerance_mm:g} mm, collision-free); "
+          f"best error < 1 mm: {int((errors < 1).sum())}; "
           f"median {np.median(errors):.3g} mm; {wall:.1f} s ({len(results) / wall:.1f} problems/s)")
     print(f"results: {out}/ (one JSON per problem, summary.csv)")
     return results

@@ -26,7 +26,8 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "reference_posture", "robot_and_ik", "search", "solve", "solve_many", "trial_posture"]
+__all__ = ["build_environment", "failure_reason", "reference_posture", "robot_and_ik", "search", "solve", "solve_many",
+           "trial_posture"]
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 

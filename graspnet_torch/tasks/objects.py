@@ -7,9 +7,10 @@
   (uniform), to move a whole problem with :meth:`GraspProblem.moved`;
 - :func:`as_mesh`: a problem's primitive object written as a mesh file (the same object);
 - :func:`closure_problem`: a contact set on an object whose grasp is known to be reachable and
-  collision-free: the hand is placed around the object, each finger closes along a straight line in
-  joint space until its fingertip touches the surface, and the posture is kept only when FCL finds
-  it collision-free (the touching fingertips excepted, as in every count); the contacts are the
+  collision-free: the hand is placed around the object, each finger closes along a straight line
+  in joint space until its fingertip touches the surface (bisection on the mesh's winding number,
+  which stays exact up to the surface), and the posture is kept only when FCL finds it
+  collision-free (the touching fingertips excepted, as in every count); the contacts are the
   fingertips, the posture the problem's ``reference``.
 """
 
@@ -106,8 +107,8 @@ def closure_problem(robot: Robot, obj: Shape, seed: int, fingers: int = 3, attem
         local_query, T = MeshQuery(replace(obj, pose=np.zeros(6)).trimesh()), np.eye(4)
         T[:3, :3], T[:3, 3] = rpy_matrix_np(obj.pose[3:]), obj.pose[:3]
 
-    def inside(points: np.ndarray) -> np.ndarray:  # world points inside the object
-        return local_query.inside((points - T[:3, 3]) @ T[:3, :3])
+    def inside(points: np.ndarray) -> np.ndarray:  # world points inside the object, up to its surface
+        return local_query.winding((points - T[:3, 3]) @ T[:3, :3]) > 0.5
 
     centre = T[:3, :3] @ local_query.bounds.mean(0) + T[:3, 3]
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)

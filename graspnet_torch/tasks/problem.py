@@ -27,6 +27,7 @@ __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_ta
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
 MAX_OBSTACLES = 1000
+MAX_SCALE = 1e6
 KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds", "bounds", "obstacles", "name",
               "description", "reference",
               "notes"}
@@ -95,12 +96,12 @@ class Shape:
                 raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
             bases = (folder, repo_root()) if folder is not None else (repo_root(),)
             path = confined_file(paths[0], f"{where}.size", bases, ProblemError, allow_outside_paths)
-            scale = 1.0
-            if data.get("scale") is not None:
-                scale = float(_numbers([data["scale"]], 1, f"{where}.scale", "a number (the mesh's scale)", 1e-6,
-                                       1e6)[0])
-                if scale <= 0:
-                    raise ProblemError(f"{where}.scale: must be positive, got {short(data['scale'])}")
+            scale = data.get("scale", 1.0)
+            if isinstance(scale, bool) or not isinstance(scale, int | float) or not math.isfinite(scale) \
+                    or not 0 < scale <= MAX_SCALE:
+                raise ProblemError(f"{where}.scale: expected a number in (0, {MAX_SCALE:g}] (the mesh file's unit in "
+                                   f"metres, e.g. 0.001 for millimetres), got {short(scale)}")
+            scale = float(scale)
             _check_mesh(path, f"{where}.size", scale)
             return cls(kind, (), pose, path, scale)
         size = _numbers(data.get("size"), SHAPES[kind], f"{where}.size")

@@ -1,0 +1,184 @@
+"""Mesh objects and obstacles: files as users have them, the engine of record's inside and depth
+against independent recomputations, the convex pieces of the loop's proxy, and the proxy's verdict
+against FCL's near real meshes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+import yaml
+
+import graspnet_torch as gt
+from graspnet_torch.collision import CollisionScene
+from graspnet_torch.collision.convex import convex_pieces, pieces_distance
+from graspnet_torch.collision.mesh import MeshQuery, point_triangle_distance
+from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.robot.robot import Posture
+from graspnet_torch.robot.transforms import compose, matrix_to_pose, pose_to_rt, rt_to_pose
+from graspnet_torch.solver.search_space import palm_search_space
+from graspnet_torch.tasks.objects import as_mesh, closure_problem, random_pose, real_objects
+from graspnet_torch.tasks.problem import Shape
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    """Every test decomposes into its own cache folder."""
+    monkeypatch.setenv("GRASPNET_TORCH_CACHE", str(tmp_path / "cache"))
+
+
+def test_point_triangle_distances_agree_with_a_dense_search():
+    rng = np.random.default_rng(0)
+    triangles = rng.normal(scale=0.03, size=(6, 3, 3))
+    points = rng.normal(scale=0.05, size=(40, 3))
+    u = np.linspace(0, 1, 121)
+    U, V = np.meshgrid(u, u)
+    keep = U + V <= 1
+    U, V = U[keep], V[keep]
+    dense = (triangles[:, None, 0] + (triangles[:, None, 1] - triangles[:, None, 0]) * U[None, :, None]
+             + (triangles[:, None, 2] - triangles[:, None, 0]) * V[None, :, None]).reshape(-1, 3)
+    want = np.linalg.norm(points[:, None] - dense[None], axis=-1).min(1)
+    got = point_triangle_distance(points, triangles).min(1)
+    assert np.all(got <= want + 1e-12)  # the exact distance is at most the grid's
+    np.testing.assert_allclose(got, want, atol=5e-4)  # and the grid is fine enough to come within 0.5 mm
+
+
+def test_inside_and_depth_of_a_closed_mesh():
+    """A 100 mm cube: a sphere of radius 7 mm whose surface goes 3 mm into a face reaches 3 mm deep;
+    one 1 mm in does not reach beyond a 2 mm tolerance; one wholly inside is inside."""
+    query = MeshQuery(trimesh.creation.box(extents=(0.1, 0.1, 0.1)))
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.007).vertices
+    assert query.depth_beyond(sphere + np.array([0.05 + 0.007 - 0.003, 0, 0]), 0.002) == pytest.approx(0.003, abs=2e-4)
+    assert query.depth_beyond(sphere + np.array([0.05 + 0.007 - 0.001, 0, 0]), 0.002) == 0.0
+    assert query.inside(np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]])).tolist() == [True, False]
+    assert query.depth_beyond(sphere, 0.002) > 0.002
+
+
+@pytest.mark.parametrize("ext", ["stl", "obj", "ply", "glb"])
+def test_meshes_in_every_format_at_a_scale_are_the_same_object(tmp_path, hand, ext):
+    """The glass of glass3 written in millimetres as STL, OBJ, PLY or GLB, loaded with scale 0.001:
+    FCL counts the same collisions as for the primitive on the same postures, and the problem's
+    checks see the mesh in metres."""
+    base = gt.GraspProblem.from_task("glass3")
+    mesh = trimesh.creation.cylinder(radius=32.5, height=120.0, sections=128)
+    mesh.export(tmp_path / f"glass.{ext}")
+    data = base.to_mapping()
+    data["object"] = {"shape": "mesh", "size": f"glass.{ext}", "scale": 0.001, "pose": data["object"]["pose"]}
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(data))
+    problem = gt.GraspProblem.from_file(tmp_path / "p.yaml")
+    assert problem.object.scale == 0.001
+    np.testing.assert_allclose(problem.object.trimesh().extents, [0.065, 0.065, 0.12], rtol=1e-6)
+    g = torch.Generator().manual_seed(0)
+    b = base.bounds()
+    lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
+    pose = lo + (hi - lo) * torch.rand(40, 6, generator=g, dtype=torch.float64)
+    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
+    q = flo + (fhi - flo) * torch.rand(40, *flo.shape, generator=g, dtype=torch.float64)
+    meshed, primitive = CollisionScene(hand, problem), CollisionScene(hand, base)
+    agree = [(meshed.count(Posture(pose[k], q[k], torch.zeros(0))) > 0)
+             == (primitive.count(Posture(pose[k], q[k], torch.zeros(0))) > 0) for k in range(40)]
+    assert sum(agree) >= 39
+
+
+@pytest.mark.parametrize(("scale", "message"), [(0, r"object\.scale: expected a number in \(0, 1e\+06\]"),
+                                                (-1, "got -1"), ("big", "got 'big'"), (True, "got True"),
+                                                (1000.0, "beyond \\+-10 m at scale 1000")])
+def test_a_bad_scale_is_refused(tmp_path, scale, message):
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(tmp_path / "box.stl")
+    contacts = [{"finger": "thumb", "position": [0.025, 0, 0]}, {"finger": "index", "position": [-0.025, 0, 0]}]
+    data = {"robot": "hand", "object": {"shape": "mesh", "size": "box.stl", "scale": scale}, "contacts": contacts}
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(gt.ProblemError, match=message):
+        gt.GraspProblem.from_file(tmp_path / "p.yaml")
+    data["object"] = {"shape": "box", "size": [0.05, 0.05, 0.05], "scale": 2.0}
+    with pytest.raises(gt.ProblemError, match="only a mesh takes a scale"):
+        gt.GraspProblem.from_mapping(data)
+
+
+def test_a_convex_mesh_is_its_own_piece_and_the_pieces_are_cached(tmp_path):
+    """A box mesh: one exact piece, its six face planes, whose distance is the box's inside and a
+    lower bound outside (sqrt(3) at a corner). The pieces go to the cache folder, and another
+    process reads them from there (a cache file replaced by other pieces is what it gets)."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.04, 0.06, 0.08)).export(path)
+    pieces = convex_pieces(path)
+    assert pieces.exact and pieces.n_pieces == 1 and pieces.planes.shape == (1, 6, 4)
+    inside = torch.tensor([[0.0, 0.0, 0.0], [0.015, 0.0, 0.0]], dtype=torch.float64)
+    d = pieces_distance(inside[:, None], torch.as_tensor(pieces.planes)).squeeze(1)
+    np.testing.assert_allclose(d, [-0.02, -0.005], atol=1e-12)
+    corner = torch.tensor([[0.02 + 0.01, 0.03 + 0.01, 0.04 + 0.01]], dtype=torch.float64)
+    lower = float(pieces_distance(corner[:, None], torch.as_tensor(pieces.planes)))
+    assert lower == pytest.approx(0.01) and lower < np.sqrt(3) * 0.01
+    files = list((tmp_path / "cache" / "convex").glob("*.npz"))
+    assert len(files) == 1
+    small = trimesh.creation.box(extents=(0.01, 0.01, 0.01)).vertices
+    np.savez(files[0], n=1, exact=True, v0=small)
+    code = (f"from graspnet_torch.collision.convex import convex_pieces; "
+            f"print(convex_pieces({str(path)!r}).planes[0, :, 3].max())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert float(out.stdout) == pytest.approx(0.005)  # the cached half-extent, not the file's 0.04
+
+
+def test_the_pieces_of_a_concave_mesh_hold_its_inside():
+    """A real, concave mesh (pybullet_data's blob 000): the pieces' union holds the points well
+    inside the mesh and leaves out the points well outside."""
+    path, scale = real_objects()["blob000"]
+    pieces = convex_pieces(path, scale)
+    assert not pieces.exact and pieces.n_pieces > 1
+    mesh = trimesh.load(path, force="mesh")
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    mesh.apply_scale(scale)
+    query = MeshQuery(mesh)
+    points = mesh.bounds[0] + (mesh.bounds[1] - mesh.bounds[0]) * np.random.default_rng(0).uniform(size=(3000, 3))
+    depth = point_triangle_distance(points, np.asarray(mesh.triangles)).min(1)
+    inside = query.inside(points)
+    sd = pieces_distance(torch.as_tensor(points)[:, None].expand(-1, pieces.n_pieces, 3),
+                         torch.as_tensor(pieces.planes)).amin(-1).numpy()
+    deep_in, far_out = inside & (depth > 0.004), ~inside & (depth > 0.004)
+    assert np.mean(sd[deep_in] < 0) > 0.99
+    assert np.mean(sd[far_out] > 0) > 0.95
+
+
+def _search_configurations(hand, problem, n, seed=0):
+    """Palm poses uniform in the problem's search space (the frame and box the loop searches) and
+    finger joints uniform in their limits: what the loop evaluates."""
+    g = torch.Generator().manual_seed(seed)
+    space = palm_search_space(hand, problem)
+    lo, hi = torch.as_tensor(space.lower), torch.as_tensor(space.upper)
+    G = torch.as_tensor(space.frame)
+    R, t = compose(G[:3, :3], G[:3, 3], *pose_to_rt(lo + (hi - lo) * torch.rand(n, 6, generator=g,
+                                                                                    dtype=torch.float64)))
+    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
+    return rt_to_pose(R, t), flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=g, dtype=torch.float64)
+
+
+def test_the_proxy_agrees_with_fcl_near_real_meshes(hand, tmp_path):
+    """Contact sets on real meshes at random poses (a concave blob and a convex toy cylinder), and
+    glass3 moved with its glass as a mesh: over configurations of their search spaces, the proxy's
+    collision-free verdict is FCL's on >= 99 % (measured over 11 objects: 98.3-100 %, 99.2 %
+    pooled)."""
+    rng = np.random.default_rng(0)
+    objects = real_objects()
+    problems = []
+    for name in ("blob000", "cylinder"):
+        path, scale = objects[name]
+        pose = matrix_to_pose(torch.as_tensor(random_pose(rng))).numpy()
+        problems.append(closure_problem(hand, Shape("mesh", (), pose, path, scale), seed=0))
+    problems.append(as_mesh(gt.GraspProblem.from_task("glass3").moved(random_pose(rng)), tmp_path))
+    agree, colliding, n = 0, 0, 200
+    for problem in problems:
+        pose, q = _search_configurations(hand, problem, n)
+        proxy = CollisionProxy(hand, problem, dtype=torch.float64)
+        scene = CollisionScene(hand, problem)
+        counts = proxy.count(pose_to_rt(pose), q)
+        fcl = torch.tensor([scene.count(Posture(pose[k], q[k], torch.zeros(0))) for k in range(n)])
+        agree += int(((counts > 0) == (fcl > 0)).sum())
+        colliding += int((fcl > 0).sum())
+    total = n * len(problems)
+    print(f"verdict {agree / total:.4f}, colliding {colliding / total:.2f}")
+    assert 0.1 < colliding / total < 0.9
+    assert agree / total >= 0.99, agree / total
