@@ -14,7 +14,8 @@ signed distance, batched in torch, is
 
 exact inside the piece and wherever the nearest feature is a face; near an edge or a vertex it
 is a lower bound (the piece looks up to sqrt(3) times closer from beyond a corner), so a sphere
-(c, rho) hits the piece when sd(c) < rho: a conservative test. The mesh is the union of its
+(c, rho) hits the piece when sd(c) < rho: a conservative test. Bevel planes at the sharp edges
+and corners (supporting planes, not faces) bring that bound near the true distance there. The mesh is the union of its
 pieces (sd = min over pieces).
 
 FCL, the engine of record, checks the mesh itself (a BVH of its triangles, with the inside and
@@ -39,10 +40,11 @@ from graspnet_torch.io import atomic_path
 
 __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
 
-VERSION = 4  # of the cached files: bump when the decomposition or its settings change
+VERSION = 5  # of the cached files: bump when the decomposition or its settings change
 COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
-MAX_PLANES = 64  # faces of a piece beyond which its hull is bounded by this many face directions
+MAX_PLANES = 64  # planes of a piece: its faces, then bevels; a hull of more faces is bounded by this many
+BEVEL_COS = 0.9  # faces that meet at more than about 26 degrees make a sharp edge or corner (bevelled)
 FAR = 1e9  # padding planes: n = 0, b = FAR, never the largest
 
 
@@ -79,33 +81,78 @@ def cache_dir() -> Path:
 
 
 def _planes(vertices: np.ndarray) -> np.ndarray:
-    """(F, 4) the distinct face planes of the convex hull of points (coplanar triangles merged).
+    """(F, 4) the planes that bound the convex hull of points: its distinct faces (coplanar
+    triangles merged), then bevel planes, at most ``MAX_PLANES`` in all.
 
-    A hull of more than ``MAX_PLANES`` faces (a finely tessellated convex mesh) is bounded instead
-    by ``MAX_PLANES`` of its face directions, spread by farthest-point sampling over the unit
-    sphere from its largest face, each pushed out to the hull's support value b = max_v n . v:
-    a polytope that holds the hull and exceeds it by about r (1 / cos(theta) - 1) on a curved
-    part of radius r, theta the angular spacing of the directions (about 3 % of r for a sphere)."""
+    A bevel plane touches the hull along a sharp edge or at a sharp corner, its normal between
+    those of the faces that meet there (the normalised sum of the two faces' normals, of the
+    corner's faces' normals), its offset the hull's support value b = max_v n . v: it cuts nothing
+    from the hull but lifts the max-plane distance beyond that edge or corner towards the true
+    distance (a box's corner goes from up to sqrt(3) times too near to about 1.1 times). Bevels
+    are added by farthest-point sampling of their directions against those already chosen.
+
+    A hull of more faces than ``MAX_PLANES`` (a finely tessellated convex mesh: no sharp edges)
+    is bounded instead by ``MAX_PLANES`` of its face directions, spread by farthest-point sampling
+    from its largest face and pushed out to the support values: a polytope that holds the hull
+    and exceeds it by about r (1 / cos(theta) - 1) on a curved part of radius r, theta the angular
+    spacing of the directions (about 3 % of r for a sphere)."""
     from scipy.spatial import ConvexHull
 
     hull = ConvexHull(vertices)
     eq = hull.equations  # (n, d): n . x + d <= 0 inside, n unit
     planes = np.concatenate([eq[:, :3], -eq[:, 3:]], axis=1)
     _, keep, which = np.unique(np.round(planes, 9), axis=0, return_index=True, return_inverse=True)
-    if len(keep) <= MAX_PLANES:
-        return planes[np.sort(keep)]
-    planes = planes[keep]
-    normals = planes[:, :3]
-    tri = vertices[hull.simplices]
-    area = np.bincount(which.ravel(), np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1),
-                       minlength=len(planes))  # each distinct face's area
-    chosen = [int(np.argmax(area))]
-    gap = 1.0 - normals @ normals[chosen[0]]  # cosine distance to the nearest chosen direction
-    for _ in range(MAX_PLANES - 1):
-        chosen.append(int(np.argmax(gap)))
-        gap = np.minimum(gap, 1.0 - normals @ normals[chosen[-1]])
-    n = normals[chosen]
-    return np.concatenate([n, (vertices @ n.T).max(0)[:, None]], axis=1)
+    faces = planes[keep]
+    normals = faces[:, :3]
+    which = which.ravel()
+    if len(faces) > MAX_PLANES:
+        tri = vertices[hull.simplices]
+        area = np.bincount(which, np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1),
+                           minlength=len(faces))  # each distinct face's area
+        chosen = _spread(normals, [int(np.argmax(area))], MAX_PLANES)
+        n = normals[chosen]
+        return np.concatenate([n, (vertices @ n.T).max(0)[:, None]], axis=1)
+    # bevels: sharp edges (neighbouring triangles of two distinct faces) and corners
+    candidates = []
+    for t, neighbours in enumerate(hull.neighbors):
+        for u in neighbours:
+            a, b = which[t], which[u]
+            if a < b and normals[a] @ normals[b] < BEVEL_COS:
+                candidates.append(normals[a] + normals[b])
+    incident: dict[int, set[int]] = {}
+    for t, simplex in enumerate(hull.simplices):
+        for v in simplex:
+            incident.setdefault(int(v), set()).add(int(which[t]))
+    for around in incident.values():
+        if len(around) >= 3:
+            m = normals[sorted(around)]
+            if (m @ m.T).min() < BEVEL_COS:
+                candidates.append(m.sum(0))
+    if not candidates or len(faces) >= MAX_PLANES:
+        return faces[np.argsort(keep)]
+    directions = np.asarray(candidates)
+    directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    _, first = np.unique(np.round(directions, 9), axis=0, return_index=True)
+    directions = directions[np.sort(first)]
+    both = np.concatenate([normals, directions])
+    chosen = _spread(both, list(range(len(faces))), min(MAX_PLANES, len(both)))
+    bevels = both[chosen[len(faces):]]
+    bevels = np.concatenate([bevels, (vertices @ bevels.T).max(0)[:, None]], axis=1)
+    return np.concatenate([faces[np.argsort(keep)], bevels])
+
+
+def _spread(directions: np.ndarray, chosen: list[int], count: int) -> list[int]:
+    """Farthest-point sampling of unit directions: ``chosen`` then the farthest (in cosine) from
+    every one chosen, until ``count``."""
+    chosen = list(chosen)
+    gap = (1.0 - directions @ directions[chosen].T).min(1)
+    while len(chosen) < count:
+        k = int(np.argmax(gap))
+        if gap[k] <= 1e-9:
+            break
+        chosen.append(k)
+        gap = np.minimum(gap, 1.0 - directions @ directions[k])
+    return chosen
 
 
 def _decompose(mesh) -> tuple[list[np.ndarray], bool]:

@@ -5,9 +5,10 @@ the surface, but not a link wholly inside, and its penetration depths against a 
 single triangles (measured: negative, or the triangle's, not the object's). So for a mesh the
 engine of record adds two measurements of its own, against the mesh itself:
 
-- *inside*: a point is inside a closed (watertight) mesh by trimesh's ray test; a mesh that is not
-  closed has no inside of its own, and its convex pieces (:mod:`graspnet_torch.collision.convex`)
-  stand for it;
+- *inside*: a point is inside a closed (watertight) mesh by ray parity (trimesh's ray test along
+  one fixed direction, both ways; a point whose rays disagree gets its winding number: the same
+  answer every run); a mesh that is not closed has no inside of its own, and its convex pieces
+  (:mod:`graspnet_torch.collision.convex`) stand for it;
 - *depth* of a link: the largest depth below the surface of points spread over the link's
   geometry (its surface, at most ``SPACING`` apart, and its vertices), i.e. how far the link
   reaches into the object: for the points inside, their distance to the surface
@@ -28,6 +29,7 @@ __all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "point_triangle_d
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
 CHUNK = 64  # inside points measured at a time
+RAY = np.array([0.4395064455, 0.617598629942, 0.652231566745])  # the inside test's ray (trimesh's default)
 MAX_POINTS = 1500
 
 
@@ -133,12 +135,28 @@ class MeshQuery:
         if not box.any():
             return out
         if self.closed or self.pieces is None:
-            out[box] = self.mesh.contains(points[box])
+            out[box] = self._contains(points[box])
         else:
             p = points[box]
             planes = self.pieces.planes
             sd = (np.einsum("nc,kfc->nkf", p, planes[..., :3]) - planes[..., 3]).max(-1).min(-1)
             out[box] = sd < 0
+        return out
+
+    def _contains(self, points: np.ndarray) -> np.ndarray:
+        """Ray parity along one fixed direction, both ways (trimesh's test, deterministic): a point
+        whose two rays disagree and both hit (a ray through an edge or a vertex) gets its winding
+        number instead of trimesh's retry in a random direction."""
+        n = len(points)
+        rays = np.tile(RAY, (n, 1))
+        _, index, _ = self.mesh.ray.intersects_location(np.vstack((points, points)), np.vstack((rays, -rays)),
+                                                        multiple_hits=True)
+        hits = np.bincount(index, minlength=2 * n).reshape(2, n)
+        odd = hits % 2 == 1
+        out = odd[0] & (odd[0] == odd[1])
+        broken = (odd[0] != odd[1]) & (hits > 0).all(0)
+        if broken.any():
+            out[broken] = self.winding(points[broken]) > 0.5
         return out
 
     def winding(self, points: np.ndarray) -> np.ndarray:

@@ -13,10 +13,7 @@ The robot. Every collision primitive of the URDF becomes a few spheres fixed in 
   union whose waist is >= 0.97 r, which covers the rim (to within 3 % of r) and overshoots the
   flat ends by 3r/4 on the axis (the URDF's joint spheres sit there for most links);
 - a box becomes spheres of radius rho (its smallest half-extent) on a grid over the box shrunk
-  by rho, close enough that its faces dip by at most ``BOX_DIMPLE`` (1 mm, or rho / 4) between
-  them: a slab with rounded edges; its twelve edges are lined with spheres of radius rho / 2,
-  rho / 2 inside the two faces that meet there, and its corners hold spheres of radius rho / 4
-  (an edge is missed by at most (sqrt(2) - 1) rho / 2, a corner by (sqrt(3) - 1) rho / 4);
+  by rho, at most rho apart: a slab with rounded edges;
 - a mesh becomes the spheres of its oriented bounding box, grown so that they cover the mesh
   (:func:`mesh_box`).
 
@@ -77,7 +74,6 @@ __all__ = [
 ]
 
 
-BOX_DIMPLE = 0.001  # m: how far a box's sphere model may dip below its faces between spheres
 SMALL_BOX_M = 0.1  # boxes whose longest half-extent is at most this are capsules for self-collision
 
 
@@ -119,13 +115,9 @@ def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
     elif shape.kind == "box":
         h = np.asarray(shape.size, dtype=np.float64) / 2
         rho = float(h.min())
-        # grid spacing s: between four spheres the slab's face dips by rho - sqrt(rho^2 - s^2 / 2);
-        # at most BOX_DIMPLE (or rho / 4)
-        dip = min(BOX_DIMPLE, rho / 4)
-        spacing = math.sqrt(2 * (rho**2 - (rho - dip) ** 2))
         axes = []
         for hi in h - rho:
-            k = max(1, math.ceil(2 * hi / spacing) + 1)
+            k = max(1, math.ceil(2 * hi / rho) + 1)
             axes.append(np.linspace(-hi, hi, k) if k > 1 else np.zeros(1))
         local = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         radii = np.full(len(local), rho)
@@ -138,26 +130,12 @@ def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
         for u0, u1, v0, v1 in ((-hb, hb, -hc, -hc), (hb, hb, -hc, hc), (hb, -hb, hc, hc), (-hb, -hb, hc, -hc)):
             k = max(2, math.ceil(max(abs(u1 - u0), abs(v1 - v0)) / r2) + 1)
             rim += [(u, v) for u, v in zip(np.linspace(u0, u1, k)[:-1], np.linspace(v0, v1, k)[:-1], strict=True)]
-        points = []
         for side in (-1, 1):
             for u, v in rim:
                 point = np.zeros(3)
                 point[a], point[b], point[c] = side * (h[a] - r2), u, v
-                points.append(point)
-        # the four edges across the slab (along its thin axis a), likewise
-        k = max(2, math.ceil(2 * (h[a] - r2) / r2) + 1)
-        for sb in (-1, 1):
-            for sc in (-1, 1):
-                for w in np.linspace(-(h[a] - r2), h[a] - r2, k):
-                    point = np.zeros(3)
-                    point[a], point[b], point[c] = w, sb * hb, sc * hc
-                    points.append(point)
-        radii = np.concatenate([radii, np.full(len(points), r2)])
-        # the eight corners: spheres of radius rho/4, rho/4 inside the three faces that meet there
-        r4 = rho / 4
-        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * (h - r4)
-        local = np.vstack([local, np.asarray(points).reshape(-1, 3), corners])
-        radii = np.concatenate([radii, np.full(8, r4)])
+                local = np.vstack([local, point])
+                radii = np.append(radii, r2)
     else:  # pragma: no cover - link_shapes makes no other kinds
         raise ConfigError(f"link '{shape.link}': no sphere model for {shape.kind}")
     centres = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]

@@ -97,22 +97,27 @@ def test_a_bad_scale_is_refused(tmp_path, scale, message):
 
 
 def test_a_convex_mesh_is_its_own_piece_and_the_pieces_are_cached(tmp_path):
-    """A box mesh: one exact piece, its six face planes, whose distance is the box's inside and a
-    lower bound outside (sqrt(3) at a corner). The pieces go to the cache folder, and another
-    process reads them from there (a cache file replaced by other pieces is what it gets)."""
+    """A box mesh: one exact piece, its six face planes and bevels at its 12 edges and 8 corners,
+    whose distance is the box's inside and its true distance straight beyond a face, an edge or a
+    corner. The pieces go to the cache folder, and another process reads them from there (a cache
+    file replaced by other pieces is what it gets)."""
     import subprocess
     import sys
 
     path = tmp_path / "box.stl"
     trimesh.creation.box(extents=(0.04, 0.06, 0.08)).export(path)
     pieces = convex_pieces(path)
-    assert pieces.exact and pieces.n_pieces == 1 and pieces.planes.shape == (1, 6, 4)
+    assert pieces.exact and pieces.n_pieces == 1 and pieces.planes.shape == (1, 6 + 12 + 8, 4)  # + bevels
+    planes = torch.as_tensor(pieces.planes)
     inside = torch.tensor([[0.0, 0.0, 0.0], [0.015, 0.0, 0.0]], dtype=torch.float64)
-    d = pieces_distance(inside[:, None], torch.as_tensor(pieces.planes)).squeeze(1)
-    np.testing.assert_allclose(d, [-0.02, -0.005], atol=1e-12)
-    corner = torch.tensor([[0.02 + 0.01, 0.03 + 0.01, 0.04 + 0.01]], dtype=torch.float64)
-    lower = float(pieces_distance(corner[:, None], torch.as_tensor(pieces.planes)))
-    assert lower == pytest.approx(0.01) and lower < np.sqrt(3) * 0.01
+    np.testing.assert_allclose(pieces_distance(inside[:, None], planes).squeeze(1), [-0.02, -0.005], atol=1e-12)
+    # beyond a corner, an edge, a face: the distance is a lower bound, exact where a bevel faces it
+    for offset, true in (((0.01, 0.01, 0.01), np.sqrt(3) * 0.01), ((0.01, 0.01, 0.0), np.sqrt(2) * 0.01),
+                         ((0.01, 0.0, 0.0), 0.01)):
+        point = torch.tensor([[0.02, 0.03, 0.04]], dtype=torch.float64) * torch.tensor(
+            [[1.0 if o else 0.0 for o in offset]]) + torch.tensor([offset], dtype=torch.float64)
+        lower = float(pieces_distance(point[:, None], planes))
+        assert lower <= true + 1e-8 and lower == pytest.approx(true, rel=1e-6)  # the STL holds float32
     files = list((tmp_path / "cache" / "convex").glob("*.npz"))
     assert len(files) == 1
     small = trimesh.creation.box(extents=(0.01, 0.01, 0.01)).vertices
@@ -120,7 +125,7 @@ def test_a_convex_mesh_is_its_own_piece_and_the_pieces_are_cached(tmp_path):
     code = (f"from graspnet_torch.collision.convex import convex_pieces; "
             f"print(convex_pieces({str(path)!r}).planes[0, :, 3].max())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert float(out.stdout) == pytest.approx(0.005)  # the cached half-extent, not the file's 0.04
+    assert float(out.stdout) == pytest.approx(0.005 * np.sqrt(3))  # the cached cube's corner bevel, not the file's
 
 
 def test_the_pieces_of_a_concave_mesh_hold_its_inside():
