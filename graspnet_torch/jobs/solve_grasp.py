@@ -268,7 +268,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
         quality = f"best total error {best.total_error_mm:.3f} mm ({per_finger})"
     print(f"\n{problem.name or problem.source} (solver={solver.method}): {stops}; {quality}, "
           f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials "
-          f"collision-free (FCL, INTERFACE.md); "
+          f"collision-free (FCL); "
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     if result.failure is not None:
         print(f"no grasp: {result.failure}")
