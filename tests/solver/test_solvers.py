@@ -70,8 +70,12 @@ def test_every_solver_config_composes_into_its_settings(name):
         cfg = compose("solve_grasp", overrides=[f"solver={name}"])
     solver = build(SolverCfg, unset(SolverCfg, dict(cfg.solver)), "solver")  # null: the robot's default
     assert solver.method == {"paper": "srv"}.get(name, name)
-    if name == "paper":
-        assert solver.stop is None and solver.polish == "fingers" and solver.polish_from is None
+    if name == "paper":  # the command line's paper protocol is the Python one
+        assert solver == SolverCfg.paper(refine=solver.refine, final_refine=solver.final_refine,
+                                         stop_clear=solver.stop_clear)
+        assert solver.stop_rule == "reinforcement" and solver.stop is None and solver.polish == "fingers"
+    else:
+        assert solver.stop_rule == "grasp" and solver.tolerance_mm == 1.0
 
 
 def test_the_default_solver_lands_random_problems_below_a_micrometre(hand):
