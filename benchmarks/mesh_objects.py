@@ -32,8 +32,8 @@ from graspnet_torch.benchmarking import check_targets, loop_rate
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.collision.proxy import CollisionProxy
 from graspnet_torch.robot.robot import Posture
-from graspnet_torch.robot.transforms import compose, matrix_to_pose, pose_to_rt, rt_to_pose
-from graspnet_torch.solver.search_space import palm_search_space
+from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_rt
+from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.objects import as_mesh, closure_problem, random_pose, real_objects
 from graspnet_torch.tasks.problem import Shape
@@ -58,13 +58,7 @@ def agreement(problem: gt.GraspProblem, n: int) -> tuple[int, int, int, int]:
     """(agreeing, proxy-only, FCL-only, colliding by FCL) over n configurations of the search space."""
     hand = gt.load_robot("hand")
     g = torch.Generator().manual_seed(0)
-    space = palm_search_space(hand, problem)
-    lo, hi = torch.as_tensor(space.lower), torch.as_tensor(space.upper)
-    G = torch.as_tensor(space.frame)
-    local = lo + (hi - lo) * torch.rand(n, 6, generator=g, dtype=torch.float64)
-    pose = rt_to_pose(*compose(G[:3, :3], G[:3, 3], *pose_to_rt(local)))
-    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
-    q = flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=g, dtype=torch.float64)
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), n, g)
     proxy = CollisionProxy(hand, problem, dtype=torch.float64).count(pose_to_rt(pose), q) > 0
     scene = CollisionScene(hand, problem)
     fcl = torch.tensor([scene.count(Posture(pose[k], q[k], torch.zeros(0))) > 0 for k in range(n)])

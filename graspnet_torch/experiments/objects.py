@@ -122,33 +122,33 @@ def _row(label: list[str], r: dict) -> list[str]:
     return [*label, f"{sum(r['ok'])}/{n}", f"{100 * np.mean(r['ok']):.0f}", f"{np.median(r['wall']):.2f}", why]
 
 
+def _measure(problems: list, label: list[str], target: float, what: str, cfg: ObjectsCfg, numbers: dict,
+             timings: dict, checks: list) -> list[list[str]]:
+    """Every solver on the same problems: a table row each, its numbers, and the default's check."""
+    rows = []
+    for solver in cfg.solvers:
+        r = _solve_all(problems, solver, cfg, f"objects: {' '.join(label)} {solver}")
+        rows.append(_row([*label, solver], r))
+        pct = 100 * float(np.mean(r["ok"]))
+        key = "/".join(label[:1] if label[0] == "real meshes" else label)
+        numbers[f"{key}/{solver}/success %"] = pct
+        timings[f"{key}/{solver}/median wall s"] = float(np.median(r["wall"]))
+        if solver == "srv":
+            checks.append((f"default solver, {what}: {pct:.0f} % succeed >= {target:g} %", pct >= target))
+    return rows
+
+
 def run_objects(cfg: ObjectsCfg, out: Path) -> ExperimentReport:
     """Both sections (see the module's docstring), with the targets as ``checks`` and a picture of
     the default solver's grasp on the first real-mesh set."""
     numbers, timings, rows, checks = {}, {}, [], []
     with tempfile.TemporaryDirectory(prefix="graspnet_objects_") as tmp:
-        moved = moved_problems(cfg, Path(tmp))
-        for (task, kind), problems in moved.items():
-            for solver in cfg.solvers:
-                r = _solve_all(problems, solver, cfg, f"objects: {task} {kind} {solver}")
-                rows.append(_row([task, kind, solver], r))
-                pct = 100 * float(np.mean(r["ok"]))
-                numbers[f"{task}/{kind}/{solver}/success %"] = pct
-                timings[f"{task}/{kind}/{solver}/median wall s"] = float(np.median(r["wall"]))
-                if solver == "srv":
-                    checks.append((f"default solver, {task} as a {kind} at {cfg.poses} random poses: {pct:.0f} % "
-                                   f"succeed >= {MOVED_PCT:g} %", pct >= MOVED_PCT))
+        for (task, kind), problems in moved_problems(cfg, Path(tmp)).items():
+            rows += _measure(problems, [task, kind], MOVED_PCT, f"{task} as a {kind} at {cfg.poses} random poses",
+                             cfg, numbers, timings, checks)
         real = real_mesh_problems(cfg)
-        real_rows = []
-        for solver in cfg.solvers:
-            r = _solve_all(real, solver, cfg, f"objects: real meshes {solver}")
-            real_rows.append(_row(["real meshes", f"{len(cfg.objects)} objects", solver], r))
-            pct = 100 * float(np.mean(r["ok"]))
-            numbers[f"real meshes/{solver}/success %"] = pct
-            timings[f"real meshes/{solver}/median wall s"] = float(np.median(r["wall"]))
-            if solver == "srv":
-                checks.append((f"default solver, {len(real)} contact sets on real meshes: {pct:.0f} % succeed >= "
-                               f"{REAL_PCT:g} %", pct >= REAL_PCT))
+        rows += _measure(real, ["real meshes", f"{len(cfg.objects)} objects"], REAL_PCT,
+                         f"{len(real)} contact sets on real meshes", cfg, numbers, timings, checks)
         figures = [_picture(real[0], out)]
     headers = ["problems", "object", "solver", "succeeded", "%", "median wall s", "failures (why)"]
     body = (f"**Objects anywhere.** Each shipped hand task with its object moved and turned to {cfg.poses} random "
@@ -158,7 +158,7 @@ def run_objects(cfg: ObjectsCfg, out: Path) -> ExperimentReport:
             f"({', '.join(cfg.objects)}; `pybullet_data`), each from a collision-free posture whose fingertips "
             f"touch the mesh. Every solver with its defaults, {cfg.trials} trials, problem k with seed "
             f"{cfg.seed} + k. Success: every contact finger within 1 mm and no collision (FCL).\n\n"
-            + markdown_table(headers, rows + real_rows))
+            + markdown_table(headers, rows))
     return ExperimentReport("objects", "Your own object, anywhere: moved tasks and real meshes", body,
                             figures=figures, tables=["Objects"], numbers=numbers, timings=timings, checks=checks)
 

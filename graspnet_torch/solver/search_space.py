@@ -36,7 +36,7 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space",
-           "unreachable_contacts"]
+           "sample_hand_configurations", "unreachable_contacts"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -151,6 +151,25 @@ def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
                            f"reaches both)")
     return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
                            "contacts")
+
+
+def sample_hand_configurations(robot: Robot, space: PalmSearchSpace, n: int,
+                               generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """n configurations uniform in a search space: palm poses uniform in its box (in its frame) and
+    every finger joint uniform within its limits, float64.
+
+    Returns:
+        palm_pose: (n, 6) in the world (x, y, z, rx, ry, rz; m, rad); fingers: (n, F, J).
+    """
+    from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
+
+    lo, hi = torch.as_tensor(space.lower), torch.as_tensor(space.upper)
+    local = lo + (hi - lo) * torch.rand(n, 6, generator=generator, dtype=torch.float64)
+    G = torch.as_tensor(space.frame)
+    pose = rt_to_pose(*compose(G[:3, :3], G[:3, 3], *pose_to_rt(local)))
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=generator, dtype=torch.float64)
+    return pose, q
 
 
 def unreachable_contacts(robot: Robot, problem: GraspProblem) -> list[str]:

@@ -16,8 +16,8 @@ from graspnet_torch.collision.convex import convex_pieces, pieces_distance
 from graspnet_torch.collision.mesh import MeshQuery, point_triangle_distance
 from graspnet_torch.collision.proxy import CollisionProxy
 from graspnet_torch.robot.robot import Posture
-from graspnet_torch.robot.transforms import compose, matrix_to_pose, pose_to_rt, rt_to_pose
-from graspnet_torch.solver.search_space import palm_search_space
+from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_rt
+from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
 from graspnet_torch.tasks.objects import as_mesh, closure_problem, random_pose, real_objects
 from graspnet_torch.tasks.problem import Shape
 
@@ -69,12 +69,7 @@ def test_meshes_in_every_format_at_a_scale_are_the_same_object(tmp_path, hand, e
     problem = gt.GraspProblem.from_file(tmp_path / "p.yaml")
     assert problem.object.scale == 0.001
     np.testing.assert_allclose(problem.object.trimesh().extents, [0.065, 0.065, 0.12], rtol=1e-6)
-    g = torch.Generator().manual_seed(0)
-    b = base.bounds()
-    lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
-    pose = lo + (hi - lo) * torch.rand(40, 6, generator=g, dtype=torch.float64)
-    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
-    q = flo + (fhi - flo) * torch.rand(40, *flo.shape, generator=g, dtype=torch.float64)
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, base), 40, torch.Generator().manual_seed(0))
     meshed, primitive = CollisionScene(hand, problem), CollisionScene(hand, base)
     agree = [(meshed.count(Posture(pose[k], q[k], torch.zeros(0))) > 0)
              == (primitive.count(Posture(pose[k], q[k], torch.zeros(0))) > 0) for k in range(40)]
@@ -148,19 +143,6 @@ def test_the_pieces_of_a_concave_mesh_hold_its_inside():
     assert np.mean(sd[far_out] > 0) > 0.95
 
 
-def _search_configurations(hand, problem, n, seed=0):
-    """Palm poses uniform in the problem's search space (the frame and box the loop searches) and
-    finger joints uniform in their limits: what the loop evaluates."""
-    g = torch.Generator().manual_seed(seed)
-    space = palm_search_space(hand, problem)
-    lo, hi = torch.as_tensor(space.lower), torch.as_tensor(space.upper)
-    G = torch.as_tensor(space.frame)
-    R, t = compose(G[:3, :3], G[:3, 3], *pose_to_rt(lo + (hi - lo) * torch.rand(n, 6, generator=g,
-                                                                                    dtype=torch.float64)))
-    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
-    return rt_to_pose(R, t), flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=g, dtype=torch.float64)
-
-
 def test_the_proxy_agrees_with_fcl_near_real_meshes(hand, tmp_path):
     """Contact sets on real meshes at random poses (a concave blob and a convex toy cylinder), and
     glass3 moved with its glass as a mesh: over configurations of their search spaces, the proxy's
@@ -176,7 +158,8 @@ def test_the_proxy_agrees_with_fcl_near_real_meshes(hand, tmp_path):
     problems.append(as_mesh(gt.GraspProblem.from_task("glass3").moved(random_pose(rng)), tmp_path))
     agree, colliding, n = 0, 0, 200
     for problem in problems:
-        pose, q = _search_configurations(hand, problem, n)
+        space = palm_search_space(hand, problem)
+        pose, q = sample_hand_configurations(hand, space, n, torch.Generator().manual_seed(0))
         proxy = CollisionProxy(hand, problem, dtype=torch.float64)
         scene = CollisionScene(hand, problem)
         counts = proxy.count(pose_to_rt(pose), q)

@@ -14,6 +14,7 @@ from graspnet_torch.collision.proxy import CollisionProxy, shape_spheres
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
+from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
 
 
 @pytest.fixture(scope="module")
@@ -63,12 +64,7 @@ def test_proxy_agrees_with_fcl_on_random_arm_configurations(arm_hand, task):
 def test_proxy_agrees_with_fcl_for_the_free_hand_and_its_object():
     hand = gt.load_robot("hand")
     problem = gt.GraspProblem.from_task("glass3")
-    g = torch.Generator().manual_seed(1)
-    b = problem.bounds()
-    lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
-    pose = lo + (hi - lo) * torch.rand(600, 6, generator=g, dtype=torch.float64)
-    flo, fhi = (torch.as_tensor(a) for a in hand.finger_limits)
-    q = flo + (fhi - flo) * torch.rand(600, *flo.shape, generator=g, dtype=torch.float64)
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), 600, torch.Generator().manual_seed(1))
     verdict, exact, colliding = _agreement(hand, problem, None, q, pose_to_rt(pose))
     print(f"glass3: verdict {verdict:.4f}, count {exact:.4f}, colliding {colliding:.3f}")
     assert 0.1 < colliding < 0.9
