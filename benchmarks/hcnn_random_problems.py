@@ -1,8 +1,9 @@
 """Random reachable problems: does the HCNN solve them?
 
-Each problem: a palm pose uniform within the hand's bounds (paper Table 1), finger joints uniform
-within limits, 2 to 5 fingers chosen at random; their fingertips are the contacts, so a solution
-exists. Solved with the paper's protocol (``solver=paper``: 20 trials, 2000 iterations, each stops at
+Each problem (``gt.random_reachable_problem``): a palm pose uniform within the hand's bounds (paper
+Table 1), finger joints uniform within limits, 2 to 5 fingers chosen at random; their fingertips are
+the contacts, so a solution exists; the palm is searched in the same box (``palm_bounds: robot``),
+as in the paper. Solved with the paper's protocol (``solver=paper``: 20 trials, 2000 iterations, each stops at
 r > 0.99, fingers refined); a problem counts as solved when the result's total error is under
 10 mm. ``benchmarks/solvers.py`` compares every solver, the default included, on such problems.
 
@@ -25,17 +26,10 @@ from graspnet_torch.solver import SolverCfg
 
 
 def random_problem(robot, seed: int) -> gt.GraspProblem:
-    g = torch.Generator().manual_seed(seed)
-    b = robot.palm_bounds
-    lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
-    pose = lo + (hi - lo) * torch.rand(6, generator=g, dtype=torch.float64)
-    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
-    q = flo + (fhi - flo) * torch.rand(flo.shape, generator=g, dtype=torch.float64)
-    tips = robot.fingertips_world(pose, q)
-    k = int(torch.randint(2, robot.n_fingers + 1, (1,), generator=g))
-    chosen = sorted(torch.randperm(robot.n_fingers, generator=g)[:k].tolist())
-    contacts = [{"finger": robot.finger_names[i], "position": tips[i].tolist()} for i in chosen]
-    return gt.GraspProblem.from_mapping({"robot": robot.name, "contacts": contacts}, source=f"random problem {seed}")
+    """``gt.random_reachable_problem`` searched in the paper's box (``palm_bounds: robot``, Table 1)."""
+    problem = gt.random_reachable_problem(robot, seed)
+    return gt.GraspProblem.from_mapping({**problem.to_mapping(), "palm_bounds": "robot"}, robot_cfg=robot.cfg,
+                                        source=problem.source)
 
 
 def main() -> int:

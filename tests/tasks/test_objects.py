@@ -104,3 +104,45 @@ def test_the_default_solver_grasps_a_real_mesh_anywhere(hand):
     for c, world in zip(problem.contacts, problem.contacts_world(), strict=True):
         assert np.linalg.norm(tips[hand.finger_index(c.finger)] - world) * 1000 == pytest.approx(
             best.fingertip_error_mm[c.finger], abs=1e-6)
+
+
+BOTTLE = """robot: hand
+object:
+  shape: mesh
+  size: bottle.stl
+  scale: 1.0
+  pose: [0.0, 0.0, 0.2, {rx}, 0, 0]
+contacts:
+  - {{finger: thumb,  position: [0.03, 0.0, 0.0]}}
+  - {{finger: index,  position: [-0.0282, 0.0102, 0.01]}}
+  - {{finger: middle, position: [-0.0282, -0.0102, -0.01]}}
+"""
+
+
+def test_the_readme_bottle_is_grasped_standing_and_lying(tmp_path):
+    """The README's own-object example: a capsule exported as STL by trimesh, three contacts on its
+    surface, default settings. Standing and lying (rx = 90), each is a success (within 1 mm,
+    collision-free), and the lying grasp is the standing one turned with the bottle."""
+    import math
+
+    import trimesh
+
+    from graspnet_torch.robot.transforms import pose_to_matrix
+
+    trimesh.creation.capsule(height=0.1, radius=0.03).export(tmp_path / "bottle.stl")
+    results = []
+    for name, rx in (("standing", 0), ("lying", 90)):
+        (tmp_path / f"{name}.yaml").write_text(BOTTLE.format(rx=rx))
+        result = gt.solve(gt.GraspProblem.from_file(tmp_path / f"{name}.yaml"), trials=20, seed=0)
+        assert result.success and result.failure is None, result.failure
+        assert max(result.best.fingertip_error_mm.values()) <= 1.0 and result.best.collisions == 0
+        results.append(result.best)
+
+    def matrix(trial):
+        return pose_to_matrix(torch.tensor(trial.palm_pose[:3] + [math.radians(a) for a in trial.palm_pose[3:]],
+                                           dtype=torch.float64)).numpy()
+
+    turn = np.eye(4)  # the bottle turned by 90 degrees about x around its centre (0, 0, 0.2)
+    turn[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    turn[:3, 3] = np.array([0, 0, 0.2]) - turn[:3, :3] @ [0, 0, 0.2]
+    np.testing.assert_allclose(matrix(results[1]), turn @ matrix(results[0]), atol=1e-4)
