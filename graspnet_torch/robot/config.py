@@ -84,7 +84,9 @@ class RobotCfg:
         urdf: absolute path of the URDF.
         palm_link: the link whose pose the configuration network chooses (hand) or the arm moves.
         fingers: finger name -> chain from its fixed base frame to its fingertip; thumb first.
-        palm_bounds: search space of the palm pose, or None (robots whose palm the arm moves).
+        palm_bounds: a free hand's world box of palm poses, searched by problems that say
+            ``palm_bounds: robot`` (the paper's Table 1 for ``hand``); None: no such box (problems
+            without ``palm_bounds`` search a space built from their contacts).
         arm: chain from the arm's base to ``palm_link`` (arm_hand, manus), or None.
         mobile_base: chain from the world to the platform carrying the arm (manus), or None.
         gripper_points: the two marked point links of a gripper (manus), or ().
@@ -164,8 +166,6 @@ class RobotCfg:
             raise ConfigError(f"{source}: 'gripper_points' must list two link names")
         if not fingers and not points:
             raise ConfigError(f"{source}: a robot needs 'fingers' or 'gripper_points'")
-        if arm is None and palm_bounds is None:
-            raise ConfigError(f"{source}: a robot without an 'arm' needs 'palm_bounds'")
         home = {}
         raw_home = {} if data.get("home") is None else data["home"]
         if not isinstance(raw_home, Mapping):

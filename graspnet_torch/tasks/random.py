@@ -16,10 +16,11 @@ __all__ = ["random_reachable_problem"]
 def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None) -> GraspProblem:
     """A problem whose contacts are the fingertips of a random posture.
 
-    The palm pose is uniform within the robot's ``palm_bounds`` (a free hand) or the arm's joints
-    within their limits (a hand on an arm); every free finger joint is uniform within its limits;
-    ``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2 to all)
-    chosen at random touch their fingertips. Deterministic in ``seed``.
+    The palm pose is uniform within the robot's ``palm_bounds`` (a free hand; a hand without them:
+    at the origin, any orientation) or the arm's joints within their limits (a hand on an arm);
+    every free finger joint is uniform within its limits; ``n_fingers`` fingers (a number, or a
+    range ``(lo, hi)`` drawn uniformly; default 2 to all) chosen at random touch their fingertips.
+    Deterministic in ``seed``.
     """
     if not robot.n_fingers or robot.n_fingers < 2:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
@@ -30,11 +31,21 @@ def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[
         blo, bhi = (torch.as_tensor(a) for a in robot.body_limits)
         body = blo + (bhi - blo) * torch.rand(blo.shape, generator=g, dtype=torch.float64)
         tips = robot.fingertips_world_from_body(body, q)
-    else:
+    elif robot.palm_bounds is not None:
         b = robot.palm_bounds
         lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
         pose = lo + (hi - lo) * torch.rand(6, generator=g, dtype=torch.float64)
         tips = robot.fingertips_world(pose, q)
+    else:  # no box: the palm at the origin, turned uniformly at random (a unit quaternion)
+        from graspnet_torch.robot.transforms import matrix_to_pose
+
+        w, x, y, z = torch.nn.functional.normalize(torch.randn(4, generator=g, dtype=torch.float64), dim=0)
+        T = torch.eye(4, dtype=torch.float64)
+        T[:3, :3] = torch.stack([
+            torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)]),
+            torch.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)]),
+            torch.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)])])
+        tips = robot.fingertips_world(matrix_to_pose(T), q)
     lo_k, hi_k = (2, robot.n_fingers) if n_fingers is None else \
         (n_fingers, n_fingers) if isinstance(n_fingers, int) else tuple(n_fingers)
     k = int(torch.randint(lo_k, min(hi_k, robot.n_fingers) + 1, (1,), generator=g))

@@ -182,3 +182,28 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
                                                                           "search space brings the thumb fingertip")
     assert failure_reason(robot, moved, [trial], None, 1.0).startswith("far: the budget ended with the best trial "
                                                                         "3.5 mm from its contacts (thumb 3 mm)")
+
+
+def test_palm_bounds_robot_needs_a_box_in_the_robot_config(tmp_path):
+    """The shipped hand as a config without ``palm_bounds``: ``palm_bounds: robot`` is refused
+    before any work, naming the robot and what to do; without the key the space is built from the
+    contacts, and a random problem drawn without a box (any orientation) is solved."""
+    import yaml
+
+    from graspnet_torch.paths import repo_root
+
+    cfg = yaml.safe_load((repo_root() / "configs" / "robot" / "hand.yaml").read_text())
+    del cfg["palm_bounds"]
+    cfg.update(name="boxless", urdf=str(repo_root() / cfg["urdf"]),
+               checkpoint=str(repo_root() / "checkpoints" / "hand" / "fcnn.pt"))
+    path = tmp_path / "boxless.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    contacts = [{"finger": "thumb", "position": [0.02, 0.0, 0.1]}, {"finger": "index", "position": [-0.02, 0, 0.1]}]
+    with pytest.raises(gt.ProblemError, match="palm_bounds: robot 'boxless' has no palm_bounds in its config"):
+        gt.GraspProblem.from_mapping({"robot": str(path), "contacts": contacts, "palm_bounds": "robot"})
+    robot = gt.load_robot(path)
+    problem = gt.GraspProblem.from_mapping({"robot": str(path), "contacts": contacts})
+    assert palm_search_space(robot, problem).kind == "contacts"
+    random = gt.random_reachable_problem(robot, seed=0)
+    result = gt.solve(random, trials=8, seed=0)
+    assert result.success, result.failure
