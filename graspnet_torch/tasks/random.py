@@ -36,16 +36,14 @@ def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[
         lo, hi = torch.as_tensor(b.lower), torch.as_tensor(b.upper)
         pose = lo + (hi - lo) * torch.rand(6, generator=g, dtype=torch.float64)
         tips = robot.fingertips_world(pose, q)
-    else:  # no box: the palm at the origin, turned uniformly at random (a unit quaternion)
-        from graspnet_torch.robot.transforms import matrix_to_pose
+    else:  # no box: the palm at the origin, turned uniformly at random
+        import numpy as np
 
-        w, x, y, z = torch.nn.functional.normalize(torch.randn(4, generator=g, dtype=torch.float64), dim=0)
-        T = torch.eye(4, dtype=torch.float64)
-        T[:3, :3] = torch.stack([
-            torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)]),
-            torch.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)]),
-            torch.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)])])
-        tips = robot.fingertips_world(matrix_to_pose(T), q)
+        from graspnet_torch.robot.transforms import matrix_to_pose
+        from graspnet_torch.tasks.objects import random_pose
+
+        rng = np.random.default_rng(int(torch.randint(2**31, (1,), generator=g)))
+        tips = robot.fingertips_world(matrix_to_pose(torch.as_tensor(random_pose(rng, radius=0.0))), q)
     lo_k, hi_k = (2, robot.n_fingers) if n_fingers is None else \
         (n_fingers, n_fingers) if isinstance(n_fingers, int) else tuple(n_fingers)
     k = int(torch.randint(lo_k, min(hi_k, robot.n_fingers) + 1, (1,), generator=g))

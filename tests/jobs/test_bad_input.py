@@ -245,8 +245,7 @@ def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
     code = ("import torch, graspnet_torch as gt\n"
             "from graspnet_torch.solver.config import SolverCfg\n"
             "torch.set_num_threads(1)\n"
-            "gt.solve('block5', trials=4000, solver=SolverCfg(max_iterations=60, threshold=None))\n"
-            )
+            "gt.solve('block5', trials=4000, solver=SolverCfg(max_iterations=60, threshold=None))\n")
     res, peak = run_measured([sys.executable, "-c", code], tmp_path / "peak.json", capture_output=True, text=True,
                              timeout=120)
     assert res.returncode == 0, res.stderr[-2000:]
