@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from graspnet_torch.settings import build, setting
 
-__all__ = ["ALIGNMENT_MIN", "PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
+__all__ = ["PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
 
 
 @dataclass(frozen=True)
@@ -51,8 +51,6 @@ SOLVERS = ("srv", "cmaes", "dls")
 # fingers are refined after the loop (the palm pose is what the network chose).
 PAPER_PROTOCOL = {"stop": None, "polish": "fingers", "polish_from": None, "stop_rule": "reinforcement"}
 
-ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
-
 
 @dataclass(frozen=True)
 class SolverCfg:
@@ -84,7 +82,7 @@ class SolverCfg:
             the problem has an object or obstacles, no collision (FCL).
         stop_rule: 'grasp' (default): a trial stops once its configuration is a grasp in the
             model (every contact finger within ``tolerance_mm``, a gripper aligned to
-            ``ALIGNMENT_MIN``, and clear where the collision proxy counts collisions);
+            ``gripper.ALIGNMENT_MIN``, and clear where the collision proxy counts collisions);
             'reinforcement': once its observed reinforcement exceeds ``threshold`` (the paper's
             rule, ``solver=paper``). With sensor noise the model's error is not observed, so the
             reinforcement rule applies (the noise presets run their whole budget). CMA-ES stops on

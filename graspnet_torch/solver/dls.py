@@ -24,7 +24,8 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.rewards import Reward, r1
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment
-from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded
+from graspnet_torch.solver.loop import LoopOutcome
+from graspnet_torch.solver.tracker import enough_succeeded
 
 __all__ = ["run_dls"]
 
@@ -37,11 +38,10 @@ def run_dls(env: Environment, trials: int, seed: int, solver: SolverCfg | None =
     if noise is not None and noise.sigma > 0:
         raise ConfigError("solver=dls minimises the model's fingertip error and never sees the reinforcement, so "
                           "sensor noise (noise.sigma > 0) does not apply to it: use solver=srv or solver=cmaes")
-    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations)
+    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations, env.reward_base)
     like = env.lower
     gen = torch.Generator().manual_seed(seed)
-    problem_index = getattr(env, "problem_index", None)
-    pid = None if problem_index is None else problem_index.cpu()
+    pid = None if env.problem_index is None else env.problem_index.cpu()
     done = None
     if solver.stop is not None:
         def done(converged: Tensor) -> Tensor:
