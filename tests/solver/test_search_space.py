@@ -10,7 +10,8 @@ import pytest
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.solver.search_space import contact_frame, palm_search_space, unreachable_contacts
+from graspnet_torch.solver.hand import HandEnvironment
+from graspnet_torch.solver.search_space import contact_frame, palm_search_space
 from graspnet_torch.tasks.objects import random_pose
 
 
@@ -173,15 +174,15 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
     problem = gt.GraspProblem.from_mapping({
         "robot": str(tmp_path / "oddhand.yaml"), "palm_bounds": {"min": [0, 0, 0, 0, 0, 0], "max": [0, 0, 0, 0, 0, 0]},
         "contacts": [{"finger": "thumb", "position": [gap, 0.0, 0.0]}, {"finger": "index", "position": [0, 0, 0.1]}]})
-    assert unreachable_contacts(robot, problem) == ["thumb"]
+    assert HandEnvironment.unreachable(robot, problem) == ["thumb"]
     moved = problem.moved(np.eye(4))  # the search space built from the contacts: reachable by construction
-    assert unreachable_contacts(robot, moved) == []
+    assert HandEnvironment.unreachable(robot, moved) == []
     trial = gt.TrialResult(success=False, iterations=5, reinforcement=0.5, wall_time_s=0.0,
                            fingertip_error_mm={"thumb": 3.0, "index": 0.5}, total_error_mm=3.5)
-    assert failure_reason(robot, problem, [trial], None, 1.0).startswith("out of reach: no configuration in the "
-                                                                          "search space brings the thumb fingertip")
-    assert failure_reason(robot, moved, [trial], None, 1.0).startswith("far: the budget ended with the best trial "
-                                                                        "3.5 mm from its contacts (thumb 3 mm)")
+    reason = failure_reason(robot, problem, [trial], None, [False], 1.0)
+    assert reason.startswith("out of reach: no configuration in the search space brings the thumb fingertip")
+    reason = failure_reason(robot, moved, [trial], None, [False], 1.0)
+    assert reason.startswith("far: the budget ended with the best trial 3.5 mm from its contacts (thumb 3 mm)")
 
 
 def test_palm_bounds_robot_needs_a_box_in_the_robot_config(tmp_path):
