@@ -24,7 +24,7 @@ import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.solver import SolverCfg
-from graspnet_torch.solver.config import RewardCfg
+from graspnet_torch.solver.config import FingersCfg, RewardCfg
 from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 
 # (a, s kind, s scale): the defaults first, then the settings that converge best without noise
@@ -40,7 +40,7 @@ TABLE2 = (("glass3", 2000, 3.1), ("glass4", 1000, 5.1), ("videotape5", 1000, 6.9
 def final_error_mm(srv: SRVNetCfg, reward: RewardCfg, sigma_n: float, seed: int, trials: int, steps: int) -> float:
     """Noise-study final error: median over trials of the mean error of the last 100 steps (mm)."""
     res = gt.solve("block5", trials=trials, seed=seed, noise=sigma_n, srv=srv, reward=reward,
-                   solver=SolverCfg.paper(threshold=None, max_iterations=steps, final_refine=0))
+                   solver=SolverCfg.paper(threshold=None, max_iterations=steps, fingers=FingersCfg(final_refine=0)))
     total = res.outcome.history["total"].double().numpy()  # (K, T) metres
     return float(np.median(total[-100:].mean(0))) * 1000
 

@@ -82,8 +82,7 @@ def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, rew
 def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> dict:
     return {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
             "tolerance_mm": solver.tolerance_mm, "stop_rule": solver.stop_rule,
-            "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
-            "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
+            "stop": solver.stop, "solver": solver.method, "polish": solver.polish.mode, "reward": reward.kind,
             "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
             "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
             "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}

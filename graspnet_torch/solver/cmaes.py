@@ -3,7 +3,7 @@
 One independent CMA-ES (Hansen's evolution strategy, the ``cmaes`` package) per trial searches the
 normalised configuration space [0, 1]^n that the configuration network's output o lives in
 (eq. 13), from a random start (the same draw as the SRV loop's with the same seed), with step size
-``solver.step_size``. Each generation, the populations of every active trial are evaluated as one
+``solver.cmaes.step_size``. Each generation, the populations of every active trial are evaluated as one
 batch by the environment; each candidate's reinforcement is the ``reward`` group's (R1-R4, with i
 the trial's evaluations so far and p the budget), plus the sensor noise N(0, sigma_n) (eq. 15): it
 sees exactly what the SRV loop sees. One evaluation is one iteration, so ``max_iterations`` is a
@@ -60,10 +60,10 @@ def run_cmaes(env: Environment, trials: int, seed: int, solver: SolverCfg | None
     else:
         o0 = ((start.to(lower) - lower) / span).clamp(0, 1)
     box = np.stack([np.zeros(n), np.ones(n)], axis=1)
-    pop = solver.population or 4 + int(3 * math.log(n))
+    pop = solver.cmaes.population or 4 + int(3 * math.log(n))
 
     def make(t: int, mean: np.ndarray, k: int) -> CMA:
-        return CMA(mean=mean, sigma=solver.step_size, bounds=box, seed=(seed * 1_000_003 + t * 7919 + k) % 2**31,
+        return CMA(mean=mean, sigma=solver.cmaes.step_size, bounds=box, seed=(seed * 1_000_003 + t * 7919 + k) % 2**31,
                    population_size=pop)
 
     opts = [make(t, o0[t].double().cpu().numpy(), 0) for t in range(T)]

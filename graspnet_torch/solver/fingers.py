@@ -53,10 +53,10 @@ class FingerEnvironment(Environment):
             if missing:
                 raise ProblemError(f"{p.source}: no FCNN experts for finger(s) {', '.join(missing)}")
         self.robot, self.problems, self.problem, self.ik = robot, problems, problems[0], ik
-        self.refine, self.candidates, self.final_refine = solver.refine, solver.candidates, solver.final_refine
-        self.polish_whole_iterations = solver.polish_iterations if solver.polish == "whole" else 0
-        self.polish_iterations, self.polish_tol = solver.polish_iterations, solver.polish_tolerance_mm / 1000
-        self.polishes = self.polish_whole_iterations > 0
+        fingers, polish = solver.fingers, solver.polish
+        self.refine, self.candidates, self.final_refine = fingers.refine, fingers.candidates, fingers.final_refine
+        self.polish_iterations, self.polish_tol = polish.iterations, polish.tolerance_mm / 1000
+        self.polishes = polish.mode == "whole" and polish.iterations > 0
         self.tolerance_mm = solver.tolerance_mm
         kw = {"dtype": dtype, "device": device}
         self.mask = self.problem_index = None
@@ -174,8 +174,8 @@ class FingerEnvironment(Environment):
         return None
 
     def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
-        """Refine the finger joints of the reported configurations (``solver.final_refine`` steps,
-        the configuration kept); never worse. With ``solver.polish: whole``, instead polish the
+        """Refine the finger joints of the reported configurations (``solver.fingers.final_refine`` steps,
+        the configuration kept); never worse. With ``solver.polish.mode: whole``, instead polish the
         configuration and the fingers together (:meth:`polish`; ``done`` as :meth:`local_solve`'s:
         the rows that may stop, given the converged ones). Returns the configurations and their
         evaluation."""
@@ -283,11 +283,11 @@ class FingerEnvironment(Environment):
 
     def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
                ) -> tuple[Tensor, Evaluation]:
-        """``solver.polish_iterations`` Levenberg-Marquardt steps on the whole configuration (palm
+        """``solver.polish.iterations`` Levenberg-Marquardt steps on the whole configuration (palm
         pose or arm joints) together with the contact fingers' free joints (:meth:`local_solve`),
         from the reported ones, of the trials ``trials``: never worse. The loop finds the basin;
         the fingers alone, with the palm fixed, end where the palm left them (a few mm), the whole
-        polish lands in it. Rows stop below ``solver.polish_tolerance_mm`` or when ``done`` says so."""
+        polish lands in it. Rows stop below ``solver.polish.tolerance_mm`` or when ``done`` says so."""
         x = self.whole_start(config, evaluation.joints, trials)
         solved = self.local_solve(x, self.polish_iterations, self.polish_tol, done, rows=trials)
         return self.whole_result(solved, config, trials)

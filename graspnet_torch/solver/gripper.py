@@ -88,8 +88,9 @@ class GripperEnvironment(Environment):
                                    f"'points'")
         self.robot, self.problems, self.problem = robot, problems, problems[0]
         self.n = len(robot.body_joint_names)
-        self.refine, self.final_refine, self.tolerance_mm = solver.refine, solver.final_refine, solver.tolerance_mm
-        bounds = [gripper_bounds(robot, p, solver.approach_m, solver.approach_deg) for p in problems]
+        cfg = solver.gripper
+        self.refine, self.final_refine, self.tolerance_mm = cfg.settle, cfg.polish_iterations, solver.tolerance_mm
+        bounds = [gripper_bounds(robot, p, cfg.approach_m, cfg.approach_deg) for p in problems]
         targets = np.stack([p.points_world() for p in problems])  # (P, 2, 3)
         kw = {"dtype": dtype, "device": device}
         self.problem_index = None
@@ -123,7 +124,7 @@ class GripperEnvironment(Environment):
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
     def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
-        """config: (T, n) -> the ``solver.refine`` settling steps, then d (T,) of eq. 26 as
+        """config: (T, n) -> the ``solver.gripper.settle`` settling steps, then d (T,) of eq. 26 as
         ``error``, the alignment (T,) of eq. 24 and, with a proxy, the collision count; ``config``
         the settled configurations. ``trials`` (B,): the trials the rows of ``config`` (B, n)
         belong to, when the loop evaluates only its active trials (None: all, in order)."""
@@ -214,7 +215,7 @@ class GripperEnvironment(Environment):
         return q, levels, pts
 
     def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
-        """Polish the reported configurations: ``solver.final_refine`` damped least-squares steps (float64)
+        """Polish the reported configurations: ``solver.gripper.polish_iterations`` damped least-squares steps (float64)
         on the two gripper points against the object points of each trial's nearer pairing,
         within the bounds, each step kept only where it lowers d (never worse). The analogue of
         the hand's final finger refinement: the loop finds the basin, the polish lands in it.
@@ -351,7 +352,7 @@ class GripperEnvironment(Environment):
     @classmethod
     def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
         """The problem's ``approach`` names known joints within their limits (:func:`gripper_bounds`)."""
-        gripper_bounds(robot, problem, solver.approach_m, solver.approach_deg)
+        gripper_bounds(robot, problem, solver.gripper.approach_m, solver.gripper.approach_deg)
 
     @staticmethod
     def describe(trial: TrialResult) -> str:

@@ -145,8 +145,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     o_prev2 = o_prev
     best = Tracker(T, reward, solver.max_iterations, env.problem_index, solver.stop, device)
     polish_from = None  # the polish inside the loop (SolverCfg.polish_from; never with sensor noise)
-    if solver.polish_from is not None and env.polishes and noise.sigma == 0 and threshold is not None:
-        polish_from = solver.polish_from
+    if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
+        polish_from = solver.polish.from_r
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     tolerance = solver.tolerance_mm / 1000

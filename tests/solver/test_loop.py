@@ -172,7 +172,7 @@ def test_stop_clear_waits_for_a_clear_configuration(rule, stop_clear, stops_at):
     rule (the default) never stops on a colliding configuration."""
     from graspnet_torch.solver.loop import run_loop
 
-    cfg = SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0, stop_rule=rule)
+    cfg = SolverCfg(max_iterations=50, stop_clear=stop_clear, stop_rule=rule)
     out = run_loop(_Colliding(), 2, 0, cfg, reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
     assert out.iterations.tolist() == [stops_at, stops_at]
 
