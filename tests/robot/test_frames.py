@@ -21,7 +21,6 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import pose_to_rt
 
-
 PK_ATOL = 1e-6  # pytorch-kinematics' frames differ from the robot's own chain products by up to ~1.2e-7 (measured)
 
 
