@@ -68,7 +68,7 @@ class CollisionProxy:
         groups, thresholds: the elements by kind (:class:`~graspnet_torch.collision.primitives.PrimitiveGroup`)
             and the clusters' tests against them, one per group.
         self_pairs: the robot's link pairs tested against each other; ``proxy_unchecked`` those left to FCL.
-        levels: the robot's level frames (:class:`~graspnet_torch.robot.frames.RobotLevels`).
+        robot_levels: the robot's level frames (:class:`~graspnet_torch.robot.frames.RobotLevels`).
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], object_tolerance: float = 0.002,
@@ -105,7 +105,7 @@ class CollisionProxy:
         self._link_of_cluster = torch.as_tensor(one_hot, **kw)  # (C, L)
         self._cluster_local = torch.as_tensor(cl.local, **kw)  # (C, 4, CLUSTER) homogeneous sphere centres
         self._cluster_bound = torch.as_tensor(cl.bound, **kw)  # (C, 4, 1) bounding-sphere centres
-        self.levels = RobotLevels(robot, dtype, device)
+        self.robot_levels = RobotLevels(robot, dtype, device)
         self._eye34 = torch.eye(4, **kw)[:3]
         # the environment: obstacles, then the object (its own threshold; touching links exempt)
         elements = environment_obstacles(robot, problem)  # the problem's, then the robot's floor
@@ -148,7 +148,7 @@ class CollisionProxy:
     def body_levels_and_palm(self, body: Tensor) -> tuple[list[Tensor], tuple[Tensor, Tensor]]:
         """The body chain's frames P_1..P_m (T, 4, 4) and the palm frame R (T, 3, 3), t (T, 3)
         (:meth:`~graspnet_torch.robot.frames.RobotLevels.body_levels_and_palm`)."""
-        return self.levels.body_levels_and_palm(body)
+        return self.robot_levels.body_levels_and_palm(body)
 
     def frames(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
                body_levels: list[Tensor] | None = None) -> Tensor:
@@ -162,12 +162,12 @@ class CollisionProxy:
         if self.robot.body is not None:
             frames.append(self._eye34.expand(T, 3, 4))
             if body_levels is None:
-                body_levels = self.levels.body_levels(body, self.body_levels)
+                body_levels = self.robot_levels.body_levels(body, self.body_levels)
             frames += [P[..., :3, :] for P in body_levels[:self.body_levels]]
         frames.append(W)
         stacked = torch.stack(frames)  # (n, T, 3, 4)
         if self.robot.n_fingers:
-            levels = self.levels.finger_levels(W, fingers, self.finger_levels)
+            levels = self.robot_levels.finger_levels(W, fingers, self.finger_levels)
             stacked = torch.cat([stacked, torch.stack(levels, dim=2).flatten(1, 2).transpose(0, 1)])
         return stacked
 

@@ -103,6 +103,7 @@ class RobotLevels:
 
     Attributes:
         body: the body chain's :class:`ChainLevels` (robots with an arm), else None.
+        palm_offset: (4, 4) the body chain's last offset F_m (its last level -> the palm), else None.
         fingers: every finger's whole chain, padded to the longest (robots with fingers), else None.
         n_fingers: F, the robot's fingers.
     """
@@ -111,17 +112,19 @@ class RobotLevels:
         kw = {"dtype": dtype, "device": device}
         self.n_body = len(robot.body_joint_names)
         self.body: ChainLevels | None = None
+        self.palm_offset: Tensor | None = None
         if robot.body is not None:
             A, B, rev = motion_terms(robot.body.axes, robot.body.joint_types)
             self.body = ChainLevels(A, B, rev, robot.body.offsets, kw)
             self.palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)  # (4, 4) F_m: the last level -> palm
         self.fingers: ChainLevels | None = None
         self.n_fingers = robot.n_fingers
+        self._finger_map: tuple[Tensor, Tensor] | None = None
         if robot.n_fingers:
-            A, B, rev, offsets, self._finger_map = _finger_chains(robot)
+            A, B, rev, offsets, coupling = _finger_chains(robot)
             self.fingers = ChainLevels(A, B, rev, offsets, kw)
-            if self._finger_map is not None:
-                self._finger_map = tuple(torch.as_tensor(a, **kw) for a in self._finger_map)
+            if coupling is not None:
+                self._finger_map = (torch.as_tensor(coupling[0], **kw), torch.as_tensor(coupling[1], **kw))
             base = np.stack([f.base_in_palm for f in robot.fingers.values()])  # (F, 4, 4)
             self._base_cols = torch.as_tensor(base.transpose(1, 0, 2).reshape(4, -1), **kw)  # (4, 4F): W4 @ it
             self._bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], **kw)
