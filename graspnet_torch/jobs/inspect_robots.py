@@ -119,16 +119,14 @@ def _panels(robot: Robot, row: dict) -> list:
 
     home = robot.home_posture()
     name = robot.name
-    panels = [Panel(f"{name}: home posture", home, (15.0, -60.0) if robot.has_body else (10.0, -80.0))]
+    panels = [Panel(f"{name}: home posture", home, (15.0, -60.0))]
     pairs = opposing_fingers(robot)
-    if pairs and not robot.has_body:
-        panels.append(Panel(f"{name}: home, side view", home, (15.0, -15.0)))
+    focus = hand_links(robot)  # the palm and its fingers (the whole robot for a free hand)
+    if pairs:
+        panels.append(Panel(f"{name}: home, side view", home, (15.0, -15.0), focus=focus))
     for a, b in pairs:
         posture, gap = opposition_posture(robot, a, b, home)
-        view, focus = (10.0, 20.0), frozenset()
-        if robot.has_body:  # the hand at the end of the arm: framed on its links
-            view, focus = (15.0, -60.0), hand_links(robot)
-        panels.append(Panel(f"{a}-{b} opposition (gap {gap * 1000:.2f} mm)", posture, view, focus=focus))
+        panels.append(Panel(f"{a}-{b} opposition (gap {gap * 1000:.2f} mm)", posture, (10.0, 20.0), focus=focus))
         row[f"{a}-{b} gap (mm)"] = round(gap * 1000, 3)
     return panels
 

@@ -6,7 +6,6 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from graspnet_torch.errors import ProblemError
 from graspnet_torch.jobs.configs import ReferencePostureJobCfg
 from graspnet_torch.jobs.solve_grasp import resolve_problem
 from graspnet_torch.robot.robot import Robot
@@ -24,9 +23,7 @@ def prepare_reference(cfg: Mapping[str, Any] | ReferencePostureJobCfg,
     """The checks of the job (settings, problem) before any work."""
     job = build(ReferencePostureJobCfg, cfg)
     problem = resolve_problem(job.problem, job.task, None, job.allow_outside_paths)
-    if problem.robot_cfg is not None and problem.robot_cfg.arm is not None:
-        raise ProblemError(f"{problem.source}: reference_posture fits free hands; robot '{problem.robot}' has an arm")
-    HandEnvironment.check(Robot(problem.robot_cfg), problem, SolverCfg())
+    HandEnvironment.check(Robot(problem.robot_cfg), problem, SolverCfg())  # a free hand, its contacts in reach
     return job, problem
 
 

@@ -2,6 +2,7 @@
 
 from graspnet_torch.robot.chain import ChainSpec, UrdfModel
 from graspnet_torch.robot.config import ChainCfg, PoseBounds, RobotCfg, available_robots, load_robot_cfg
+from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.robot import Finger, Posture, Robot, load_robot
 
@@ -14,6 +15,7 @@ __all__ = [
     "Posture",
     "Robot",
     "RobotCfg",
+    "RobotLevels",
     "UrdfModel",
     "available_robots",
     "load_robot",

@@ -18,10 +18,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspnet_torch.collision.proxy import ChainLevels, motion_terms
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward, r1
+from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
@@ -105,13 +105,13 @@ class GripperEnvironment(Environment):
         self.upper = torch.as_tensor(self._bounds[1], **kw)
         self._targets64 = torch.as_tensor(targets, dtype=torch.float64)  # (T or 1, 2, 3)
         self.targets = self._targets64.to(**kw)
-        # the body chain's frames P_1..P_n as batched products (collision/proxy.py), from which the
+        # the body chain's frames P_1..P_n as batched products (robot/frames.py), from which the
         # gripper points and their Jacobian follow in closed form (see :meth:`_kinematics`)
-        A, B, revolute = motion_terms(robot.body.axes, robot.body.joint_types)
-        self._chain = ChainLevels(A, B, revolute, robot.body.offsets, kw)
+        levels = RobotLevels(robot, dtype, device)
+        self._chain = levels.body
         self._axes = torch.as_tensor(robot.body.axes, **kw).unsqueeze(-1)  # (n, 3, 1)
-        self._revolute = torch.as_tensor(revolute, device=device).view(1, -1, 1, 1)
-        self._palm_offset = torch.as_tensor(robot.body.offsets[-1], **kw)
+        self._revolute = self._chain.revolute.view(1, -1, 1, 1)
+        self._palm_offset = levels.palm_offset
         zero = robot.link_frames(robot.home_posture())
         palm_inv = np.linalg.inv(zero[robot.cfg.palm_link])
         self._points_local = torch.as_tensor(np.stack([(palm_inv @ zero[name])[:, 3] for name in

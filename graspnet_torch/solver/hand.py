@@ -79,7 +79,10 @@ class HandEnvironment(FingerEnvironment):
         """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther
         from the box of palm positions than the finger can reach (its base offset plus the lengths
         of its links, an upper bound whatever the joints); without bounds, contacts that no palm
-        position reaches together (:func:`~graspnet_torch.solver.search_space.palm_search_space`)."""
+        position reaches together (:func:`~graspnet_torch.solver.search_space.palm_search_space`).
+        A robot with an arm is not a free hand."""
+        if robot.has_body:
+            raise ProblemError(f"{problem.source}: robot '{robot.name}' has an arm; this fits free hands")
         bounds = problem.bounds()
         if bounds is None:
             from graspnet_torch.solver.search_space import palm_search_space

@@ -9,7 +9,9 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
-from graspnet_torch.collision.proxy import CollisionProxy, mesh_box, self_collision_primitive, shape_spheres
+from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.collision.self_collision import self_collision_primitive
+from graspnet_torch.collision.spheres import mesh_box, shape_spheres
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.transforms import pose_to_rt
 from tests.mesh_robots import PALM_EXTENTS, mesh_hand_urdf, write_box_mesh, write_robot

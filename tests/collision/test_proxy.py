@@ -10,7 +10,8 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
-from graspnet_torch.collision.proxy import CollisionProxy, shape_spheres
+from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
@@ -86,7 +87,7 @@ def test_sphere_centres_follow_pytorch_kinematics_link_frames(arm_hand):
             for c in proxy.link_spheres[link]:  # sphere centres in the link frame
                 expected.append(c @ frames[link][:3, :3].T + frames[link][:3, 3])
         expected = np.concatenate(expected)
-        valid = proxy._cluster_local[:, 3, :] > 0  # (C, K): real spheres, in link order
+        valid = torch.as_tensor(~np.isnan(proxy.clusters.radii))  # (C, K): real spheres, in link order
         got = centres[k][valid].numpy()
         assert got.shape == expected.shape
         assert np.allclose(got, expected, atol=1e-10)

@@ -11,9 +11,12 @@ import yaml
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene, environment_obstacles, self_collision_pairs
 from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.collision.self_collision import segment_distance_sq, segment_meets_box, self_collision_primitive
+from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.paths import repo_root
 from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.robot.frames import Attachment, riding_base_links
 from graspnet_torch.robot.robot import Posture
 
 POINTS = {"robot": "manus", "points": [[0.9, 0.2, 0.8], [0.9, 0.13, 0.8]]}
@@ -104,14 +107,14 @@ def test_links_riding_the_planar_base_are_not_tested_against_the_floor(manus):
     never touch it anywhere in the base's range."""
     problem = gt.GraspProblem.from_mapping(POINTS, source="points")
     proxy = CollisionProxy(manus, problem, dtype=torch.float64)
-    attach = {link: ("body", 3) for link in ("platform", "arm_mount")} | {"gripper": ("body", 9)}
-    assert proxy._riding_base(manus, attach) == {"platform", "arm_mount"}
+    attach = {link: Attachment("body", 3) for link in ("platform", "arm_mount")} | {"gripper": Attachment("body", 9)}
+    assert riding_base_links(manus, attach) == {"platform", "arm_mount"}
     floor = len(problem.obstacles)  # the floor follows the problem's obstacles
-    for g in proxy._groups:
-        if floor in g["index"]:
-            col = g["index"].index(floor)
-            riding = [k for k, li in enumerate(proxy._cluster_link.tolist()) if proxy.links[li] == "platform"]
-            assert not bool(g["bound_pos"][riding, 0, col].any())
+    for g, tests in zip(proxy.groups, proxy.thresholds, strict=True):
+        if floor in g.index:
+            col = g.index.index(floor)
+            riding = [k for k, li in enumerate(proxy.clusters.link) if proxy.links[li] == "platform"]
+            assert not bool(tests.bound_pos[riding, 0, col].any())
     scene = CollisionScene(manus, problem)
     lo, hi = (torch.as_tensor(a[:3]) for a in manus.body_limits)
     g = torch.Generator().manual_seed(9)
@@ -125,15 +128,13 @@ def test_segment_distance_matches_a_dense_search():
     """The closed-form segment-segment distance (Ericson) against the minimum over a 301 x 301
     grid of both segments' points, float64, with points (zero-length segments) and parallel pairs
     among them: never above the grid's minimum, and below it by no more than the grid's spacing."""
-    from graspnet_torch.collision.proxy import _segment_distance_sq
-
     g = torch.Generator().manual_seed(5)
     p1, q1, p2, q2 = (torch.rand(60, 3, generator=g, dtype=torch.float64) for _ in range(4))
     q1[:10] = p1[:10]  # the first is a point
     q2[10:20] = p2[10:20]  # the second is a point
     q2[20:25], p2[20:25] = p2[25:30], p2[25:30]  # both points
     q2[30:40] = p2[30:40] + (q1[30:40] - p1[30:40]) * 0.7  # parallel
-    got = _segment_distance_sq(p1, q1, p2, q2).sqrt()
+    got = segment_distance_sq(p1, q1, p2, q2).sqrt()
     s = torch.linspace(0, 1, 301, dtype=torch.float64)
     a = p1[:, None] + s[None, :, None] * (q1 - p1)[:, None]  # (N, 301, 3)
     b = p2[:, None] + s[None, :, None] * (q2 - p2)[:, None]
@@ -147,14 +148,12 @@ def test_segment_meets_box_matches_sampling():
     """The slab test against points sampled along each segment (2001 of them): a segment whose
     samples enter the box shrunk by 1e-3 meets it; one whose samples miss the box grown by 1e-3
     does not."""
-    from graspnet_torch.collision.proxy import _segment_meets_box
-
     g = torch.Generator().manual_seed(6)
     p0, p1 = (torch.rand(400, 3, generator=g, dtype=torch.float64) * 2 - 1 for _ in range(2))
     p1[:40] = p0[:40]  # points
     p1[40:80, 1] = p0[40:80, 1]  # parallel to a slab
     half = torch.tensor([0.3, 0.2, 0.4], dtype=torch.float64)
-    got = _segment_meets_box(p0, p1, half)
+    got = segment_meets_box(p0, p1, half)
     t = torch.linspace(0, 1, 2001, dtype=torch.float64)
     x = (p0[:, None] + t[None, :, None] * (p1 - p0)[:, None]).abs()  # (N, 2001, 3)
     inner = (x <= half - 1e-3).all(-1).any(-1)
@@ -166,7 +165,6 @@ def test_segment_meets_box_matches_sampling():
 def test_the_floor_half_space_agrees_with_the_spheres_heights(manus):
     """The proxy tests the floor as a half-space: link l hits it where one of its spheres (placed
     by pytorch-kinematics' link frames, float64) dips below the floor's top by its radius."""
-    from graspnet_torch.collision.proxy import shape_spheres
     from graspnet_torch.collision.scene import FLOOR_GAP
     from graspnet_torch.robot.geometry import link_shapes
 
@@ -194,7 +192,6 @@ def test_self_collision_primitives_of_the_manus_links(manus):
     """Cylinders become capsules along their axis (ends r/4 inside the flat faces), the wrist's
     sphere a capsule of length 0, the thin jaws capsules along their longest side (radius the
     half-diagonal of the cross-section), the platform stays a box."""
-    from graspnet_torch.collision.proxy import self_collision_primitive
     from graspnet_torch.robot.geometry import link_shapes
 
     shapes = {s.link: s for s in link_shapes(manus.urdf, "collision")}

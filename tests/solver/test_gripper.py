@@ -110,7 +110,7 @@ def test_polish_lands_from_random_starts(manus):
     q0 = torch.tensor([[0.1, -0.2, 0.3, 0.5, 0.4, -1.0, 0.7, 0.2, -0.4]], dtype=torch.float64)
     points = manus.gripper_points(q0)[0].tolist()
     problem = gt.GraspProblem.from_mapping({"robot": "manus", "points": points}, source="reachable")
-    cfg = gt.SolverCfg(gripper=gt.GripperCfg(polish_iterations=200))
+    cfg = gt.SolverCfg(gripper=gt.GripperCfg(settle=0, polish_iterations=200))
     env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64)
     g = torch.Generator().manual_seed(5)
     starts = env.lower + (env.upper - env.lower) * torch.rand(40, 9, generator=g, dtype=torch.float64)
@@ -125,7 +125,7 @@ def test_polish_and_refine_never_step_into_a_collision(manus):
     """With collisions counted, a polish step that raises the proxy's count is refused: starts
     that are clear stay clear."""
     problem = gt.GraspProblem.from_task("cube")
-    cfg = gt.SolverCfg(gripper=gt.GripperCfg(polish_iterations=100))
+    cfg = gt.SolverCfg(gripper=gt.GripperCfg(settle=0, polish_iterations=100))  # the polish alone
     env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64, collisions=True)
     g = torch.Generator().manual_seed(6)
     starts = env.lower + (env.upper - env.lower) * torch.rand(60, 9, generator=g, dtype=torch.float64)

@@ -1,0 +1,89 @@
+"""The proxy's robot models, through their modules' public functions: link spheres in clusters
+(collision/spheres.py) and the self-collision capsules and boxes (collision/self_collision.py),
+against hand formulas."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.collision.self_collision import SMALL_BOX_M, SelfCollisionModel
+from graspnet_torch.collision.spheres import CLUSTER, shape_spheres, sphere_clusters
+from graspnet_torch.robot.frames import Attachment, link_attachments
+from graspnet_torch.robot.geometry import Shape as LinkShape
+from graspnet_torch.robot.geometry import link_shapes
+
+KW = {"dtype": torch.float64, "device": "cpu"}
+
+
+@pytest.mark.parametrize("name", ["hand", "manus"])
+def test_clusters_hold_every_sphere_in_its_attachment_frame(name):
+    """Each link's spheres (shape_spheres, placed by its attachment pose) in order, at most
+    CLUSTER per cluster, each inside its cluster's bounding sphere, in its link's frame id."""
+    robot = gt.load_robot(name)
+    shapes = link_shapes(robot.urdf, "collision")
+    attach = link_attachments(robot, [s.link for s in shapes])
+    ids = {}
+
+    def frame_id(a: Attachment) -> int:
+        return ids.setdefault((a.kind, a.finger, a.level), len(ids))
+
+    cl = sphere_clusters(shapes, attach, frame_id)
+    assert cl.links == list(dict.fromkeys(s.link for s in shapes))
+    for link in cl.links:
+        G = attach[link].pose
+        want = np.concatenate([shape_spheres(s)[0] for s in shapes if s.link == link]) @ G[:3, :3].T + G[:3, 3]
+        want_r = np.concatenate([shape_spheres(s)[1] for s in shapes if s.link == link])
+        rows = [k for k, li in enumerate(cl.link) if cl.links[li] == link]
+        assert {cl.frame[k] for k in rows} == {frame_id(attach[link])}
+        real = ~np.isnan(cl.radii[rows])  # (k, CLUSTER)
+        np.testing.assert_allclose(cl.local[rows][:, :3].transpose(0, 2, 1)[real], want, atol=1e-15)
+        np.testing.assert_allclose(cl.radii[rows][real], want_r, atol=0)
+        assert all(r.sum() == CLUSTER for r in real[:-1])  # full clusters, the last may be partial
+    assert cl.n_spheres == sum(len(shape_spheres(s)[1]) for s in shapes)
+    real = ~np.isnan(cl.radii)
+    reach = np.linalg.norm(cl.local[:, :3] - cl.bound[:, :3], axis=1) + np.nan_to_num(cl.radii)  # (C, CLUSTER)
+    assert bool(np.all(reach[real] <= np.repeat(cl.bound_r[:, None], CLUSTER, 1)[real] + 1e-12))
+    assert bool(np.all(cl.local[:, 3][real] == 1.0)) and bool(np.all(cl.local[:, 3][~real] == 0.0))
+
+
+def _cylinder(link: str, r: float, length: float) -> LinkShape:
+    return LinkShape(link, "cylinder", (r, length), np.eye(4))
+
+
+def _frames(shift: np.ndarray) -> torch.Tensor:
+    """(3, T, 3, 4): frame 0 the world, frames 1 and 2 translated by shift (T, 3)."""
+    T = len(shift)
+    eye = torch.eye(4, dtype=torch.float64)[:3].expand(T, 3, 4)
+    moved = eye.clone()
+    moved[..., 3] = torch.as_tensor(shift)
+    return torch.stack([eye, moved, moved])
+
+
+def test_capsules_and_boxes_hit_within_their_radii_and_the_clearance():
+    """Two parallel cylinders (r = 0.02, axis along z) at distance d hit when d < 2 r + clearance;
+    a capsule against a large box (a box for self-collision) when the capsule's axis comes within
+    r + clearance of the box's face; two boxes are left unchecked; dropped pairs never hit."""
+    r, clearance = 0.02, 0.005
+    big = LinkShape("c", "box", (0.4, 0.4, 0.4), np.eye(4))  # half 0.2 > SMALL_BOX_M: a box
+    assert 0.2 > SMALL_BOX_M
+    shapes = [_cylinder("a", r, 0.2), _cylinder("b", r, 0.2), big, LinkShape("d", "box", (0.3, 0.3, 0.3), np.eye(4))]
+    attach = {"a": Attachment("body", 0), "b": Attachment("body", 1), "c": Attachment("body", 2),
+              "d": Attachment("body", 0)}
+    pairs = [("a", "b"), ("a", "c"), ("c", "d")]
+    model = SelfCollisionModel(shapes, pairs, attach, lambda a: a.level, clearance, KW)
+    assert model.tested and model.unchecked == [("c", "d")]
+    d = np.linspace(0.0, 0.5, 101)
+    d = d[np.abs(d - (2 * r + clearance)) > 1e-9]
+    d = d[np.abs(d - (0.2 + r + clearance)) > 1e-9]
+    shift = np.stack([d, np.zeros_like(d), np.zeros_like(d)], 1)
+    hits = model.hits(_frames(shift)).numpy()  # (T, 3)
+    np.testing.assert_array_equal(hits[:, 0], d < 2 * r + clearance)
+    np.testing.assert_array_equal(hits[:, 1], d < 0.2 + r + clearance)  # the capsule's axis vs the face at x = 0.2
+    assert not hits[:, 2].any()
+    model.drop(torch.tensor([True, False, False]))
+    assert model.unchecked == [("c", "d"), ("a", "b")]
+    hits = model.hits(_frames(shift)).numpy()
+    assert not hits[:, 0].any() and hits[:, 1].any()
