@@ -16,10 +16,12 @@ from torch import Tensor
 
 __all__ = [
     "compose",
+    "frame_point_jacobian",
     "invert",
     "matrix_to_pose",
     "matrix_to_rpy",
     "pose_from_degrees",
+    "pose_jacobian",
     "pose_to_degrees",
     "pose_to_matrix",
     "pose_to_rt",
@@ -77,6 +79,48 @@ def pose_to_rt(pose: Tensor) -> tuple[Tensor, Tensor]:
         R: (..., 3, 3); t: (..., 3).
     """
     return rpy_to_matrix(pose[..., 3:]), pose[..., :3]
+
+
+def pose_jacobian(pose: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """A pose's frame and its Jacobian with respect to the pose's six values.
+
+    With ``R = Rz(rz) Ry(ry) Rx(rx)``, ``dR = [w]_x R`` where the angular velocity of each angle is
+    the axis it turns about, carried into the world by the rotations applied after it:
+    ``w_rx = Rz Ry e_x``, ``w_ry = Rz e_y``, ``w_rz = e_z``; the translation moves with x, y, z.
+
+    Args:
+        pose: (..., 6).
+    Returns:
+        R: (..., 3, 3); t: (..., 3); J: (..., 6, 6), rows d t (3) then w (3), one column per value
+        (the frame Jacobian of :func:`frame_point_jacobian`).
+    """
+    R, t = pose_to_rt(pose)
+    c, s = torch.cos(pose[..., 4:]), torch.sin(pose[..., 4:])
+    cp, cy = c.unbind(-1)
+    sp, sy = s.unbind(-1)
+    zero, one = torch.zeros_like(cp), torch.ones_like(cp)
+    w = torch.stack([cy * cp, -sy, zero, sy * cp, cy, zero, -sp, zero, one], -1).unflatten(-1, (3, 3))
+    J = pose.new_zeros(*pose.shape[:-1], 6, 6)
+    J[..., :3, :3] = torch.eye(3, dtype=pose.dtype, device=pose.device)
+    J[..., 3:, 3:] = w
+    return R, t, J
+
+
+def frame_point_jacobian(R: Tensor, J: Tensor, points: Tensor) -> Tensor:
+    """Jacobian of points fixed in a moving frame, expressed in its parent: ``p = R y + t``.
+
+    A frame Jacobian J (rows d t / d c (3) and the angular velocity w (3) with ``dR/dc = [w]_x R``)
+    gives ``d p / d c = d t / d c + w x (R y)``.
+
+    Args:
+        R: (..., 3, 3) the frame; J: (..., 6, n) its Jacobian; points: (..., P, 3) y, in the frame.
+    Returns:
+        (..., P, 3, n).
+    """
+    arm = (R.unsqueeze(-3) @ points.unsqueeze(-1)).squeeze(-1)  # (..., P, 3): R y
+    w = J[..., 3:, :].transpose(-1, -2).unsqueeze(-3)  # (..., 1, n, 3)
+    turn = torch.linalg.cross(w, arm.unsqueeze(-2).expand(*arm.shape[:-1], w.shape[-2], 3))  # (..., P, n, 3)
+    return J[..., :3, :].unsqueeze(-3) + turn.transpose(-1, -2)
 
 
 def rt_to_pose(R: Tensor, t: Tensor) -> Tensor:

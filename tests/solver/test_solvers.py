@@ -26,12 +26,12 @@ def test_levenberg_marquardt_agrees_with_least_squares_on_a_linear_map():
     lo, hi = torch.full((3,), -10.0, dtype=torch.float64), torch.full((3,), 10.0, dtype=torch.float64)
 
     def f(x, rows):
-        return x @ A.T
+        return x @ A.T, A.expand(x.shape[0], 6, 3)
 
-    out = levenberg_marquardt(f, x_true @ A.T, torch.zeros(4, 3, dtype=torch.float64), lo, hi, 50, h=1e-6)
+    out = levenberg_marquardt(f, x_true @ A.T, torch.zeros(4, 3, dtype=torch.float64), lo, hi, 50)
     assert torch.allclose(out.x, x_true, atol=1e-6) and bool((out.err < 1e-6).all())
     goal = torch.randn(6, generator=g, dtype=torch.float64)  # 6 equations, 3 unknowns: no exact solution
-    out = levenberg_marquardt(f, goal, torch.zeros(1, 3, dtype=torch.float64), lo, hi, 200, h=1e-6)
+    out = levenberg_marquardt(f, goal, torch.zeros(1, 3, dtype=torch.float64), lo, hi, 200)
     ref = torch.linalg.lstsq(A, goal.unsqueeze(1)).solution.squeeze(1)
     assert torch.allclose(out.x[0], ref, atol=1e-5)
 
@@ -40,7 +40,7 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     """A goal outside the box: x stays within it and ends at the bound; |e| never rises (trace);
     a row that starts within tol takes no step; ``done`` stops the others."""
     def f(x, rows):
-        return x.clone()
+        return x.clone(), torch.eye(2, dtype=x.dtype).expand(x.shape[0], 2, 2)
 
     goal = torch.tensor([2.0, 0.5], dtype=torch.float64)
     lo, hi = torch.zeros(2, dtype=torch.float64), torch.ones(2, dtype=torch.float64)
