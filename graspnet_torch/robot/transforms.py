@@ -95,15 +95,13 @@ def pose_jacobian(pose: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         (the frame Jacobian of :func:`frame_point_jacobian`).
     """
     R, t = pose_to_rt(pose)
-    c, s = torch.cos(pose[..., 4:]), torch.sin(pose[..., 4:])
-    cp, cy = c.unbind(-1)
-    sp, sy = s.unbind(-1)
-    zero, one = torch.zeros_like(cp), torch.ones_like(cp)
-    w = torch.stack([cy * cp, -sy, zero, sy * cp, cy, zero, -sp, zero, one], -1).unflatten(-1, (3, 3))
-    J = pose.new_zeros(*pose.shape[:-1], 6, 6)
-    J[..., :3, :3] = torch.eye(3, dtype=pose.dtype, device=pose.device)
-    J[..., 3:, 3:] = w
-    return R, t, J
+    yaw = pose[..., 5:]
+    lead, kw = pose.shape[:-1], {"dtype": pose.dtype, "device": pose.device}
+    w_ry = torch.cat([-torch.sin(yaw), torch.cos(yaw), torch.zeros_like(yaw)], -1).unsqueeze(-1)  # Rz e_y
+    w_rz = torch.tensor([[0.0], [0.0], [1.0]], **kw).expand(*lead, 3, 1)
+    w = torch.cat([R[..., :, :1], w_ry, w_rz], -1)  # w_rx = Rz Ry e_x = R e_x (Rx leaves e_x)
+    top = torch.eye(3, 6, **kw).expand(*lead, 3, 6)
+    return R, t, torch.cat([top, torch.cat([torch.zeros_like(w), w], -1)], -2)
 
 
 def frame_point_jacobian(R: Tensor, J: Tensor, points: Tensor) -> Tensor:

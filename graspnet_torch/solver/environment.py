@@ -171,6 +171,7 @@ class FingerEnvironment:
         self.idx = [robot.finger_index(f) for f in self.fingers]
         base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]), **kw)
         self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
+        self._base64 = (self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu())
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
         from graspnet_torch.collision.scene import has_environment
@@ -327,12 +328,12 @@ class FingerEnvironment:
         R, t, Jc = self.palm_frame_jacobian(x[:, :n])
         kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
         local, Jq = kernel.position_jacobian(x[:, n:].reshape(B, F, j))  # (B, F, 3), (B, F, 3, j)
-        base_R = self.base_R.to(torch.float64).cpu()
-        in_palm = transform_points(base_R, self.base_t.to(torch.float64).cpu(), local)
+        base_R, base_t = self._base64
+        in_palm = transform_points(base_R, base_t, local)
         tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
         fingers = (R.unsqueeze(1) @ base_R) @ Jq  # (B, F, 3, j)
-        eye = torch.eye(F, dtype=x.dtype).view(1, F, 1, F, 1)
-        J = torch.cat([frame_point_jacobian(R, Jc, in_palm), (fingers.unsqueeze(3) * eye).reshape(B, F, 3, F * j)], -1)
+        blocks = fingers.unsqueeze(3) * torch.eye(F, dtype=x.dtype).view(1, F, 1, F, 1)  # block diagonal
+        J = torch.cat([frame_point_jacobian(R, Jc, in_palm), blocks.reshape(B, F, 3, F * j)], -1)
         mask = self._rows(self.mask, rows)
         if mask is not None:
             mask = mask.to(tips).cpu().unsqueeze(-1)
