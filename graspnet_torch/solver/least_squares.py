@@ -11,7 +11,9 @@ Joints at a bound that the step pushes outward leave the Jacobian and the step i
 (an active set). A step is kept only where it lowers |e| and, with a collision count, does not
 raise it: never worse. Kept: lambda / 3, else lambda * 4, within [lam_min, lam_max]. A row stops
 once |e| < ``tol`` or once ``done`` says so (e.g. enough rows of its problem have converged), and
-then costs nothing more.
+then costs nothing more. A row whose step was refused at lambda = lam_max would take the very same
+step again (same x, Jacobian and damping) and be refused again: it is not evaluated any more (its
+steps still count, as if it ran them), and once every running row is such, the call ends.
 
 The model returns its value and Jacobian together, and the trial point's Jacobian is the next
 step's when the step is kept: a step costs one model evaluation. :func:`numerical_jacobian`
@@ -96,13 +98,20 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     lams = torch.full((B,), lam, dtype=x.dtype, device=x.device)
     counts = count(x, all_rows) if count is not None else None
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
-    for _ in range(iterations):
+    stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
+    for it in range(iterations):
         stopped = err < tol
         if done is not None:
             stopped = stopped | done(stopped)
         if bool(stopped.all()):
             break
-        rows = (~stopped).nonzero().squeeze(1)
+        running = ~stopped
+        if bool((stalled | stopped).all()):  # nothing changes any more: the rows ran the budget out
+            steps += running.long() * (iterations - it)
+            if trace is not None:
+                trace.extend(err.clone() for _ in range(iterations - it))
+            break
+        rows = (running & ~stalled).nonzero().squeeze(1)
         xr, vr, Jr, gr, lr, hr = x[rows], value[rows], jac[rows], goal[rows], lo[rows], hi[rows]
         e = gr - vr
         damping = lams[rows]
@@ -122,8 +131,9 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         value[rows] = torch.where(better.unsqueeze(1), new_value, vr)
         jac[rows] = torch.where(better.view(-1, 1, 1), new_jac, Jr)
         err[rows] = torch.where(better, new_err, err[rows])
-        lams[rows] = torch.where(better, lams[rows] / 3, lams[rows] * 4).clamp(lam_min, lam_max)
-        steps[rows] += 1
+        stalled[rows] = ~better & (damping >= lam_max)  # the same step again next time: rejected again
+        lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)
+        steps += running.long()  # a stalled row counts the steps it would repeat
         if trace is not None:
             trace.append(err.clone())
     return LMResult(x=x, err=err, value=value, count=counts, steps=steps)
