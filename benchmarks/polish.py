@@ -5,12 +5,16 @@
                                 [--baseline-per-s X] [--threads 1] [--check]
 
 ``step``: the whole polish's model (the shipped ``hand``: palm pose + the contact fingers' joints,
-``HandEnvironment.whole_tips``) on the same problems and the same random starts, at two batch
-sizes (one problem x 20 trials, as ``gt.solve``; 64 problems x 4 trials, as ``gt.solve_many``):
-the time per Levenberg-Marquardt step with the analytic Jacobian (one model evaluation per step)
-and with forward differences (m + 1 evaluations of the fingertips per step, the previous
-implementation's Jacobian, built here from the public kinematics), every row running every step,
+``HandEnvironment.whole_tips``) on the same problems and the same random starts, at three batch
+sizes (one problem x 20 trials, as ``gt.solve``; 64 and 250 problems x 4 trials, as ``gt.solve_many``):
+the time per Levenberg-Marquardt step (the fastest of 5 interleaved rounds) with the analytic
+Jacobian (one model evaluation per step) and with forward differences (m + 1 evaluations of the
+fingertips per step, the previous implementation's Jacobian, built here from the public
+kinematics), every row running every step,
 and the fraction of rows each lands below 1 mm. Target: the analytic step >= 3x faster.
+A step of a few rows is bound by the number of torch ops, not by arithmetic: there the m + 1
+forward-difference evaluations cost about what one evaluation does, and the analytic Jacobian's
+longer program (positions and Jacobian columns) gains little; the gain grows with the batch.
 
 ``solve_many``: ``gt.solve_many`` (public API only, so the script runs against earlier commits
 too) on ``--problems`` random reachable hand problems (``gt.random_reachable_problem(robot,
@@ -29,7 +33,7 @@ import time
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.benchmarking import check_targets
+from graspnet_torch.benchmarking import check_targets, time_interleaved
 
 STEP_TARGET = 3.0
 MANY_TARGET = 2.0
@@ -47,7 +51,7 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
     robot = gt.load_robot("hand")
     ik = gt.load_finger_ik(robot)
     checks, lines = [], []
-    for P, runs in ((1, 20), (64, 4)):
+    for P, runs in ((1, 20), (64, 4), (250, 4)):
         problems = [gt.random_reachable_problem(robot, 20_000 + k) for k in range(P)]
         env = build_environment(robot, problems if P > 1 else problems[0], ik, SolverCfg(), runs=runs)
         F, j = len(env.fingers), robot.joints_per_finger
@@ -72,20 +76,15 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
         T = P * runs
         x0 = env.random_whole(T, torch.Generator().manual_seed(0))
         lo, hi = env.whole_bounds()
-        goal = (env.contacts64 if mask is None else env.contacts64 * mask).reshape(-1 if mask is None else T, 3 * F)
+        goal = env.contacts64.reshape(-1) if mask is None else (env.contacts64 * mask).reshape(T, 3 * F)
         models = {"analytic": env.whole_tips, "forward differences": forward_differences}
         for name, model in models.items():  # the same answer: the Jacobians differ by ~1e-7
             out = levenberg_marquardt(model, goal, x0, lo, hi, iterations)
             lines.append(f"{P} x {runs} rows, {name:20s}: {float((out.err < 1e-3).float().mean()) * 100:5.1f} % of "
                          f"rows < 1 mm after {iterations} steps")
-        best = {}
-        for name, model in models.items():
-            walls = []
-            for _ in range(3):
-                t0 = time.perf_counter()
-                levenberg_marquardt(model, goal, x0, lo, hi, iterations)
-                walls.append((time.perf_counter() - t0) / iterations)
-            best[name] = min(walls)
+        fns = [lambda model=model, problem=(goal, x0, lo, hi): levenberg_marquardt(model, *problem, iterations)
+               for model in models.values()]
+        best = dict(zip(models, (t / iterations for t in time_interleaved(fns, min_time=1.0, rounds=5)), strict=True))
         ratio = best["forward differences"] / best["analytic"]
         m = x0.shape[1]
         lines.append(f"{P} x {runs} rows (m = {m}): per step analytic {best['analytic'] * 1e3:.2f} ms, forward "

@@ -117,8 +117,10 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         damping = lams[rows]
         dx = damped_pinv_step(Jr, e, damping)
         blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
-        if bool(blocked.any()):  # joints at a bound the step pushes outward leave the Jacobian
-            dx = damped_pinv_step(Jr * (~blocked).unsqueeze(1), e, damping)
+        again = blocked.any(1).nonzero().squeeze(1)
+        if again.numel():  # joints at a bound the step pushes outward leave the Jacobian: those rows again
+            dx = dx.index_copy(0, again, damped_pinv_step(Jr[again] * (~blocked[again]).unsqueeze(1), e[again],
+                                                          damping[again]))
         new = torch.minimum(torch.maximum(xr + dx, lr), hr)
         new_value, new_jac = f(new, rows)
         new_err = (gr - new_value).norm(dim=-1)
