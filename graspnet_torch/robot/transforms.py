@@ -115,10 +115,12 @@ def frame_point_jacobian(R: Tensor, J: Tensor, points: Tensor) -> Tensor:
     Returns:
         (..., P, 3, n).
     """
-    arm = (R.unsqueeze(-3) @ points.unsqueeze(-1)).squeeze(-1)  # (..., P, 3): R y
-    w = J[..., 3:, :].transpose(-1, -2).unsqueeze(-3)  # (..., 1, n, 3)
-    turn = torch.linalg.cross(w, arm.unsqueeze(-2).expand(*arm.shape[:-1], w.shape[-2], 3))  # (..., P, n, 3)
-    return J[..., :3, :].unsqueeze(-3) + turn.transpose(-1, -2)
+    arm = (R.unsqueeze(-3) @ points.unsqueeze(-1)).squeeze(-1).unsqueeze(-1)  # (..., P, 3, 1): R y
+    w = J[..., 3:, :].unsqueeze(-3)  # (..., 1, 3, n)
+    a0, a1, a2 = arm.unbind(-2)
+    w0, w1, w2 = w.unbind(-2)
+    turn = torch.stack([w1 * a2 - w2 * a1, w2 * a0 - w0 * a2, w0 * a1 - w1 * a0], -2)  # w x (R y): (..., P, 3, n)
+    return J[..., :3, :].unsqueeze(-3) + turn
 
 
 def rt_to_pose(R: Tensor, t: Tensor) -> Tensor:

@@ -331,13 +331,15 @@ class FingerEnvironment:
         base_R, base_t = self._base64
         in_palm = transform_points(base_R, base_t, local)
         tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
-        fingers = (R.unsqueeze(1) @ base_R) @ Jq  # (B, F, 3, j)
-        blocks = fingers.unsqueeze(3) * torch.eye(F, dtype=x.dtype).view(1, F, 1, F, 1)  # block diagonal
-        J = torch.cat([frame_point_jacobian(R, Jc, in_palm), blocks.reshape(B, F, 3, F * j)], -1)
+        palm = frame_point_jacobian(R, Jc, in_palm)  # (B, F, 3, n)
+        fingers = torch.einsum("nab,nfbj->nfaj", R, torch.einsum("fab,nfbj->nfaj", base_R, Jq))  # R B_R dk/dq
         mask = self._rows(self.mask, rows)
         if mask is not None:
             mask = mask.to(tips).cpu().unsqueeze(-1)
-            tips, J = tips * mask, J * mask.unsqueeze(-1)
+            tips, palm, fingers = tips * mask, palm * mask.unsqueeze(-1), fingers * mask.unsqueeze(-1)
+        J = x.new_zeros(B, F, 3, n + F * j)
+        J[..., :n] = palm
+        J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
         return tips.reshape(B, -1), J.reshape(B, 3 * F, -1)
 
     def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
