@@ -56,6 +56,27 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     assert never.steps.tolist() == [0, 0]
 
 
+def test_levenberg_marquardt_stops_evaluating_a_row_refused_at_the_largest_damping():
+    """A row whose goal lies outside the box ends at the bound; once its step is refused at
+    lam_max (the same step would come again) the model no longer sees it, yet its steps and the
+    trace count the whole budget; a row that can still move keeps being evaluated."""
+    seen = []
+
+    def f(x, rows):
+        seen.append(rows.clone())
+        return x.clone(), torch.eye(1, dtype=x.dtype).expand(x.shape[0], 1, 1)
+
+    goal = torch.tensor([[2.0], [0.5]], dtype=torch.float64)  # row 0: out of [0, 1]; row 1: inside
+    lo, hi = torch.zeros(1, dtype=torch.float64), torch.ones(1, dtype=torch.float64)
+    x0 = torch.tensor([[1.0], [0.0]], dtype=torch.float64)
+    trace = []
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, lam=0.5, lam_max=1.0, trace=trace)
+    assert out.steps.tolist() == [40, 40] and len(trace) == 40
+    assert out.x[0, 0] == 1.0 and float(out.err[0]) == pytest.approx(1.0)
+    assert sum(int((r == 0).sum()) for r in seen[1:]) <= 2  # row 0: refused at 0.5 * 4 -> lam_max, then dropped
+    assert sum(int((r == 1).sum()) for r in seen[1:]) >= 10
+
+
 def test_enough_succeeded_counts_per_problem():
     succeeded = torch.tensor([True, False, False, False, True, True])
     pid = torch.tensor([0, 0, 1, 1, 2, 2])
