@@ -122,8 +122,8 @@ class FingerEnvironment:
     at home in collision counts and results).
 
     Subclasses set ``n``, ``lower``, ``upper`` ((n,), or (T, n) for a batch) and define
-    :meth:`palm_frame` (the palm in the world for a configuration) and :meth:`bounds64` (the exact
-    bounds, float64).
+    :meth:`palm_frame` (the palm in the world for a configuration), :meth:`palm_frame_jacobian`
+    (with its Jacobian, for the polish) and :meth:`bounds64` (the exact bounds, float64).
     """
 
     n: int
