@@ -139,6 +139,8 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--check", action="store_true")
     args = ap.parse_args()
+    if args.baseline_per_s is not None and args.baseline_per_s <= 0:
+        ap.error("--baseline-per-s must be positive")
     torch.set_num_threads(args.threads)
     print(f"torch.get_num_threads() = {torch.get_num_threads()}", flush=True)
     checks, lines = [], []
