@@ -15,6 +15,7 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
 from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
+from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
 
@@ -76,7 +77,6 @@ def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: i
     q[1:, [ia, ib]] = rand[:, [ia, ib]]
     q = torch.minimum(torch.maximum(q, lo), hi)
     R = _base_rotations(robot, dtype)[[ia, ib]]  # (2, 3, 3)
-    eye = torch.eye(3, dtype=dtype)
     for _ in range(iterations):
         tips = robot.fingertips_palm(q)  # (S, F, 3)
         e = tips[:, ia] - tips[:, ib]  # (S, 3)
@@ -85,8 +85,7 @@ def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: i
         _, J = robot.fingertips_base_jacobian(q)  # (S, F, 3, n) in each base frame
         Jp = (R @ J[:, [ia, ib]]) * free[:, None, :]  # (S, 2, 3, n) palm frame; fixed slots still
         Jab = torch.cat([Jp[:, 0], -Jp[:, 1]], dim=-1)  # (S, 3, 2n)
-        A = Jab @ Jab.transpose(1, 2) + damping ** 2 * eye
-        dq = -(Jab.transpose(1, 2) @ torch.linalg.solve(A, e.unsqueeze(-1))).squeeze(-1)  # (S, 2n)
+        dq = -damped_pinv_step(Jab, e, damping)  # (S, 2n)
         dq = dq.clamp(-0.2, 0.2).view(-1, 2, lo.shape[1])
         q[:, [ia, ib]] = torch.minimum(torch.maximum(q[:, [ia, ib]] + dq, lo[[ia, ib]]), hi[[ia, ib]])
     tips = robot.fingertips_palm(q)

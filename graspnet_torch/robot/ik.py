@@ -1,4 +1,4 @@
-"""Position-only inverse kinematics steps with the damped pseudo-inverse (paper eq. 5 and 8).
+"""Damped least squares: the package's one step (paper eq. 5 and 8), and position-only IK with it.
 
     theta(k+1) = theta(k) + J^+(theta(k)) (X_D - g(theta(k))),
     J^+ = J^T (J J^T + lambda^2 I)^-1        (damped least squares; lambda = 0 is eq. 5 exactly)
@@ -33,27 +33,36 @@ def solve3_symmetric(A: Tensor, b: Tensor) -> Tensor:
     return (adj @ b.unsqueeze(-1)).squeeze(-1) / det
 
 
-def damped_pinv_step(J: Tensor, err: Tensor, damping: float = 0.0) -> Tensor:
-    """Joint step ``J^T (J J^T + damping^2 I)^-1 err``.
+def damped_pinv_step(J: Tensor, err: Tensor, damping: float | Tensor = 0.0) -> Tensor:
+    """Step ``J^T (J J^T + damping^2 I)^-1 err``: the one damped-least-squares step of the package
+    (the FCNN's refinement, the Levenberg-Marquardt polish, a gripper's settling steps).
 
-    J: (..., 3, n); err: (..., 3) -> (..., n). Chains with fewer than 3 joints use the equivalent
-    ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular).
+    J: (..., k, n); err: (..., k); damping: a number or a tensor broadcastable to the batch (...)
+    (one lambda per system) -> (..., n). Systems with fewer unknowns than equations (n < k) use the
+    equivalent ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular). 3x3 systems are
+    solved in closed form (:func:`solve3_symmetric`) for large batches.
     """
-    n = J.shape[-1]
+    k, n = J.shape[-2], J.shape[-1]
     Jt = J.transpose(-1, -2)
-    if n < 3:
+    if n < k:
         A = Jt @ J
-        if damping:
-            A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
+        _add_damping(A, damping)
         return torch.linalg.solve(A, (Jt @ err.unsqueeze(-1))).squeeze(-1)
     A = J @ Jt
-    if damping:
-        A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
-    if A.numel() <= SMALL_BATCH * 9:  # LAPACK is faster for a handful of systems, the adjugate for many
+    _add_damping(A, damping)
+    if k != 3 or A.numel() <= SMALL_BATCH * 9:  # LAPACK is faster for a handful of 3x3 systems, the adjugate for many
         y = torch.linalg.solve_ex(A, err)[0]
     else:
         y = solve3_symmetric(A, err)
     return (Jt @ y.unsqueeze(-1)).squeeze(-1)
+
+
+def _add_damping(A: Tensor, damping: float | Tensor) -> None:
+    """A (..., k, k) += damping^2 I, in place (a tensor damping: one lambda per system)."""
+    if isinstance(damping, Tensor):
+        A.diagonal(dim1=-2, dim2=-1).add_((damping * damping).unsqueeze(-1))
+    elif damping:
+        A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
 
 
 def limited_step(J: Tensor, err: Tensor, q: Tensor, lower: Tensor, upper: Tensor, damping: float) -> Tensor:

@@ -338,6 +338,12 @@ class Robot:
         self._check_body(q_body)
         return self.body_kernel.pose(q_body)
 
+    def palm_frame_jacobian(self, q_body: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Palm frame and its geometric Jacobian (rows d t, then w; see ``transforms.frame_point_jacobian``).
+        q_body: (..., m) -> R: (..., 3, 3), t: (..., 3), J: (..., 6, m)."""
+        self._check_body(q_body)
+        return self.body_kernel.pose_jacobian(q_body)
+
     def fingertips_world_from_body(self, q_body: Tensor, q: Tensor) -> Tensor:
         """Fingertips in the world from body and finger joints. (..., m), (..., F, n) -> (..., F, 3)."""
         R, t = self.palm_frame(q_body)
@@ -350,11 +356,20 @@ class Robot:
 
     def gripper_points(self, q_body: Tensor) -> Tensor:
         """The gripper's marked points in the world. q_body: (..., m) -> (..., 2, 3)."""
+        q = self._gripper_joints(q_body)
+        return self.gripper_kernel.position(q)
+
+    def _gripper_joints(self, q_body: Tensor) -> Tensor:
+        """The body joints, checked, once per gripper point's chain: (..., m) -> (..., 2, m)."""
         self._check_body(q_body)
         if self.gripper_kernel is None:
             raise ValueError(f"robot '{self.name}' has no gripper points")
-        K = self.gripper_kernel.num_chains
-        return self.gripper_kernel.position(q_body.unsqueeze(-2).expand(*q_body.shape[:-1], K, q_body.shape[-1]))
+        return q_body.unsqueeze(-2).expand(*q_body.shape[:-1], self.gripper_kernel.num_chains, q_body.shape[-1])
+
+    def gripper_points_jacobian(self, q_body: Tensor) -> tuple[Tensor, Tensor]:
+        """The gripper's marked points and d point / d q_body. q_body: (..., m) -> (..., 2, 3), (..., 2, 3, m)."""
+        q = self._gripper_joints(q_body)
+        return self.gripper_kernel.position_jacobian(q)
 
     # ------------------------------------------------------------------ postures
     def home_posture(self, dtype: torch.dtype = torch.float64) -> Posture:

@@ -16,10 +16,12 @@ from torch import Tensor
 
 __all__ = [
     "compose",
+    "frame_point_jacobian",
     "invert",
     "matrix_to_pose",
     "matrix_to_rpy",
     "pose_from_degrees",
+    "pose_jacobian",
     "pose_to_degrees",
     "pose_to_matrix",
     "pose_to_rt",
@@ -77,6 +79,48 @@ def pose_to_rt(pose: Tensor) -> tuple[Tensor, Tensor]:
         R: (..., 3, 3); t: (..., 3).
     """
     return rpy_to_matrix(pose[..., 3:]), pose[..., :3]
+
+
+def pose_jacobian(pose: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """A pose's frame and its Jacobian with respect to the pose's six values.
+
+    With ``R = Rz(rz) Ry(ry) Rx(rx)``, ``dR = [w]_x R`` where the angular velocity of each angle is
+    the axis it turns about, carried into the world by the rotations applied after it:
+    ``w_rx = Rz Ry e_x``, ``w_ry = Rz e_y``, ``w_rz = e_z``; the translation moves with x, y, z.
+
+    Args:
+        pose: (..., 6).
+    Returns:
+        R: (..., 3, 3); t: (..., 3); J: (..., 6, 6), rows d t (3) then w (3), one column per value
+        (the frame Jacobian of :func:`frame_point_jacobian`).
+    """
+    R, t = pose_to_rt(pose)
+    yaw = pose[..., 5:]
+    lead, kw = pose.shape[:-1], {"dtype": pose.dtype, "device": pose.device}
+    w_ry = torch.cat([-torch.sin(yaw), torch.cos(yaw), torch.zeros_like(yaw)], -1).unsqueeze(-1)  # Rz e_y
+    w_rz = torch.tensor([[0.0], [0.0], [1.0]], **kw).expand(*lead, 3, 1)
+    w = torch.cat([R[..., :, :1], w_ry, w_rz], -1)  # w_rx = Rz Ry e_x = R e_x (Rx leaves e_x)
+    top = torch.eye(3, 6, **kw).expand(*lead, 3, 6)
+    return R, t, torch.cat([top, torch.cat([torch.zeros_like(w), w], -1)], -2)
+
+
+def frame_point_jacobian(R: Tensor, J: Tensor, points: Tensor) -> Tensor:
+    """Jacobian of points fixed in a moving frame, expressed in its parent: ``p = R y + t``.
+
+    A frame Jacobian J (rows d t / d c (3) and the angular velocity w (3) with ``dR/dc = [w]_x R``)
+    gives ``d p / d c = d t / d c + w x (R y)``.
+
+    Args:
+        R: (..., 3, 3) the frame; J: (..., 6, n) its Jacobian; points: (..., P, 3) y, in the frame.
+    Returns:
+        (..., P, 3, n).
+    """
+    arm = (R.unsqueeze(-3) @ points.unsqueeze(-1)).squeeze(-1).unsqueeze(-1)  # (..., P, 3, 1): R y
+    w = J[..., 3:, :].unsqueeze(-3)  # (..., 1, 3, n)
+    a0, a1, a2 = arm.unbind(-2)
+    w0, w1, w2 = w.unbind(-2)
+    turn = torch.stack([w1 * a2 - w2 * a1, w2 * a0 - w0 * a2, w0 * a1 - w1 * a0], -2)  # w x (R y): (..., P, 3, n)
+    return J[..., :3, :].unsqueeze(-3) + turn
 
 
 def rt_to_pose(R: Tensor, t: Tensor) -> Tensor:

@@ -76,6 +76,10 @@ class ArmHandEnvironment(FingerEnvironment):
         """The arm's forward kinematics. (T, n) -> R (T, 3, 3), t (T, 3)."""
         return self.robot.palm_frame(q_arm)
 
+    def palm_frame_jacobian(self, q_arm: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """The arm's forward kinematics and geometric Jacobian. (T, n) -> R (T, 3, 3), t (T, 3), J (T, 6, n)."""
+        return self.robot.palm_frame_jacobian(q_arm)
+
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
 

@@ -30,8 +30,8 @@ class FingerEnvironment(Environment):
     at home in collision counts and results).
 
     Subclasses set ``n``, ``lower``, ``upper`` ((n,), or (T, n) for a batch) and define
-    :meth:`palm_frame` (the palm in the world for a configuration) and :meth:`bounds64` (the exact
-    bounds, float64).
+    :meth:`palm_frame` (the palm in the world for a configuration), :meth:`palm_frame_jacobian`
+    (with its Jacobian, for the polish) and :meth:`bounds64` (the exact bounds, float64).
     """
 
     n: int
@@ -83,6 +83,7 @@ class FingerEnvironment(Environment):
         self.idx = [robot.finger_index(f) for f in self.fingers]
         base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]), **kw)
         self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
+        self._base64 = (self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu())
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
         from graspnet_torch.collision.scene import has_environment
@@ -97,6 +98,11 @@ class FingerEnvironment(Environment):
 
     def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
         """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
+        raise NotImplementedError
+
+    def palm_frame_jacobian(self, config: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """(T, n) configurations -> the palm frame R (T, 3, 3), t (T, 3) and its Jacobian (T, 6, n)
+        (rows d t / d config, then the angular velocity w: dR = [w]_x R)."""
         raise NotImplementedError
 
     def bounds64(self) -> tuple[Tensor, Tensor]:
@@ -225,21 +231,30 @@ class FingerEnvironment(Environment):
             return c.reshape(-1)
         return (c * self._rows(self.mask, rows).to(c).unsqueeze(-1).cpu()).reshape(c.shape[0], -1)
 
-    def _tips64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+    def whole_tips(self, x: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """Contact fingertips in the world, flattened, of x (B, m) float64 of the trials ``rows``
-        -> (B, 3F) (zero where a batch's mask is)."""
-        from graspnet_torch.robot.transforms import transform_points
+        -> (B, 3F), and their Jacobian d tips / d x (B, 3F, m) (zero where a batch's mask is): the
+        palm's columns by :func:`~graspnet_torch.robot.transforms.frame_point_jacobian`, each
+        finger's R B_R dk/dq (free joints; mimic joints through their coupling)."""
+        from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
 
-        F, j = len(self.idx), self.robot.joints_per_finger
-        R, t = self.palm_frame(x[:, : self.n])
+        B, F, j, n = x.shape[0], len(self.idx), self.robot.joints_per_finger, self.n
+        R, t, Jc = self.palm_frame_jacobian(x[:, :n])
         kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
-        local = kernel.position(x[:, self.n:].reshape(-1, F, j))
-        in_palm = transform_points(self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu(), local)
+        local, Jq = kernel.position_jacobian(x[:, n:].reshape(B, F, j))  # (B, F, 3), (B, F, 3, j)
+        base_R, base_t = self._base64
+        in_palm = transform_points(base_R, base_t, local)
         tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
+        palm = frame_point_jacobian(R, Jc, in_palm)  # (B, F, 3, n)
+        fingers = torch.einsum("nab,nfbj->nfaj", R, torch.einsum("fab,nfbj->nfaj", base_R, Jq))  # R B_R dk/dq
         mask = self._rows(self.mask, rows)
         if mask is not None:
-            tips = tips * mask.to(tips).cpu().unsqueeze(-1)
-        return tips.reshape(x.shape[0], -1)
+            mask = mask.to(tips).cpu().unsqueeze(-1)
+            tips, palm, fingers = tips * mask, palm * mask.unsqueeze(-1), fingers * mask.unsqueeze(-1)
+        J = x.new_zeros(B, F, 3, n + F * j)
+        J[..., :n] = palm
+        J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
+        return tips.reshape(B, -1), J.reshape(B, 3 * F, -1)
 
     def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
         """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
@@ -259,8 +274,8 @@ class FingerEnvironment(Environment):
 
         trials = None if rows is None else rows.cpu()
 
-        def tips(xx: Tensor, r: Tensor) -> Tensor:
-            return self._tips64(xx, r if trials is None else trials[r])
+        def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
+            return self.whole_tips(xx, r if trials is None else trials[r])
 
         def count(xx: Tensor, r: Tensor) -> Tensor:
             return self._count64(xx, r if trials is None else trials[r])

@@ -22,6 +22,7 @@ from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
+from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
@@ -199,10 +200,9 @@ class GripperEnvironment(Environment):
         swap = _pairing(pts, tg)
         goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
         err = (goal - pts.reshape(T, 6)).norm(dim=-1)
-        eye6 = torch.eye(6, dtype=q.dtype, device=q.device)
-        lam = torch.full((T, 1, 1), 0.05, dtype=q.dtype, device=q.device)
+        lam = torch.full((T,), 0.05, dtype=q.dtype, device=q.device)
         for step in range(steps):
-            new = torch.minimum(torch.maximum(q + _dls(J, goal - pts.reshape(T, 6), lam, eye6), lower), upper)
+            new = torch.minimum(torch.maximum(q + damped_pinv_step(J, goal - pts.reshape(T, 6), lam), lower), upper)
             new_levels, new_pts, _ = self._kinematics(new)
             new_err = (goal - new_pts.reshape(T, 6)).norm(dim=-1)
             better = new_err < err
@@ -222,7 +222,7 @@ class GripperEnvironment(Environment):
         Every trial is polished for the whole budget (``done`` is not used: the MANUS protocol's
         figures are those of every learner).
 
-            dq = J^T (J J^T + lambda^2 I)^-1 e,   J = d(points)/dq (6 x n, forward differences, float64)
+            dq = J^T (J J^T + lambda^2 I)^-1 e,   J = d(points)/dq (6 x n, the kernel's analytic Jacobian, float64)
         """
         iterations = self.final_refine
         if iterations <= 0:
@@ -254,14 +254,15 @@ class GripperEnvironment(Environment):
         if lo.dim() == 2:  # a batch of problems: q holds copies of every trial
             lo, hi = lo.repeat(q.shape[0] // lo.shape[0], 1), hi.repeat(q.shape[0] // hi.shape[0], 1)
 
-        def points(x: Tensor, rows: Tensor) -> Tensor:
-            return self.robot.gripper_points(x).reshape(-1, 6)
+        def points(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+            p, J = self.robot.gripper_points_jacobian(x)  # (B, 2, 3), (B, 2, 3, n)
+            return p.reshape(-1, 6), J.reshape(-1, 6, self.n)
 
         def count(x: Tensor, rows: Tensor) -> Tensor:
             pid = None if T is None else self.problem_index[rows % T]
             return self._count(x, pid)
 
-        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=1e-2, lam_min=1e-4, lam_max=10.0, h=1e-6,
+        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=1e-2, lam_min=1e-4, lam_max=10.0,
                                    edge=1e-9, tol=tol, done=done, trace=trace,
                                    count=count if self.proxy is not None else None)
 
@@ -372,11 +373,6 @@ class GripperEnvironment(Environment):
     def marks(problem: GraspProblem, trial: TrialResult) -> np.ndarray:
         """The object's two points and the gripper's two."""
         return np.concatenate([problem.points_world(), np.asarray(trial.gripper_points)])
-
-
-def _dls(J: Tensor, e: Tensor, lam: Tensor, eye: Tensor) -> Tensor:
-    """dq = J^T (J J^T + lambda^2 I)^-1 e: J (B, 6, n), e (B, 6), lam (B, 1, 1) -> (B, n)."""
-    return (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + lam ** 2 * eye, e.unsqueeze(-1))).squeeze(-1)
 
 
 def _pairing(points: Tensor, targets: Tensor) -> Tensor:

@@ -16,7 +16,7 @@ from torch import Tensor
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Robot
-from graspnet_torch.robot.transforms import pose_to_rt
+from graspnet_torch.robot.transforms import pose_jacobian, pose_to_rt
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
@@ -70,6 +70,10 @@ class HandEnvironment(FingerEnvironment):
     def palm_frame(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
         """The configuration is the palm pose. (T, 6) -> R (T, 3, 3), t (T, 3)."""
         return pose_to_rt(palm_pose)
+
+    def palm_frame_jacobian(self, palm_pose: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """(T, 6) -> R (T, 3, 3), t (T, 3), J (T, 6, 6) (:func:`~graspnet_torch.robot.transforms.pose_jacobian`)."""
+        return pose_jacobian(palm_pose)
 
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64

@@ -1,17 +1,23 @@
 """Batched Levenberg-Marquardt within bounds: the local solver behind every polish and ``solver=dls``.
 
 For B rows at once, each with its own goal, bounds and damping, minimise |g - f(x)| over x within
-[lo, hi]:
+[lo, hi], with the model's analytic Jacobian:
 
     e = g - f(x)                              (B, k)
-    J = d f / d x                             (B, k, m), forward differences (step h)
-    dx = J^T (J J^T + lambda^2 I)^-1 e        (damped least squares, the form of robot/ik.py)
+    J = d f / d x                             (B, k, m), given by the model with its value
+    dx = J^T (J J^T + lambda^2 I)^-1 e        (robot/ik.py's damped_pinv_step, the package's one step)
 
 Joints at a bound that the step pushes outward leave the Jacobian and the step is solved again
 (an active set). A step is kept only where it lowers |e| and, with a collision count, does not
 raise it: never worse. Kept: lambda / 3, else lambda * 4, within [lam_min, lam_max]. A row stops
 once |e| < ``tol`` or once ``done`` says so (e.g. enough rows of its problem have converged), and
-then costs nothing more.
+then costs nothing more. A row whose step was refused at lambda = lam_max would take the very same
+step again (same x, Jacobian and damping) and be refused again: it is not evaluated any more (its
+steps still count, as if it ran them), and once every running row is such, the call ends.
+
+The model returns its value and Jacobian together, and the trial point's Jacobian is the next
+step's when the step is kept: a step costs one model evaluation. :func:`numerical_jacobian`
+(forward differences, m + 1 evaluations) is the oracle the analytic Jacobians are tested against.
 """
 
 from __future__ import annotations
@@ -22,7 +28,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["LMResult", "levenberg_marquardt"]
+from graspnet_torch.robot.ik import damped_pinv_step
+
+__all__ = ["LMResult", "Model", "levenberg_marquardt", "numerical_jacobian"]
+
+Model = Callable[[Tensor, Tensor], tuple[Tensor, Tensor]]
+"""``f(x, rows)``: x (b, m) of the rows ``rows`` (b,) -> value (b, k) and Jacobian d value / d x (b, k, m)."""
 
 
 @dataclass
@@ -44,23 +55,31 @@ class LMResult:
     steps: Tensor
 
 
-def levenberg_marquardt(f: Callable[[Tensor, Tensor], Tensor], goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor,
-                        iterations: int, *, lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0,
-                        h: float = 1e-7, edge: float = 1e-12, tol: float = 0.0,
-                        count: Callable[[Tensor, Tensor], Tensor] | None = None,
+def numerical_jacobian(f: Callable[[Tensor], Tensor], x: Tensor, h: float = 1e-7) -> Tensor:
+    """Forward differences (f(x + h e_i) - f(x)) / h: f maps x (b, m) -> (b, k); returns (b, k, m).
+    m + 1 evaluations of f (one batch of b (m + 1) rows): the oracle of the analytic Jacobians."""
+    b, m = x.shape
+    shifted = torch.cat([x.unsqueeze(1), x.unsqueeze(1) + h * torch.eye(m, dtype=x.dtype, device=x.device)], 1)
+    values = f(shifted.reshape(-1, m)).reshape(b, m + 1, -1)
+    return ((values[:, 1:] - values[:, :1]) / h).transpose(1, 2)
+
+
+def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
+                        lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
+                        tol: float = 0.0, count: Callable[[Tensor, Tensor], Tensor] | None = None,
                         done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
                         ) -> LMResult:
     """Levenberg-Marquardt on B rows (float64, the device of ``x``).
 
     Args:
-        f: ``f(x, rows)``: x (b, m) of the rows ``rows`` (b,) (indices into the batch) -> (b, k).
-            Rows may come in any subset; f must not depend on which (except through ``rows``).
+        f: the model (:data:`Model`): ``f(x, rows)`` -> value (b, k), Jacobian (b, k, m) of the
+            rows ``rows`` (b,) (indices into the batch). Rows may come in any subset; f must not
+            depend on which (except through ``rows``).
         goal: (B, k) or (k,).
         x: (B, m) start, clamped to the bounds first.
         lo, hi: (m,) or (B, m) bounds.
         iterations: most steps per row.
         lam, lam_min, lam_max: the damping's start and range.
-        h: forward-difference step.
         edge: a value within this of a bound counts as at it.
         tol: a row stops once |e| < tol.
         count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
@@ -73,33 +92,37 @@ def levenberg_marquardt(f: Callable[[Tensor, Tensor], Tensor], goal: Tensor, x: 
     lo, hi = (b.expand(B, m) if b.dim() == 1 else b for b in (lo, hi))
     x = torch.minimum(torch.maximum(x, lo), hi).clone()
     all_rows = torch.arange(B, device=x.device)
-    value = f(x, all_rows)
+    value, jac = f(x, all_rows)
+    value, jac = value.clone(), jac.clone()
     err = (goal - value).norm(dim=-1)
     lams = torch.full((B,), lam, dtype=x.dtype, device=x.device)
     counts = count(x, all_rows) if count is not None else None
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
-    eye_x = torch.eye(m, dtype=x.dtype, device=x.device)
-    k = goal.shape[1]
-    eye_e = torch.eye(k, dtype=x.dtype, device=x.device)
-    for _ in range(iterations):
+    stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
+    for it in range(iterations):
         stopped = err < tol
         if done is not None:
             stopped = stopped | done(stopped)
         if bool(stopped.all()):
             break
-        rows = (~stopped).nonzero().squeeze(1)
-        b = rows.numel()
-        xr, vr, gr, lr, hr = x[rows], value[rows], goal[rows], lo[rows], hi[rows]
+        running = ~stopped
+        if bool((stalled | stopped).all()):  # nothing changes any more: the rows ran the budget out
+            steps += running.long() * (iterations - it)
+            if trace is not None:
+                trace.extend(err.clone() for _ in range(iterations - it))
+            break
+        rows = (running & ~stalled).nonzero().squeeze(1)
+        xr, vr, Jr, gr, lr, hr = x[rows], value[rows], jac[rows], goal[rows], lo[rows], hi[rows]
         e = gr - vr
-        shifted = (xr.unsqueeze(1) + h * eye_x).reshape(-1, m)
-        J = ((f(shifted, rows.repeat_interleave(m)).reshape(b, m, k) - vr.unsqueeze(1)) / h).transpose(1, 2)
-        damp = (lams[rows] ** 2).view(-1, 1, 1) * eye_e
-        dx = _step(J, e, damp)
+        damping = lams[rows]
+        dx = damped_pinv_step(Jr, e, damping)
         blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
-        if bool(blocked.any()):  # joints at a bound the step pushes outward leave the Jacobian
-            dx = _step(J * (~blocked).unsqueeze(1), e, damp)
+        again = blocked.any(1).nonzero().squeeze(1)
+        if again.numel():  # joints at a bound the step pushes outward leave the Jacobian: those rows again
+            dx = dx.index_copy(0, again, damped_pinv_step(Jr[again] * (~blocked[again]).unsqueeze(1), e[again],
+                                                          damping[again]))
         new = torch.minimum(torch.maximum(xr + dx, lr), hr)
-        new_value = f(new, rows)
+        new_value, new_jac = f(new, rows)
         new_err = (gr - new_value).norm(dim=-1)
         better = new_err < err[rows]
         if counts is not None:  # never into a collision: a step may not raise the count
@@ -108,14 +131,11 @@ def levenberg_marquardt(f: Callable[[Tensor, Tensor], Tensor], goal: Tensor, x: 
             counts[rows] = torch.where(better, new_count, counts[rows])
         x[rows] = torch.where(better.unsqueeze(1), new, xr)
         value[rows] = torch.where(better.unsqueeze(1), new_value, vr)
+        jac[rows] = torch.where(better.view(-1, 1, 1), new_jac, Jr)
         err[rows] = torch.where(better, new_err, err[rows])
-        lams[rows] = torch.where(better, lams[rows] / 3, lams[rows] * 4).clamp(lam_min, lam_max)
-        steps[rows] += 1
+        stalled[rows] = ~better & (damping >= lam_max)  # the same step again next time: rejected again
+        lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)
+        steps += running.long()  # a stalled row counts the steps it would repeat
         if trace is not None:
             trace.append(err.clone())
     return LMResult(x=x, err=err, value=value, count=counts, steps=steps)
-
-
-def _step(J: Tensor, e: Tensor, damp: Tensor) -> Tensor:
-    """dx = J^T (J J^T + damp)^-1 e: J (b, k, m), e (b, k), damp (b, k, k) -> (b, m)."""
-    return (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + damp, e.unsqueeze(-1))).squeeze(-1)

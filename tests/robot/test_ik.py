@@ -51,3 +51,15 @@ def test_step_for_chains_with_fewer_than_three_joints(gen):
     e = torch.randn(20, 3, generator=gen, dtype=torch.float64)
     expected = (torch.linalg.pinv(J) @ e.unsqueeze(-1)).squeeze(-1)
     assert (damped_pinv_step(J, e) - expected).abs().max() < 1e-10
+
+
+def test_one_step_for_any_system_with_one_damping_per_row(gen):
+    """The package's one damped step (LM, gripper settling, FCNN refinement): k x n systems of any
+    size, a lambda per row, both forms (n >= k: J^T (J J^T + l^2 I)^-1 e; n < k: (J^T J + l^2 I)^-1 J^T e)."""
+    for k, n in ((6, 9), (15, 26), (6, 3)):
+        J = torch.randn(20, k, n, generator=gen, dtype=torch.float64)
+        e = torch.randn(20, k, generator=gen, dtype=torch.float64)
+        lam = torch.rand(20, generator=gen, dtype=torch.float64)
+        A = J @ J.transpose(-1, -2) + (lam**2).view(-1, 1, 1) * torch.eye(k, dtype=torch.float64)
+        expected = (J.transpose(-1, -2) @ torch.linalg.solve(A, e).unsqueeze(-1)).squeeze(-1)
+        assert (damped_pinv_step(J, e, lam) - expected).abs().max() < 1e-9

@@ -27,12 +27,12 @@ def test_levenberg_marquardt_agrees_with_least_squares_on_a_linear_map():
     lo, hi = torch.full((3,), -10.0, dtype=torch.float64), torch.full((3,), 10.0, dtype=torch.float64)
 
     def f(x, rows):
-        return x @ A.T
+        return x @ A.T, A.expand(x.shape[0], 6, 3)
 
-    out = levenberg_marquardt(f, x_true @ A.T, torch.zeros(4, 3, dtype=torch.float64), lo, hi, 50, h=1e-6)
+    out = levenberg_marquardt(f, x_true @ A.T, torch.zeros(4, 3, dtype=torch.float64), lo, hi, 50)
     assert torch.allclose(out.x, x_true, atol=1e-6) and bool((out.err < 1e-6).all())
     goal = torch.randn(6, generator=g, dtype=torch.float64)  # 6 equations, 3 unknowns: no exact solution
-    out = levenberg_marquardt(f, goal, torch.zeros(1, 3, dtype=torch.float64), lo, hi, 200, h=1e-6)
+    out = levenberg_marquardt(f, goal, torch.zeros(1, 3, dtype=torch.float64), lo, hi, 200)
     ref = torch.linalg.lstsq(A, goal.unsqueeze(1)).solution.squeeze(1)
     assert torch.allclose(out.x[0], ref, atol=1e-5)
 
@@ -41,7 +41,7 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     """A goal outside the box: x stays within it and ends at the bound; |e| never rises (trace);
     a row that starts within tol takes no step; ``done`` stops the others."""
     def f(x, rows):
-        return x.clone()
+        return x.clone(), torch.eye(2, dtype=x.dtype).expand(x.shape[0], 2, 2)
 
     goal = torch.tensor([2.0, 0.5], dtype=torch.float64)
     lo, hi = torch.zeros(2, dtype=torch.float64), torch.ones(2, dtype=torch.float64)
@@ -55,6 +55,27 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     assert bool((errs[1:] <= errs[:-1] + 1e-15).all())
     never = levenberg_marquardt(f, goal, x0, lo, hi, 40, done=lambda stopped: torch.ones_like(stopped))
     assert never.steps.tolist() == [0, 0]
+
+
+def test_levenberg_marquardt_stops_evaluating_a_row_refused_at_the_largest_damping():
+    """A row whose goal lies outside the box ends at the bound; once its step is refused at
+    lam_max (the same step would come again) the model no longer sees it, yet its steps and the
+    trace count the whole budget; a row that can still move keeps being evaluated."""
+    seen = []
+
+    def f(x, rows):
+        seen.append(rows.clone())
+        return x.clone(), torch.eye(1, dtype=x.dtype).expand(x.shape[0], 1, 1)
+
+    goal = torch.tensor([[2.0], [0.5]], dtype=torch.float64)  # row 0: out of [0, 1]; row 1: inside
+    lo, hi = torch.zeros(1, dtype=torch.float64), torch.ones(1, dtype=torch.float64)
+    x0 = torch.tensor([[1.0], [0.0]], dtype=torch.float64)
+    trace = []
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, lam=0.5, lam_max=1.0, trace=trace)
+    assert out.steps.tolist() == [40, 40] and len(trace) == 40
+    assert out.x[0, 0] == 1.0 and float(out.err[0]) == pytest.approx(1.0)
+    assert sum(int((r == 0).sum()) for r in seen[1:]) <= 2  # row 0: refused at 0.5 * 4 -> lam_max, then dropped
+    assert sum(int((r == 1).sum()) for r in seen[1:]) >= 10
 
 
 def test_enough_succeeded_counts_per_problem():
