@@ -150,10 +150,19 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     tolerance = solver.tolerance_mm / 1000
+    live = None  # the trials whose networks still run, once most have stopped (None: all)
+    r_hat = sigma = None
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
-        step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
-        config = torch.addcmul(env.lower, span, step.o)  # (13)
+        noise_k = torch.randn(T, n, generator=gen, dtype=dtype, device=device)  # every trial's draw, always
+        if live is None:
+            step = net(x, noise_k)
+            o, r_hat, sigma = step.o, step.r_hat, step.sigma
+        else:  # the stopped trials' outputs are never used: their rows keep stale values
+            step = net(x[live], noise_k[live])
+            o = o_prev.index_copy(0, live, step.o)
+            r_hat, sigma = r_hat.index_copy(0, live, step.r_hat), sigma.index_copy(0, live, step.sigma)
+        config = torch.addcmul(env.lower, span, o)  # (13)
         if best.all_active or best.n_active * 2 > T or not env.subsets:
             ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
         else:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
@@ -162,7 +171,10 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
-        net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
+        if live is None:
+            net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
+        else:
+            net.reinforce(observed[live], best.active[live])
         best.rescore(k + 1)
         best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
         if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
@@ -175,13 +187,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
                 ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
         if solver.history:
-            for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
-                               ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
+            for key, value in (("reinforcement", r), ("observed", observed), ("expected", r_hat),
+                               ("sigma", sigma), ("total", ev.error), ("errors", ev.finger_errors),
                                ("collisions", ev.collisions), ("alignment", ev.alignment)):
                 if value is not None:
                     hist.setdefault(key, []).append(value)
             hist.setdefault("time", []).append(time.perf_counter() - t0)
-        o_new = step.o if best.all_active else torch.where(best.active.unsqueeze(1), step.o, o_prev)
+        o_new = o if best.all_active else torch.where(best.active.unsqueeze(1), o, o_prev)
         o_prev2, o_prev = o_prev, o_new
         if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
             best.halt(k + 1)
@@ -193,8 +205,14 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 done = best.active & (observed > threshold)
                 if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
                     done &= ev.collisions == 0
-            if bool(done.any()) and not best.finish(done, k + 1):
-                break
+            if bool(done.any()):
+                if not best.finish(done, k + 1):
+                    break
+                running = T if live is None else live.numel()
+                if best.n_active * 4 <= running and running >= 64 and not net.autograd:  # run the rest only
+                    keep = best.active.nonzero().squeeze(1)
+                    net = net.select(keep if live is None else torch.searchsorted(live, keep))
+                    live = keep
     return best.config, best.evaluation, best.r, best.iterations
 
 

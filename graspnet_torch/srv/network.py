@@ -98,6 +98,21 @@ class ConfigurationNetwork(nn.Module):
                  {"params": [self.phi, self.phi_b], "lr": cfg.lr_lms}], lr=cfg.lr_bp, foreach=True)
         self._cache: tuple | None = None
 
+    def select(self, rows: Tensor) -> ConfigurationNetwork:
+        """The networks of the trials ``rows`` (B,), copied: what a loop whose other trials have
+        stopped still runs (each trial's network is independent, so its steps are unchanged)."""
+        if self.autograd:
+            raise ValueError("select() needs the fused updates (autograd=False)")
+        out = ConfigurationNetwork.__new__(ConfigurationNetwork)
+        nn.Module.__init__(out)
+        out.n, out.trials, out.cfg, out.autograd = self.n, int(rows.numel()), self.cfg, False
+        for name in ("W1", "b1", "W2", "b2", "theta", "theta_b", "phi", "phi_b"):
+            setattr(out, name, nn.Parameter(getattr(self, name)[rows].clone(), requires_grad=False))
+        out._bp = [out.W1, out.b1, out.W2, out.b2]
+        out._srv = [out.theta, out.theta_b, out.phi, out.phi_b]
+        out._cache = None
+        return out
+
     def forward(self, x: Tensor, noise: Tensor) -> SRVStep:
         """x: (T, 2n) current configuration and its change; noise: (T, n) standard normal draws."""
         x = x.unsqueeze(1)
