@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 from graspnet_torch.jobs.inspect_robots import inspect_robots
-from graspnet_torch.paths import repo_root
+from tests.in_process import ScriptRun, run_script
 
 
 def test_inspect_robots_writes_pictures_and_table(tmp_path, capsys):
@@ -22,9 +19,9 @@ def test_inspect_robots_writes_pictures_and_table(tmp_path, capsys):
     assert not list(tmp_path.glob("*.tmp*")) and not list(tmp_path.glob("tmp*"))
 
 
-def _script(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(repo_root() / "scripts" / "inspect_robots.py"), *args],
-                          capture_output=True, text=True, cwd=repo_root())
+def _script(*args: str) -> ScriptRun:
+    """scripts/inspect_robots.py's entry point, in this process (:func:`run_script`)."""
+    return run_script("inspect_robots.py", *args)
 
 
 def test_script_unknown_robot_exits_2_with_one_line(tmp_path):

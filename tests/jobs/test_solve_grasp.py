@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 from graspnet_torch.paths import repo_root
+from tests.in_process import ScriptRun, run_script
 
 
-def _run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), *args],
-                          capture_output=True, text=True, cwd=repo_root())
+def _run(*args: str) -> ScriptRun:
+    """scripts/solve_grasp.py's entry point, in this process (:func:`run_script`); the real command
+    in a fresh process is tests/jobs/test_bad_input.py's test_valid_odd_input_runs."""
+    return run_script("solve_grasp.py", *args)
 
 
 def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):

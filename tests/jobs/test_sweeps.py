@@ -15,6 +15,7 @@ from graspnet_torch.jobs.solve_grasp import hparams_of
 from graspnet_torch.jobs.summarize_sweep import collect_sweep, summarize_sweep
 from graspnet_torch.paths import repo_root
 from graspnet_torch.solver.result import GraspResult, TrialResult
+from tests.in_process import run_script
 
 
 def _fake_sweep(root, rows):
@@ -47,8 +48,7 @@ def test_the_summary_tables_agree_with_the_job_results(tmp_path):
 def test_a_folder_without_results_is_refused_and_nothing_written(tmp_path):
     with pytest.raises(ConfigError, match="no job results"):
         summarize_sweep(tmp_path)
-    res = subprocess.run([sys.executable, str(repo_root() / "scripts" / "summarize_sweep.py"), str(tmp_path)],
-                         capture_output=True, text=True)
+    res = run_script("summarize_sweep.py", str(tmp_path))
     assert res.returncode == 2 and res.stderr.startswith("error: ") and not list(tmp_path.iterdir())
 
 
