@@ -122,6 +122,7 @@ def test_checkpoint_for_another_robot_or_chain_is_refused(ik, tmp_path):
         gt.load_finger_ik(changed, default_checkpoint("hand"))
 
 
+@pytest.mark.slow
 def test_candidates_and_fallback_never_worsen_and_rescue_poor_answers(hand, index_chain):
     """With an untrained expert the winner's answer is poor; refining more candidates and the
     random-restart fallback can only lower the error, and the fallback solves most targets."""

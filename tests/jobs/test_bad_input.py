@@ -124,6 +124,7 @@ def test_device_cuda_is_checked_for_availability(tmp_path):
     _refused(tmp_path, "solve_grasp.py", "device=cuda", message="device=cuda: CUDA is not available")
 
 
+@pytest.mark.slow
 def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path):
     line = _refused_in_a_fresh_process(tmp_path, "solve_grasp.py", "trials=200000000",
                                        message="trials=200000000 x max_iterations=2000")
@@ -164,6 +165,7 @@ def test_bad_problem_files_are_refused_with_a_short_line(tmp_path, text, message
     assert len(line) < 600
 
 
+@pytest.mark.slow
 def test_oversized_non_utf8_and_special_problem_files(tmp_path):
     big = tmp_path / "big.yaml"
     with open(big, "w") as fh:
@@ -246,6 +248,7 @@ def test_resume_from_a_non_finite_state_is_refused(tmp_path):
     assert sorted(p.name for p in run.iterdir()) == ["state.pt"]  # checked before Hydra writes .hydra/
 
 
+@pytest.mark.slow
 def test_valid_odd_input_runs(tmp_path):
     """What looks odd but is valid runs: a sweep of good values, ints for floats, a JSON problem."""
     problem = tmp_path / "p.json"
@@ -259,6 +262,7 @@ def test_valid_odd_input_runs(tmp_path):
     assert os.listdir(tmp_path / "run")
 
 
+@pytest.mark.slow
 def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
     """The peak memory of a real solve (4000 trials x 60 iterations with history, in a fresh
     process) stays under the estimate the refusal uses, and the estimate is not wildly above it."""
@@ -350,6 +354,7 @@ def test_bad_manus_problems_are_refused(tmp_path, text, message):
     ("inspect_robots.py", ["robots=[octopus]"], "unknown robot 'octopus'"),
     ("reference_posture.py", ["restarts=0"], "restarts=0: expected an integer in [1, 1000]"),
 ])
+@pytest.mark.slow
 def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, message):
     """A sample of the refusals above, each script once, as real commands in a fresh process."""
     _refused_in_a_fresh_process(tmp_path, script, *args, message=message)

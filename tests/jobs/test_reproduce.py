@@ -18,6 +18,7 @@ def _run(*args: str) -> ScriptRun:
     return run_script("reproduce.py", *args)
 
 
+@pytest.mark.slow
 def test_one_experiment_writes_the_report_numbers_and_figure(tmp_path):
     out = tmp_path / "out"
     res = _run("+experiment=fig10", "experiments.fig10.trials=2", f"out={out}", f"hydra.run.dir={tmp_path / 'run'}")

@@ -72,6 +72,7 @@ def test_the_slurm_launcher_config_names_partition_time_cpus_and_array_paralleli
     assert "partition" in launcher
 
 
+@pytest.mark.slow
 def test_a_submitit_local_sweep_runs_real_jobs_and_summarizes(tmp_path):
     """hydra/launcher=submitit_local: real submitit jobs on this machine, each writing its result
     and its TensorBoard hparams; the summary turns them into the table."""

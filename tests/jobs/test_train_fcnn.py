@@ -30,6 +30,7 @@ def test_job_writes_state_experts_tensorboard_and_export(hand, tmp_path, capsys)
     assert loaded.finger_names == ("index", "pinky")
 
 
+@pytest.mark.slow
 def test_resume_extends_an_interrupted_run(hand, tmp_path):
     run = tmp_path / "run"
     train_fcnn(hand, TINY, run, fingers=["middle"], progress=False, eval_targets=100)
@@ -54,6 +55,7 @@ def _script(*args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, cwd=repo_root())
 
 
+@pytest.mark.slow
 def test_script_trains_and_refuses_bad_input(tmp_path):
     res = _script("robot=hand", "fingers=[thumb]", "fcnn.epochs=2", "fcnn.targets_per_epoch=16",
                   "fcnn.train_steps=2", "fcnn.val_targets=100", "eval_targets=100", "progress=false",
@@ -66,6 +68,7 @@ def test_script_trains_and_refuses_bad_input(tmp_path):
         "error: robot 'hand' has no finger 'little' (fingers: thumb, index, middle, ring, pinky)"]
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_to_the_same_result(hand, tmp_path, monkeypatch):
     """Kill the run during the 2nd finger's 4th epoch; resume=true finishes it, and the experts
     equal those of an uninterrupted run (state is saved every checkpoint_every epochs)."""

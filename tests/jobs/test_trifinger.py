@@ -68,6 +68,7 @@ def test_example_config_names_the_packaged_urdf():
     assert cfg.checkpoint == EXAMPLE.resolve() / "trifinger.fcnn.pt"
 
 
+@pytest.mark.slow
 def test_training_exports_the_checkpoint_beside_the_config(trained):
     folder, robot, ik, rows = trained
     assert (folder / "trifinger.fcnn.pt").is_file() and (folder / "run" / "state.pt").is_file()
@@ -106,6 +107,7 @@ def _tips_from_urdf(urdf: bytes, palm_link: str, tips: dict[str, str], result: d
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.slow
 def test_random_reachable_problems_are_solved_and_check_from_the_urdf(trained, seed):
     _folder, robot, ik, _rows = trained
     problem = gt.random_reachable_problem(robot, seed, n_fingers=(2, 3))
@@ -122,6 +124,7 @@ def test_random_reachable_problems_are_solved_and_check_from_the_urdf(trained, s
     assert sum(data["fingertip_error_mm"].values()) == pytest.approx(data["total_error_mm"], abs=1e-6)
 
 
+@pytest.mark.slow
 def test_cli_solves_the_cube_problem(trained):
     folder = trained[0]
     out = folder / "r.json"

@@ -63,6 +63,7 @@ def test_shipped_task_is_reachable(hand, task):
 
 
 @pytest.mark.parametrize("task", ["env1", "env2", "fig10"])
+@pytest.mark.slow
 def test_arm_task_has_a_collision_free_reachable_reference(task):
     """Each arm task's reference (arm joints within the task's bounds, finger joints within
     limits) puts every fingertip on its contact, and FCL finds no collision: the task is

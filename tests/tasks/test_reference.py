@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import pytest
 import torch
 
 import graspnet_torch as gt
@@ -7,6 +8,7 @@ from graspnet_torch.jobs.reference_posture import reference_posture
 from graspnet_torch.tasks.reference import find_reference_posture
 
 
+@pytest.mark.slow
 def test_fit_finds_an_exact_posture_for_a_reachable_problem(hand):
     b = hand.palm_bounds
     pose = torch.as_tensor(b.lower + (b.upper - b.lower) * 0.5, dtype=torch.float64)
@@ -28,6 +30,7 @@ def test_fit_finds_an_exact_posture_for_a_reachable_problem(hand):
         assert float((got[hand.finger_index(c["finger"])] - torch.tensor(c["position"])).norm()) < 2e-4
 
 
+@pytest.mark.slow
 def test_job_prints_a_reference_block(capsys):
     fit = reference_posture({"task": "glass3", "restarts": 4})
     out = capsys.readouterr().out
