@@ -348,13 +348,12 @@ def test_bad_manus_problems_are_refused(tmp_path, text, message):
 
 
 @pytest.mark.parametrize(("script", "args", "message"), [
-    ("solve_grasp.py", ["solver.tolerance=1"], "unknown setting 'solver.tolerance' (settings of solver:"),
-    ("solve_grasp.py", ["-m", "seed=0,1", "problem=/dev/zero"], "/dev/zero: the problem file is not a regular file"),
     ("train_fcnn.py", ["fcnn.targets_per_epoch=100000", "fcnn.random_restarts=1000"], "GiB of memory but"),
     ("inspect_robots.py", ["robots=[octopus]"], "unknown robot 'octopus'"),
     ("reference_posture.py", ["restarts=0"], "restarts=0: expected an integer in [1, 1000]"),
 ])
 @pytest.mark.slow
 def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, message):
-    """A sample of the refusals above, each script once, as real commands in a fresh process."""
+    """A sample of the refusals above as real commands in a fresh process (solve_grasp.py's: the
+    memory estimate and the oversized problem file above)."""
     _refused_in_a_fresh_process(tmp_path, script, *args, message=message)

@@ -12,6 +12,7 @@ import graspnet_torch as gt
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import repo_root
+from tests.in_process import run_script
 
 TINY = FCNNTrainCfg(epochs=3, targets_per_epoch=32, train_steps=5, batch_size=32, val_targets=200, val_every=2)
 
@@ -62,8 +63,8 @@ def test_script_trains_and_refuses_bad_input(tmp_path):
                   f"hydra.run.dir={tmp_path / 'ok'}")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "ok" / "fcnn.pt").is_file() and "thumb" in res.stdout
-    res = _script("robot=hand", "fingers=[little]", f"hydra.run.dir={tmp_path / 'bad'}")
-    assert res.returncode == 2
+    res = run_script("train_fcnn.py", "robot=hand", "fingers=[little]", f"hydra.run.dir={tmp_path / 'bad'}")
+    assert res.returncode == 2 and not (tmp_path / "bad").exists()
     assert res.stderr.strip().splitlines() == [
         "error: robot 'hand' has no finger 'little' (fingers: thumb, index, middle, ring, pinky)"]
 
