@@ -105,8 +105,8 @@ def test_missing_checkpoint(hand, tmp_path):
         gt.load_finger_ik(hand, tmp_path / "nope.pt")
 
 
-def test_checkpoint_for_another_robot_or_chain_is_refused(ik, tmp_path):
-    arm_hand = gt.load_robot("arm_hand")  # same fingers, other robot name
+def test_checkpoint_for_another_robot_or_chain_is_refused(ik, robots, tmp_path):
+    arm_hand = robots["arm_hand"]  # same fingers, other robot name
     with pytest.raises(gt.CheckpointError, match=r"fcnn.pt: trained for robot 'hand', not 'arm_hand'"):
         gt.load_finger_ik(arm_hand, default_checkpoint("hand"))
     # a hand whose index finger has other joint limits: same names, different chain

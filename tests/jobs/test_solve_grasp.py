@@ -232,10 +232,9 @@ def test_dls_with_sensor_noise_is_refused_before_any_work(tmp_path):
     assert not out.exists()
 
 
-def _write_random_problems(folder, n):
+def _write_random_problems(robot, folder, n):
     import graspnet_torch as gt
 
-    robot = gt.load_robot("hand")
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
     for s in range(n):
@@ -246,11 +245,11 @@ def _write_random_problems(folder, n):
 
 
 @pytest.mark.slow
-def test_many_problems_from_a_folder_write_one_result_each(tmp_path):
+def test_many_problems_from_a_folder_write_one_result_each(hand, tmp_path):
     """problem=DIR: every problem file solved in one vectorised batch, one result JSON per file
     (named after it), a summary.csv, and the results checkable like any other."""
     folder = tmp_path / "problems"
-    for k, data in enumerate(_write_random_problems(folder, 3)):
+    for k, data in enumerate(_write_random_problems(hand, folder, 3)):
         (folder / f"p{k}.json").write_text(json.dumps(data))
     out = tmp_path / "results"
     res = _run(f"problem={folder}", f"out={out}", "trials=2", f"hydra.run.dir={tmp_path / 'run'}")
@@ -263,8 +262,8 @@ def test_many_problems_from_a_folder_write_one_result_each(tmp_path):
     assert "3 problems" in res.stdout
 
 
-def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
-    rows = _write_random_problems(tmp_path, 2)
+def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(hand, tmp_path):
+    rows = _write_random_problems(hand, tmp_path, 2)
     path = tmp_path / "p.jsonl"
     path.write_text(json.dumps(rows[0]) + "\n\n" + '{"robot": "hand", "contacts": [}\n' + json.dumps(rows[1]) + "\n")
     out = tmp_path / "results"
@@ -274,10 +273,10 @@ def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
     assert not out.exists() and not (tmp_path / "run").exists()
 
 
-def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(tmp_path):
+def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(hand, tmp_path):
     """problem=DIR writes into a folder: out naming a file, or batch=0, is refused before any work."""
     folder = tmp_path / "problems"
-    for k, data in enumerate(_write_random_problems(folder, 2)):
+    for k, data in enumerate(_write_random_problems(hand, folder, 2)):
         (folder / f"p{k}.json").write_text(json.dumps(data))
     taken = tmp_path / "taken.json"
     taken.write_text("{}")
