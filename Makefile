@@ -25,9 +25,9 @@ demo: $(STAMP)  ## solve the default problem (glass3, 20 trials, R3: no finger t
 robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
 	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots
 
-test: $(STAMP)  ## ruff check + the whole test suite
+test: $(STAMP)  ## ruff check + the whole test suite on two processes (pytest -n 2; CI runs this)
 	$(PY) -m ruff check .
-	$(PY) -m pytest
+	$(PY) -m pytest -n 2 --dist loadscope
 
 test-fast: $(STAMP)  ## the inner loop: every test not marked slow (pytest -m "not slow", < 1 min)
 	$(PY) -m pytest -m "not slow"

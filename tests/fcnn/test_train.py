@@ -53,6 +53,7 @@ def test_tiny_training_on_planar_2r_chain_converges(hand, planar_chain):
     assert float(refined.median()) < 1e-5
 
 
+@pytest.mark.slow
 def test_same_seed_same_experts(index_chain):
     cfg = FCNNTrainCfg(epochs=3, **TINY)
     a, b = FingerTrainer(index_chain, cfg, seed=5), FingerTrainer(index_chain, cfg, seed=5)
@@ -81,6 +82,7 @@ def test_state_round_trip_continues_identically(index_chain):
         assert torch.allclose(resumed.experts.state_dict()[key], value, atol=1e-6), key
 
 
+@pytest.mark.slow
 def test_trained_set_drives_finger_ik(hand, index_chain):
     trainer = FingerTrainer(index_chain, FCNNTrainCfg(epochs=5, **TINY), seed=0)
     for _ in range(5):

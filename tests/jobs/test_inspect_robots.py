@@ -67,6 +67,7 @@ def test_robots_by_path_get_generic_opposition_panels(tmp_path, capsys):
     assert capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_a_picture_failure_is_a_warning_per_robot(tmp_path, capsys, monkeypatch):
     import graspnet_torch.viz as viz
 

@@ -27,6 +27,7 @@ def _fake_sweep(root, rows):
                                                      "iterations": 10 + k, "wall_time_s": 0.5, "collisions": 0}))
 
 
+@pytest.mark.slow
 def test_the_summary_tables_agree_with_the_job_results(tmp_path):
     """Swept parameters found from the overrides; per-setting medians recomputed by hand."""
     rows = [(["noise=none", "reward.a=1", f"seed={s}"], e, True) for s, e in enumerate((1.0, 3.0))]

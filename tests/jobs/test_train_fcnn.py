@@ -17,6 +17,7 @@ from tests.in_process import run_script
 TINY = FCNNTrainCfg(epochs=3, targets_per_epoch=32, train_steps=5, batch_size=32, val_targets=200, val_every=2)
 
 
+@pytest.mark.slow
 def test_job_writes_state_experts_tensorboard_and_export(hand, tmp_path, capsys):
     export = tmp_path / "exported" / "fcnn.pt"
     _ik, rows = train_fcnn(hand, TINY, tmp_path / "run", fingers=["index", "pinky"], export=export,

@@ -48,6 +48,7 @@ def test_a_mesh_robot_is_drawn(tmp_path, capsys, skeletons):
     assert not skeletons and capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_a_robot_without_geometry_is_a_skeleton(tmp_path, capsys, skeletons):
     robot = gt.load_robot(write_robot(tmp_path, bare_hand_urdf(), name="barehand"))
     path = _draw(robot, tmp_path / "bare.png")
@@ -65,6 +66,7 @@ def test_a_visual_only_robot_draws_its_visual_meshes(tmp_path, skeletons):
     assert _draw(robot, tmp_path / "v.png").read_bytes()[:8] == PNG and not skeletons
 
 
+@pytest.mark.slow
 def test_a_broken_mesh_is_one_warning_and_a_skeleton(tmp_path, capsys, skeletons):
     robot = gt.load_robot(write_robot(tmp_path, mesh_hand_urdf('<mesh filename="package://gone/palm.stl"/>')))
     path = _draw(robot, tmp_path / "broken.png")
