@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -25,9 +25,12 @@ demo: $(STAMP)  ## solve the default problem (glass3, 20 trials, R3: no finger t
 robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
 	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots
 
-test: $(STAMP)  ## ruff check + pytest
+test: $(STAMP)  ## ruff check + the whole test suite on two processes (pytest -n 2; CI runs this)
 	$(PY) -m ruff check .
-	$(PY) -m pytest
+	$(PY) -m pytest -n 2 --dist loadscope
+
+test-fast: $(STAMP)  ## the inner loop: every test not marked slow (pytest -m "not slow", < 1 min)
+	$(PY) -m pytest -m "not slow"
 
 reproduce: $(STAMP)  ## every experiment of the paper -> reports/REPRODUCTION.md and its figures (~30 min on 2 cores)
 	$(PY) scripts/reproduce.py out=reports hydra.run.dir=outputs/reproduce/full

@@ -1,11 +1,16 @@
 from __future__ import annotations
 
+import os
+
 import pytest
 import torch
 
 import graspnet_torch as gt
 
 ROBOTS = ("hand", "arm_hand", "manus")
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # pytest -n N: N processes share the cores, one torch thread each
+    torch.set_num_threads(1)
 
 
 @pytest.fixture(scope="session")

@@ -29,6 +29,7 @@ def test_failed_write_leaves_previous_file_and_no_temporary(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ckpt.pt"]
 
 
+@pytest.mark.slow
 def test_sigkill_during_a_write_leaves_the_previous_file_whole(tmp_path):
     """A writer killed with SIGKILL in the middle of writing 20 MB leaves the old file as it was
     (only a stray temporary, never a half-written target)."""

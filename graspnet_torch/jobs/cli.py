@@ -254,6 +254,8 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    global _job_started
+    _job_started = False  # a new command (a test may run several in one process)
     # the checks run on one thread (a busy machine, README "Threads"); every job sets its own count
     torch.set_num_threads(1)
     if argv is None:

@@ -70,6 +70,7 @@ def test_the_proxy_covers_the_mesh(mesh_hand):
     assert self_collision_primitive(palm)[0] == "capsule"  # a small box: a capsule, as for box links
 
 
+@pytest.mark.slow
 def test_the_proxy_never_misses_what_fcl_finds_on_the_mesh(mesh_hand):
     """Random small boxes around the palm: each one FCL finds on the palm, the proxy finds too;
     boxes clear of the grown box are clear for both."""

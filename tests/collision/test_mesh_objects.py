@@ -56,6 +56,7 @@ def test_inside_and_depth_of_a_closed_mesh():
 
 
 @pytest.mark.parametrize("ext", ["stl", "obj", "ply", "glb"])
+@pytest.mark.slow
 def test_meshes_in_every_format_at_a_scale_are_the_same_object(tmp_path, hand, ext):
     """The glass of glass3 written in millimetres as STL, OBJ, PLY or GLB, loaded with scale 0.001:
     FCL counts the same collisions as for the primitive on the same postures, and the problem's
@@ -91,6 +92,7 @@ def test_a_bad_scale_is_refused(tmp_path, scale, message):
         gt.GraspProblem.from_mapping(data)
 
 
+@pytest.mark.slow
 def test_a_convex_mesh_is_its_own_piece_and_the_pieces_are_cached(tmp_path):
     """A box mesh: one exact piece, its six face planes and bevels at its 12 edges and 8 corners,
     whose distance is the box's inside and its true distance straight beyond a face, an edge or a
@@ -123,6 +125,7 @@ def test_a_convex_mesh_is_its_own_piece_and_the_pieces_are_cached(tmp_path):
     assert float(out.stdout) == pytest.approx(0.005 * np.sqrt(3))  # the cached cube's corner bevel, not the file's
 
 
+@pytest.mark.slow
 def test_the_pieces_of_a_concave_mesh_hold_its_inside():
     """A real, concave mesh (pybullet_data's blob 000): the pieces' union holds the points well
     inside the mesh and leaves out the points well outside."""
@@ -143,6 +146,7 @@ def test_the_pieces_of_a_concave_mesh_hold_its_inside():
     assert np.mean(sd[far_out] > 0) > 0.95
 
 
+@pytest.mark.slow
 def test_the_proxy_agrees_with_fcl_near_real_meshes(hand, tmp_path):
     """Contact sets on real meshes at random poses (a concave blob and a convex toy cylinder), and
     glass3 moved with its glass as a mesh: over configurations of their search spaces, the proxy's

@@ -49,6 +49,7 @@ def _agreement(robot, problem, body, q, palm):
 
 
 @pytest.mark.parametrize("task", ["env1", "fig10"])
+@pytest.mark.slow
 def test_proxy_agrees_with_fcl_on_random_arm_configurations(arm_hand, task):
     """>= 99 % of random configurations get the same verdict (collision-free or not) from the
     proxy as from FCL, on a set where a good part collides; the counts themselves on >= 90 %
@@ -62,6 +63,7 @@ def test_proxy_agrees_with_fcl_on_random_arm_configurations(arm_hand, task):
     assert exact >= 0.90, exact
 
 
+@pytest.mark.slow
 def test_proxy_agrees_with_fcl_for_the_free_hand_and_its_object():
     hand = gt.load_robot("hand")
     problem = gt.GraspProblem.from_task("glass3")

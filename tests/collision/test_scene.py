@@ -36,6 +36,7 @@ def _sphere_hits(shape, T_link: np.ndarray, centre: np.ndarray, radius: float) -
     return float(np.hypot(dr, dz)) < radius
 
 
+@pytest.mark.slow
 def test_obstacle_pairs_agree_with_closed_form_geometry(hand):
     problem = gt.GraspProblem.from_task("glass3")
     posture = _reference_posture(hand, problem)

@@ -162,6 +162,7 @@ def test_segment_meets_box_matches_sampling():
     assert 0.2 < float(got.double().mean()) < 0.8  # both verdicts present
 
 
+@pytest.mark.slow
 def test_the_floor_half_space_agrees_with_the_spheres_heights(manus):
     """The proxy tests the floor as a half-space: link l hits it where one of its spheres (placed
     by pytorch-kinematics' link frames, float64) dips below the floor's top by its radius."""

@@ -87,6 +87,7 @@ def test_markdown_tables_and_mean_std():
     assert mean_std([1.0, 3.0]) == f"2.00 +- {np.std([1.0, 3.0], ddof=1):.2f}" and mean_std([5.0]) == "5.00 +- 0.00"
 
 
+@pytest.mark.slow
 def test_the_same_seeds_give_the_same_numbers(tmp_path):
     """Two runs of an experiment with the same settings: every number identical; another seed differs."""
     cfg = ObstaclesCfg(runs=2, environments=("env1",), cmaes=False)

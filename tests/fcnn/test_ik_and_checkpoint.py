@@ -105,8 +105,8 @@ def test_missing_checkpoint(hand, tmp_path):
         gt.load_finger_ik(hand, tmp_path / "nope.pt")
 
 
-def test_checkpoint_for_another_robot_or_chain_is_refused(ik, tmp_path):
-    arm_hand = gt.load_robot("arm_hand")  # same fingers, other robot name
+def test_checkpoint_for_another_robot_or_chain_is_refused(ik, robots, tmp_path):
+    arm_hand = robots["arm_hand"]  # same fingers, other robot name
     with pytest.raises(gt.CheckpointError, match=r"fcnn.pt: trained for robot 'hand', not 'arm_hand'"):
         gt.load_finger_ik(arm_hand, default_checkpoint("hand"))
     # a hand whose index finger has other joint limits: same names, different chain
@@ -122,6 +122,7 @@ def test_checkpoint_for_another_robot_or_chain_is_refused(ik, tmp_path):
         gt.load_finger_ik(changed, default_checkpoint("hand"))
 
 
+@pytest.mark.slow
 def test_candidates_and_fallback_never_worsen_and_rescue_poor_answers(hand, index_chain):
     """With an untrained expert the winner's answer is poor; refining more candidates and the
     random-restart fallback can only lower the error, and the fallback solves most targets."""

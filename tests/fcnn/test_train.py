@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from graspnet_torch.fcnn.experts import ExpertSetCfg
@@ -32,6 +33,7 @@ def test_new_expert_when_target_out_of_every_experts_reach(index_chain):
     assert float((trainer.kernel.position(rep) - target[0]).norm()) < trainer.cfg.reach.r_e
 
 
+@pytest.mark.slow
 def test_tiny_training_on_planar_2r_chain_converges(hand, planar_chain):
     cfg = FCNNTrainCfg(experts=ExpertSetCfg(hidden=35, max_experts=4), reach=ReachCfg(), epochs=40,
                        **{**TINY, "train_steps": 40})
@@ -51,6 +53,7 @@ def test_tiny_training_on_planar_2r_chain_converges(hand, planar_chain):
     assert float(refined.median()) < 1e-5
 
 
+@pytest.mark.slow
 def test_same_seed_same_experts(index_chain):
     cfg = FCNNTrainCfg(epochs=3, **TINY)
     a, b = FingerTrainer(index_chain, cfg, seed=5), FingerTrainer(index_chain, cfg, seed=5)
@@ -61,6 +64,7 @@ def test_same_seed_same_experts(index_chain):
         assert torch.equal(pa, pb), na
 
 
+@pytest.mark.slow
 def test_state_round_trip_continues_identically(index_chain):
     cfg = FCNNTrainCfg(epochs=6, reassign_every=2, **TINY)
     straight = FingerTrainer(index_chain, cfg, seed=1)
@@ -78,6 +82,7 @@ def test_state_round_trip_continues_identically(index_chain):
         assert torch.allclose(resumed.experts.state_dict()[key], value, atol=1e-6), key
 
 
+@pytest.mark.slow
 def test_trained_set_drives_finger_ik(hand, index_chain):
     trainer = FingerTrainer(index_chain, FCNNTrainCfg(epochs=5, **TINY), seed=0)
     for _ in range(5):

@@ -1,5 +1,9 @@
 """Bad and hostile input through the command line: each kind of mistake is refused with exit 2,
-one line on stderr, no traceback and no file written (not even Hydra's run folder)."""
+one line on stderr, no traceback and no file written (not even Hydra's run folder).
+
+Each refusal runs the script's own entry point inside the test process (:func:`run_script`: the
+same ``run_cli`` checks, milliseconds instead of a 3-5 s interpreter start); a sample of them also
+runs as a real command in a fresh process, where its time and peak memory are measured."""
 
 from __future__ import annotations
 
@@ -13,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from graspnet_torch.paths import repo_root
+from tests.in_process import run_script
 from tests.processes import run_measured
 
 GLASS3 = (repo_root() / "configs" / "task" / "glass3.yaml").read_text()
@@ -34,18 +39,33 @@ def _run_measured(tmp_path: Path, script: str, *args: str) -> tuple[subprocess.C
     return res, time.perf_counter() - t0, peak
 
 
-def _refused(tmp_path: Path, script: str, *args: str, message: str) -> str:
-    """Run ``script`` with its outputs under tmp_path/run; assert a clean refusal; return the line."""
-    res, seconds, peak = _run_measured(tmp_path, script, *args, f"hydra.run.dir={tmp_path / 'run'}",
-                                       f"hydra.sweep.dir={tmp_path / 'run'}")
-    lines = res.stderr.strip().splitlines()
-    assert res.returncode == 2, res.stderr[-2000:]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.stderr, res.stderr[-2000:]
+def _check_refusal(tmp_path: Path, returncode: int, stderr: str, message: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert returncode == 2, stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in stderr, stderr[-2000:]
     assert message in lines[0], lines[0]
     assert not (tmp_path / "run").exists(), "a refused run wrote its run folder"
+    return lines[0]
+
+
+def _refused(tmp_path: Path, script: str, *args: str, message: str) -> str:
+    """Run ``script`` (in this process) with its outputs under tmp_path/run; assert a clean
+    refusal; return the line."""
+    res = run_script(script, *args, f"hydra.run.dir={tmp_path / 'run'}", f"hydra.sweep.dir={tmp_path / 'run'}")
+    line = _check_refusal(tmp_path, res.returncode, res.stderr, message)
+    assert res.stdout == "" and res.warnings == [], (res.stdout[-2000:], res.warnings)
+    return line
+
+
+def _refused_in_a_fresh_process(tmp_path: Path, script: str, *args: str, message: str) -> str:
+    """:func:`_refused` as a real command: also quick (< 30 s with the interpreter's start) and
+    small (< 1 GiB peak)."""
+    res, seconds, peak = _run_measured(tmp_path, script, *args, f"hydra.run.dir={tmp_path / 'run'}",
+                                       f"hydra.sweep.dir={tmp_path / 'run'}")
+    line = _check_refusal(tmp_path, res.returncode, res.stderr, message)
     assert seconds < 30
     assert peak < 1 << 30, f"a refusal peaked at {peak / 2**20:.0f} MiB"
-    return lines[0]
+    return line
 
 
 def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
@@ -105,8 +125,10 @@ def test_device_cuda_is_checked_for_availability(tmp_path):
     _refused(tmp_path, "solve_grasp.py", "device=cuda", message="device=cuda: CUDA is not available")
 
 
+@pytest.mark.slow
 def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path):
-    line = _refused(tmp_path, "solve_grasp.py", "trials=200000000", message="trials=200000000 x max_iterations=2000")
+    line = _refused_in_a_fresh_process(tmp_path, "solve_grasp.py", "trials=200000000",
+                                       message="trials=200000000 x max_iterations=2000")
     assert "GiB of memory but" in line and "solver.history=false" in line
 
 
@@ -144,13 +166,15 @@ def test_bad_problem_files_are_refused_with_a_short_line(tmp_path, text, message
     assert len(line) < 600
 
 
+@pytest.mark.slow
 def test_oversized_non_utf8_and_special_problem_files(tmp_path):
     big = tmp_path / "big.yaml"
     with open(big, "w") as fh:
         fh.write("robot: hand\ncontacts: [")
         fh.write("0, " * 600_000)
         fh.write("0]\n")
-    _refused(tmp_path, "solve_grasp.py", f"problem={big}", message="a problem file may have at most 1048576 bytes")
+    _refused_in_a_fresh_process(tmp_path, "solve_grasp.py", f"problem={big}",
+                                message="a problem file may have at most 1048576 bytes")
     latin = tmp_path / "latin.yaml"
     latin.write_bytes(GLASS3.replace("Drinking glass", "Verre à boire").encode("latin-1"))
     _refused(tmp_path, "solve_grasp.py", f"problem={latin}", message="not UTF-8 text")
@@ -219,12 +243,13 @@ def test_resume_from_a_non_finite_state_is_refused(tmp_path):
     state = {"format": STATE_FORMAT, "robot": "hand", "seed": 0, "cfg": {}, "fingerprints": {},
              "fingers": {"thumb": {"experts": {"W1": torch.full((2, 3), float("nan"))}}}, "finished": []}
     torch.save(state, run / "state.pt")
-    res, _ = _run("train_fcnn.py", "resume=true", f"hydra.run.dir={run}")
+    res = run_script("train_fcnn.py", "resume=true", f"hydra.run.dir={run}")
     assert res.returncode == 2 and res.stderr.strip().splitlines() == [
         f"error: {run / 'state.pt'}: cannot resume, non-finite values (NaN or infinity) in thumb.experts.W1"]
     assert sorted(p.name for p in run.iterdir()) == ["state.pt"]  # checked before Hydra writes .hydra/
 
 
+@pytest.mark.slow
 def test_valid_odd_input_runs(tmp_path):
     """What looks odd but is valid runs: a sweep of good values, ints for floats, a JSON problem."""
     problem = tmp_path / "p.json"
@@ -238,6 +263,7 @@ def test_valid_odd_input_runs(tmp_path):
     assert os.listdir(tmp_path / "run")
 
 
+@pytest.mark.slow
 def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
     """The peak memory of a real solve (4000 trials x 60 iterations with history, in a fresh
     process) stays under the estimate the refusal uses, and the estimate is not wildly above it."""
@@ -320,3 +346,15 @@ CUBE = (Path(__file__).resolve().parents[2] / "configs" / "task" / "cube.yaml").
 def test_bad_manus_problems_are_refused(tmp_path, text, message):
     path = _problem(tmp_path, text)
     _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+
+
+@pytest.mark.parametrize(("script", "args", "message"), [
+    ("train_fcnn.py", ["fcnn.targets_per_epoch=100000", "fcnn.random_restarts=1000"], "GiB of memory but"),
+    ("inspect_robots.py", ["robots=[octopus]"], "unknown robot 'octopus'"),
+    ("reference_posture.py", ["restarts=0"], "restarts=0: expected an integer in [1, 1000]"),
+])
+@pytest.mark.slow
+def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, message):
+    """A sample of the refusals above as real commands in a fresh process (solve_grasp.py's: the
+    memory estimate and the oversized problem file above)."""
+    _refused_in_a_fresh_process(tmp_path, script, *args, message=message)

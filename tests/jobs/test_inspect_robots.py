@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
+import pytest
 
 from graspnet_torch.jobs.inspect_robots import inspect_robots
-from graspnet_torch.paths import repo_root
+from tests.in_process import ScriptRun, run_script
 
 
+@pytest.mark.slow
 def test_inspect_robots_writes_pictures_and_table(tmp_path, capsys):
     rows = inspect_robots(["hand", "manus"], tmp_path)
     out = capsys.readouterr().out
@@ -22,9 +22,9 @@ def test_inspect_robots_writes_pictures_and_table(tmp_path, capsys):
     assert not list(tmp_path.glob("*.tmp*")) and not list(tmp_path.glob("tmp*"))
 
 
-def _script(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(repo_root() / "scripts" / "inspect_robots.py"), *args],
-                          capture_output=True, text=True, cwd=repo_root())
+def _script(*args: str) -> ScriptRun:
+    """scripts/inspect_robots.py's entry point, in this process (:func:`run_script`)."""
+    return run_script("inspect_robots.py", *args)
 
 
 def test_script_unknown_robot_exits_2_with_one_line(tmp_path):
@@ -35,6 +35,7 @@ def test_script_unknown_robot_exits_2_with_one_line(tmp_path):
     assert not list(tmp_path.glob("*.png"))
 
 
+@pytest.mark.slow
 def test_script_runs(tmp_path):
     """A shipped robot and one given by its YAML path, in one list."""
     from tests.mesh_robots import bare_hand_urdf, write_robot
@@ -46,6 +47,7 @@ def test_script_runs(tmp_path):
     assert "barehand" in res.stdout and (tmp_path / "barehand.png").is_file()
 
 
+@pytest.mark.slow
 def test_robots_by_path_get_generic_opposition_panels(tmp_path, capsys):
     """A hand given by its YAML path (mesh palm; no finger called thumb: the first finger opposes
     the others) and one without any geometry: table rows, gaps and pictures."""
@@ -65,6 +67,7 @@ def test_robots_by_path_get_generic_opposition_panels(tmp_path, capsys):
     assert capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_a_picture_failure_is_a_warning_per_robot(tmp_path, capsys, monkeypatch):
     import graspnet_torch.viz as viz
 

@@ -4,23 +4,21 @@ completeness check that CI's `make reproduce-quick` relies on."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.jobs.reproduce import REPORT, check_complete, compare_numbers, render
-from graspnet_torch.paths import repo_root
-
-SCRIPT = str(repo_root() / "scripts" / "reproduce.py")
+from tests.in_process import ScriptRun, run_script
 
 
-def _run(*args: str, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, timeout=300, cwd=cwd)
+def _run(*args: str) -> ScriptRun:
+    """scripts/reproduce.py's entry point, in this process (:func:`run_script`)."""
+    return run_script("reproduce.py", *args)
 
 
+@pytest.mark.slow
 def test_one_experiment_writes_the_report_numbers_and_figure(tmp_path):
     out = tmp_path / "out"
     res = _run("+experiment=fig10", "experiments.fig10.trials=2", f"out={out}", f"hydra.run.dir={tmp_path / 'run'}")

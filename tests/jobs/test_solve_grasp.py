@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 from graspnet_torch.paths import repo_root
+from tests.in_process import ScriptRun, run_script
 
 
-def _run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), *args],
-                          capture_output=True, text=True, cwd=repo_root())
+def _run(*args: str) -> ScriptRun:
+    """scripts/solve_grasp.py's entry point, in this process (:func:`run_script`); the real command
+    in a fresh process is tests/jobs/test_bad_input.py's test_valid_odd_input_runs."""
+    return run_script("solve_grasp.py", *args)
 
 
+@pytest.mark.slow
 def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
     res = _run("task=glass3", "trials=4", "seed=0", "max_iterations=80", f"hydra.run.dir={tmp_path}")
     assert res.returncode == 0, res.stderr
@@ -29,6 +30,7 @@ def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
     assert "trials succeeded (within 1 mm, collision-free)" in res.stdout
 
 
+@pytest.mark.slow
 def test_problem_file_with_out_and_noise(tmp_path):
     problem = tmp_path / "p.yaml"
     problem.write_text((repo_root() / "configs" / "task" / "glass3.yaml").read_text())
@@ -135,6 +137,7 @@ def test_the_robot_group_is_honoured(tmp_path):
     assert any(not all(a <= v <= b for v, a, b in zip(t.palm_pose, lo, hi, strict=True)) for t in wide.trials)
 
 
+@pytest.mark.slow
 def test_group_sweeps_run_every_job(tmp_path):
     res = _run("-m", "task=glass3,glass4", "trials=2", "max_iterations=5", "pictures=false", "tensorboard=false",
                f"hydra.sweep.dir={tmp_path}")
@@ -143,6 +146,7 @@ def test_group_sweeps_run_every_job(tmp_path):
     assert robots == ["glass3", "glass4"]
 
 
+@pytest.mark.slow
 def test_arm_among_obstacles_from_the_command_line(tmp_path):
     """`robot=arm_hand task=env1 reward=r3` as INTERFACE.md: arm joints by name, palm pose, every
     finger, collisions; TensorBoard gets the collisions per iteration; the summary says how many
@@ -161,6 +165,7 @@ def test_arm_among_obstacles_from_the_command_line(tmp_path):
     assert "trial_00/collisions" in events.Tags()["scalars"]
 
 
+@pytest.mark.slow
 def test_the_free_hand_with_r3_keeps_its_fingers_out_of_the_glass():
     """glass3 with R3 (the demo): the object is the environment; far more trials end collision-free
     (FCL) than with R1, and the best posture is collision-free (measured: 18/20 against 5/20)."""
@@ -175,6 +180,7 @@ def test_the_free_hand_with_r3_keeps_its_fingers_out_of_the_glass():
     assert r3.best.collisions == 0 and r3.best.success and r3.best.total_error_mm < 1.0
 
 
+@pytest.mark.slow
 def test_manus_from_the_command_line(tmp_path):
     """`robot=manus task=cube`: the result JSON of INTERFACE.md (all 9 joints by name, d, alignment,
     gripper points, collisions) and a one-line summary."""
@@ -205,6 +211,7 @@ def test_a_missing_collision_mesh_is_refused_before_any_work(tmp_path):
     assert not out.exists() and not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
 def test_each_solver_from_the_command_line(tmp_path):
     """solver=dls and solver=cmaes: the same result JSON, pictures and TensorBoard as the default."""
     for name in ("dls", "cmaes"):
@@ -225,10 +232,9 @@ def test_dls_with_sensor_noise_is_refused_before_any_work(tmp_path):
     assert not out.exists()
 
 
-def _write_random_problems(folder, n):
+def _write_random_problems(robot, folder, n):
     import graspnet_torch as gt
 
-    robot = gt.load_robot("hand")
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
     for s in range(n):
@@ -238,11 +244,12 @@ def _write_random_problems(folder, n):
     return rows
 
 
-def test_many_problems_from_a_folder_write_one_result_each(tmp_path):
+@pytest.mark.slow
+def test_many_problems_from_a_folder_write_one_result_each(hand, tmp_path):
     """problem=DIR: every problem file solved in one vectorised batch, one result JSON per file
     (named after it), a summary.csv, and the results checkable like any other."""
     folder = tmp_path / "problems"
-    for k, data in enumerate(_write_random_problems(folder, 3)):
+    for k, data in enumerate(_write_random_problems(hand, folder, 3)):
         (folder / f"p{k}.json").write_text(json.dumps(data))
     out = tmp_path / "results"
     res = _run(f"problem={folder}", f"out={out}", "trials=2", f"hydra.run.dir={tmp_path / 'run'}")
@@ -255,8 +262,8 @@ def test_many_problems_from_a_folder_write_one_result_each(tmp_path):
     assert "3 problems" in res.stdout
 
 
-def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
-    rows = _write_random_problems(tmp_path, 2)
+def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(hand, tmp_path):
+    rows = _write_random_problems(hand, tmp_path, 2)
     path = tmp_path / "p.jsonl"
     path.write_text(json.dumps(rows[0]) + "\n\n" + '{"robot": "hand", "contacts": [}\n' + json.dumps(rows[1]) + "\n")
     out = tmp_path / "results"
@@ -266,10 +273,10 @@ def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(tmp_path):
     assert not out.exists() and not (tmp_path / "run").exists()
 
 
-def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(tmp_path):
+def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(hand, tmp_path):
     """problem=DIR writes into a folder: out naming a file, or batch=0, is refused before any work."""
     folder = tmp_path / "problems"
-    for k, data in enumerate(_write_random_problems(folder, 2)):
+    for k, data in enumerate(_write_random_problems(hand, folder, 2)):
         (folder / f"p{k}.json").write_text(json.dumps(data))
     taken = tmp_path / "taken.json"
     taken.write_text("{}")

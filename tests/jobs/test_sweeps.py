@@ -15,6 +15,7 @@ from graspnet_torch.jobs.solve_grasp import hparams_of
 from graspnet_torch.jobs.summarize_sweep import collect_sweep, summarize_sweep
 from graspnet_torch.paths import repo_root
 from graspnet_torch.solver.result import GraspResult, TrialResult
+from tests.in_process import run_script
 
 
 def _fake_sweep(root, rows):
@@ -26,6 +27,7 @@ def _fake_sweep(root, rows):
                                                      "iterations": 10 + k, "wall_time_s": 0.5, "collisions": 0}))
 
 
+@pytest.mark.slow
 def test_the_summary_tables_agree_with_the_job_results(tmp_path):
     """Swept parameters found from the overrides; per-setting medians recomputed by hand."""
     rows = [(["noise=none", "reward.a=1", f"seed={s}"], e, True) for s, e in enumerate((1.0, 3.0))]
@@ -47,8 +49,7 @@ def test_the_summary_tables_agree_with_the_job_results(tmp_path):
 def test_a_folder_without_results_is_refused_and_nothing_written(tmp_path):
     with pytest.raises(ConfigError, match="no job results"):
         summarize_sweep(tmp_path)
-    res = subprocess.run([sys.executable, str(repo_root() / "scripts" / "summarize_sweep.py"), str(tmp_path)],
-                         capture_output=True, text=True)
+    res = run_script("summarize_sweep.py", str(tmp_path))
     assert res.returncode == 2 and res.stderr.startswith("error: ") and not list(tmp_path.iterdir())
 
 
@@ -72,6 +73,7 @@ def test_the_slurm_launcher_config_names_partition_time_cpus_and_array_paralleli
     assert "partition" in launcher
 
 
+@pytest.mark.slow
 def test_a_submitit_local_sweep_runs_real_jobs_and_summarizes(tmp_path):
     """hydra/launcher=submitit_local: real submitit jobs on this machine, each writing its result
     and its TensorBoard hparams; the summary turns them into the table."""

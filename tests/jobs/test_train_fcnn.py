@@ -12,10 +12,12 @@ import graspnet_torch as gt
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import repo_root
+from tests.in_process import run_script
 
 TINY = FCNNTrainCfg(epochs=3, targets_per_epoch=32, train_steps=5, batch_size=32, val_targets=200, val_every=2)
 
 
+@pytest.mark.slow
 def test_job_writes_state_experts_tensorboard_and_export(hand, tmp_path, capsys):
     export = tmp_path / "exported" / "fcnn.pt"
     _ik, rows = train_fcnn(hand, TINY, tmp_path / "run", fingers=["index", "pinky"], export=export,
@@ -30,6 +32,7 @@ def test_job_writes_state_experts_tensorboard_and_export(hand, tmp_path, capsys)
     assert loaded.finger_names == ("index", "pinky")
 
 
+@pytest.mark.slow
 def test_resume_extends_an_interrupted_run(hand, tmp_path):
     run = tmp_path / "run"
     train_fcnn(hand, TINY, run, fingers=["middle"], progress=False, eval_targets=100)
@@ -54,18 +57,20 @@ def _script(*args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, cwd=repo_root())
 
 
+@pytest.mark.slow
 def test_script_trains_and_refuses_bad_input(tmp_path):
     res = _script("robot=hand", "fingers=[thumb]", "fcnn.epochs=2", "fcnn.targets_per_epoch=16",
                   "fcnn.train_steps=2", "fcnn.val_targets=100", "eval_targets=100", "progress=false",
                   f"hydra.run.dir={tmp_path / 'ok'}")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "ok" / "fcnn.pt").is_file() and "thumb" in res.stdout
-    res = _script("robot=hand", "fingers=[little]", f"hydra.run.dir={tmp_path / 'bad'}")
-    assert res.returncode == 2
+    res = run_script("train_fcnn.py", "robot=hand", "fingers=[little]", f"hydra.run.dir={tmp_path / 'bad'}")
+    assert res.returncode == 2 and not (tmp_path / "bad").exists()
     assert res.stderr.strip().splitlines() == [
         "error: robot 'hand' has no finger 'little' (fingers: thumb, index, middle, ring, pinky)"]
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_to_the_same_result(hand, tmp_path, monkeypatch):
     """Kill the run during the 2nd finger's 4th epoch; resume=true finishes it, and the experts
     equal those of an uninterrupted run (state is saved every checkpoint_every epochs)."""

@@ -9,8 +9,6 @@ import importlib.util
 import json
 import math
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +18,7 @@ import yaml
 
 import graspnet_torch as gt
 from graspnet_torch.paths import repo_root
+from tests.in_process import run_script
 
 PACKAGE = "robot_properties_fingers"  # not imported: its __init__ imports pinocchio
 EXAMPLE = repo_root() / "examples" / "trifinger"
@@ -69,6 +68,7 @@ def test_example_config_names_the_packaged_urdf():
     assert cfg.checkpoint == EXAMPLE.resolve() / "trifinger.fcnn.pt"
 
 
+@pytest.mark.slow
 def test_training_exports_the_checkpoint_beside_the_config(trained):
     folder, robot, ik, rows = trained
     assert (folder / "trifinger.fcnn.pt").is_file() and (folder / "run" / "state.pt").is_file()
@@ -107,6 +107,7 @@ def _tips_from_urdf(urdf: bytes, palm_link: str, tips: dict[str, str], result: d
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.slow
 def test_random_reachable_problems_are_solved_and_check_from_the_urdf(trained, seed):
     _folder, robot, ik, _rows = trained
     problem = gt.random_reachable_problem(robot, seed, n_fingers=(2, 3))
@@ -123,13 +124,13 @@ def test_random_reachable_problems_are_solved_and_check_from_the_urdf(trained, s
     assert sum(data["fingertip_error_mm"].values()) == pytest.approx(data["total_error_mm"], abs=1e-6)
 
 
+@pytest.mark.slow
 def test_cli_solves_the_cube_problem(trained):
     folder = trained[0]
     out = folder / "r.json"
-    res = subprocess.run([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"),
-                          f"robot={folder / 'trifinger.yaml'}", f"problem={folder / 'cube.yaml'}", "trials=4",
-                          "max_iterations=50", "pictures=false", "tensorboard=false", f"out={out}",
-                          f"hydra.run.dir={folder / 'cli'}"], capture_output=True, text=True, cwd=repo_root())
+    res = run_script("solve_grasp.py", f"robot={folder / 'trifinger.yaml'}", f"problem={folder / 'cube.yaml'}",
+                     "trials=4", "max_iterations=50", "pictures=false", "tensorboard=false", f"out={out}",
+                     f"hydra.run.dir={folder / 'cli'}")
     assert res.returncode == 0, res.stderr
     data = json.loads(out.read_text())
     assert data["robot"] == "trifinger" and set(data["joints"]) == {"f0", "f120", "f240"}

@@ -96,7 +96,7 @@ def test_multilinear_route_handles_prismatic_joints(odd, gen):
     torch.testing.assert_close(J1, J2, rtol=0, atol=1e-12)
 
 
-def test_fingerprint_sees_the_mimic_coupling(tmp_path, odd):
+def test_fingerprint_sees_the_mimic_coupling(tmp_path, odd, hand):
     folder = tmp_path / "other"
     path = write_oddhand(folder)
     urdf = folder / "oddhand.urdf"
@@ -104,7 +104,7 @@ def test_fingerprint_sees_the_mimic_coupling(tmp_path, odd):
     other = gt.load_robot(str(path))
     assert chain_fingerprint(other.fingers["index"].chain) != chain_fingerprint(odd.fingers["index"].chain)
     assert chain_fingerprint(other.fingers["thumb"].chain) == chain_fingerprint(odd.fingers["thumb"].chain)
-    hand = gt.load_robot("hand")  # no mimic: the plain chain's fingerprint (shipped checkpoints stay valid)
+    # the hand has no mimic: the plain chain's fingerprint (shipped checkpoints stay valid)
     assert chain_fingerprint(hand.fingers["index"].chain) == chain_fingerprint(hand.fingers["index"].chain.spec)
 
 

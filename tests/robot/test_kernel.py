@@ -30,6 +30,7 @@ def every_chain(robot):
 
 
 @pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.slow
 def test_every_chain_matches_pytorch_kinematics(robots, name):
     """1,000 random configurations within limits per chain: tip pose and Jacobian agree to 1e-6."""
     robot = robots[name]
@@ -47,6 +48,7 @@ def test_every_chain_matches_pytorch_kinematics(robots, name):
 
 
 @pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.slow
 def test_fk_finite_at_joint_limits(robots, name):
     robot = robots[name]
     for root, tip in every_chain(robot):

@@ -16,6 +16,8 @@ from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from tests.odd_hands import MIMIC, pk_fingertips_palm, write_odd_arm, write_oddhand
 
+pytestmark = pytest.mark.slow  # every test shares a module fixture that trains the odd hand's FCNN
+
 TINY = FCNNTrainCfg.from_mapping({"epochs": 12, "targets_per_epoch": 96, "train_steps": 15, "val_targets": 500,
                                   "val_every": 12})
 

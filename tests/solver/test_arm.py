@@ -101,6 +101,7 @@ def test_the_robot_chooses_its_solver_defaults_and_the_user_overrides_them():
     ("glass3", gt.SRVNetCfg(), gt.RewardCfg(kind="r1"), 1000, 0.6),
     ("env1", gt.SRVNetCfg(lr_bp=0.03, lr_srv=0.03, lr_lms=0.01), None, 1000, 0.7),
 ])
+@pytest.mark.slow
 def test_learning_beats_the_same_loop_with_learning_rates_at_zero(task, srv, reward, max_iterations, ratio):
     """30 learners on a fixed seed, the paper's protocol: with its learning rates the SRV loop
     needs clearly fewer iterations (failures count as the whole budget) and reaches r > 0.99 at

@@ -84,6 +84,7 @@ def test_bad_approach_is_refused(manus, approach, message):
     assert message in str(info.value)
 
 
+@pytest.mark.slow
 def test_solve_reports_the_interface_fields_recomputable_from_the_urdf(manus):
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
     result = gt.solve(problem, trials=3, seed=0, max_iterations=30)
@@ -121,6 +122,7 @@ def test_polish_lands_from_random_starts(manus):
     assert bool(((q >= env.lower - 1e-12) & (q <= env.upper + 1e-12)).all())
 
 
+@pytest.mark.slow
 def test_polish_and_refine_never_step_into_a_collision(manus):
     """With collisions counted, a polish step that raises the proxy's count is refused: starts
     that are clear stay clear."""
@@ -184,6 +186,7 @@ def test_a_batch_of_problems_evaluates_as_each_problem_alone(manus):
     assert torch.allclose(part.error, ev.error[idx]) and torch.equal(part.collisions, ev.collisions[idx])
 
 
+@pytest.mark.slow
 def test_solve_many_gives_each_problem_its_result(manus):
     """One vectorised loop over two problems: a result per problem, in order, whose distance is
     recomputed from its own problem's points and the reported joints."""

@@ -28,6 +28,7 @@ def problem_from_posture(robot, fingers, seed=0):
         source="from-posture")
 
 
+@pytest.mark.slow
 def test_loop_solves_a_reachable_problem(hand):
     problem = problem_from_posture(hand, ("thumb", "index", "middle"), seed=3)
     result = gt.solve(problem, trials=8, seed=0, max_iterations=1500, solver=SolverCfg.paper())

@@ -100,6 +100,7 @@ def test_contacts_no_palm_position_reaches_together_are_refused(hand):
 
 # ---------------------------------------------------------------- success means the grasp
 
+@pytest.mark.slow
 def test_success_never_reports_a_finger_beyond_the_tolerance():
     """The paper's protocol stops at r > 0.99 (E < 10 mm) and refines the fingers only: trials end
     a few millimetres off. None of them is a success; every success is within the tolerance; a
@@ -126,6 +127,7 @@ def test_success_never_reports_a_collision():
     assert all(t.collisions == 0 for t in result.trials if t.success)
 
 
+@pytest.mark.slow
 def test_the_grasp_rule_stops_at_a_grasp_and_the_paper_rule_at_its_threshold():
     """The default stops a trial once every contact finger is within the tolerance and the proxy
     finds it clear; ``solver=paper`` at r > 0.99."""

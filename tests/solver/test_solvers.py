@@ -148,6 +148,7 @@ def test_cmaes_learns_from_a_noisy_reward_better_than_its_first_generation():
     assert "step_size" in long.outcome.history and long.outcome.history["iteration"][-1] == 600
 
 
+@pytest.mark.slow
 def test_dls_and_cmaes_work_for_the_arm_and_the_manus():
     """Every robot of the one loop: the arm with obstacles (R3, never into a collision the proxy
     sees) and the MANUS (both pairings)."""

@@ -101,6 +101,7 @@ def test_sigma_function():
         SigmaCfg(kind="cubic")
 
 
+@pytest.mark.slow
 def test_one_srv_unit_learns_a_bandit():
     """A single SRV unit (bias input only) maximises a reward peaked at o = 0.7."""
     gen = torch.Generator().manual_seed(0)

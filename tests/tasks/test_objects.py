@@ -86,6 +86,7 @@ def test_a_closure_contact_set_touches_the_mesh_from_a_collision_free_posture(ha
     np.testing.assert_array_equal(again.contacts_world(), problem.contacts_world())  # the same seed
 
 
+@pytest.mark.slow
 def test_the_default_solver_grasps_a_real_mesh_anywhere(hand):
     """A contact set on a real mesh at a random pose, default settings: success (within 1 mm,
     collision-free by FCL), and the result checks from the URDF alone."""
@@ -119,6 +120,7 @@ contacts:
 """
 
 
+@pytest.mark.slow
 def test_the_readme_bottle_is_grasped_standing_and_lying(tmp_path):
     """The README's own-object example: a capsule exported as STL by trimesh, three contacts on its
     surface, default settings. Standing and lying (rx = 90), each is a success (within 1 mm,

@@ -63,7 +63,8 @@ def test_shipped_task_is_reachable(hand, task):
 
 
 @pytest.mark.parametrize("task", ["env1", "env2", "fig10"])
-def test_arm_task_has_a_collision_free_reachable_reference(task):
+@pytest.mark.slow
+def test_arm_task_has_a_collision_free_reachable_reference(robots, task):
     """Each arm task's reference (arm joints within the task's bounds, finger joints within
     limits) puts every fingertip on its contact, and FCL finds no collision: the task is
     solvable collision-free. The obstacles neither touch the object nor swallow a contact."""
@@ -73,7 +74,7 @@ def test_arm_task_has_a_collision_free_reachable_reference(task):
     from graspnet_torch.solver.api import reference_posture
     from graspnet_torch.solver.arm import arm_bounds
 
-    arm = gt.load_robot("arm_hand")
+    arm = robots["arm_hand"]
     p = gt.GraspProblem.from_task(task)
     assert p.robot == "arm_hand" and p.obstacles and p.object is not None
     ref = reference_posture(arm, p)
@@ -171,7 +172,7 @@ def test_bad_arm_references_are_refused(reference, message):
         gt.GraspProblem.from_mapping(data, source="env1")
 
 
-def test_an_arm_reference_with_an_unknown_joint_is_refused():
+def test_an_arm_reference_with_an_unknown_joint_is_refused(robots):
     import yaml
 
     from graspnet_torch.paths import configs_dir
@@ -181,4 +182,4 @@ def test_an_arm_reference_with_an_unknown_joint_is_refused():
     data["reference"]["arm_joints"]["knee"] = 10.0
     problem = gt.GraspProblem.from_mapping(data, source="env1")
     with pytest.raises(gt.ProblemError, match=r"reference.arm_joints: unknown joint\(s\) knee of robot 'arm_hand'"):
-        reference_posture(gt.load_robot("arm_hand"), problem)
+        reference_posture(robots["arm_hand"], problem)

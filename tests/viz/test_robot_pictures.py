@@ -37,6 +37,7 @@ def _draw(robot, path):
     return render_robot(robot, [Panel("home", home), Panel("side", home, (15.0, -15.0))], path)
 
 
+@pytest.mark.slow
 def test_a_mesh_robot_is_drawn(tmp_path, capsys, skeletons):
     write_box_mesh(tmp_path / "meshes" / "palm.stl", subdivisions=5)  # 20480 faces: decimated
     robot = gt.load_robot(write_robot(tmp_path, mesh_hand_urdf('<mesh filename="meshes/palm.stl"/>')))
@@ -47,6 +48,7 @@ def test_a_mesh_robot_is_drawn(tmp_path, capsys, skeletons):
     assert not skeletons and capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_a_robot_without_geometry_is_a_skeleton(tmp_path, capsys, skeletons):
     robot = gt.load_robot(write_robot(tmp_path, bare_hand_urdf(), name="barehand"))
     path = _draw(robot, tmp_path / "bare.png")
@@ -64,6 +66,7 @@ def test_a_visual_only_robot_draws_its_visual_meshes(tmp_path, skeletons):
     assert _draw(robot, tmp_path / "v.png").read_bytes()[:8] == PNG and not skeletons
 
 
+@pytest.mark.slow
 def test_a_broken_mesh_is_one_warning_and_a_skeleton(tmp_path, capsys, skeletons):
     robot = gt.load_robot(write_robot(tmp_path, mesh_hand_urdf('<mesh filename="package://gone/palm.stl"/>')))
     path = _draw(robot, tmp_path / "broken.png")
@@ -73,6 +76,7 @@ def test_a_broken_mesh_is_one_warning_and_a_skeleton(tmp_path, capsys, skeletons
                                                "'package://gone/palm.stl' not found"), err
 
 
+@pytest.mark.slow
 def test_a_solve_with_an_unresolvable_mesh_writes_its_result_and_warns(tmp_path, capsys):
     """A hand (the shipped one's URDF and FCNN checkpoint) whose palm has an extra collision mesh
     that cannot be found: the solve (no object: no collision check) writes its result; the
