@@ -135,7 +135,9 @@ class FingerTrainer:
 
     # ------------------------------------------------------------------ one epoch
     @torch.no_grad()
-    def _collect(self, x: Tensor, stats: dict) -> None:
+    def collect(self, x: Tensor, stats: dict) -> None:
+        """Learn from targets x (N, 3): each reached by the best expert, the next ones, a reaching
+        motion, or a random start that founds a new expert (steps 1-4); counts go into ``stats``."""
         N = x.shape[0]
         E = self.experts.n_active
         out, err, _ = self.compete(x)
@@ -230,7 +232,7 @@ class FingerTrainer:
         """One epoch; returns statistics (counts per step, losses per expert, ...)."""
         stats = {k: 0 for k in ("points", "motions", "step1", "step2", "step3", "step4", "unsolved", "new_experts")}
         _, x = sample_reachable(self.kernel, self.lower, self.upper, self.cfg.targets_per_epoch, self.generator)
-        self._collect(x, stats)
+        self.collect(x, stats)
         self._train(stats)
         self.epochs_done += 1
         stats["moved"] = 0

@@ -32,7 +32,7 @@ from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["check_problem", "hparams_of", "job_settings", "log_hparams", "log_tensorboard", "posture_of",
-           "prepare_solve", "resolve_problem", "solve_grasp", "with_robot_defaults"]
+           "prepare_solve", "resolve_problem", "solve_grasp", "with_robot_defaults", "write_pictures"]
 
 
 def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | RobotCfg | None,
@@ -263,7 +263,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
         _warn_on_failure("TensorBoard logs", log_tensorboard, run_dir / "tb", result, fingers, every=job.log_every)
         _warn_on_failure("TensorBoard hparams", log_hparams, run_dir / "tb", result, overrides)
     if job.pictures:
-        _warn_on_failure("pictures", _pictures, robot, problem, result, run_dir)
+        _warn_on_failure("pictures", write_pictures, robot, problem, result, run_dir)
     return result
 
 
@@ -306,7 +306,8 @@ def posture_panels(robot, problem: GraspProblem, result: GraspResult) -> list:
             Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]
 
 
-def _pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
+def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
+    """posture.png (the best trial) and learning.png (the curves) in ``run_dir``."""
     from graspnet_torch.viz import plot_learning_curves, render_robot
 
     path = render_robot(robot, posture_panels(robot, problem, result), run_dir / "posture.png")

@@ -107,7 +107,7 @@ class GripperEnvironment(Environment):
         self._targets64 = torch.as_tensor(targets, dtype=torch.float64)  # (T or 1, 2, 3)
         self.targets = self._targets64.to(**kw)
         # the body chain's frames P_1..P_n as batched products (robot/frames.py), from which the
-        # gripper points and their Jacobian follow in closed form (see :meth:`_kinematics`)
+        # gripper points and their Jacobian follow in closed form (see :meth:`kinematics`)
         levels = RobotLevels(robot, dtype, device)
         self._chain = levels.body
         self._axes = torch.as_tensor(robot.body.axes, **kw).unsqueeze(-1)  # (n, 3, 1)
@@ -137,7 +137,7 @@ class GripperEnvironment(Environment):
         if self.refine > 0 and settle:
             config, levels, points = self._refine(config, self.refine, targets, lower, upper)
         else:
-            levels, points, _ = self._kinematics(config)
+            levels, points, _ = self.kinematics(config)
         _r, alignment, _r2, d = manus_reward(points, targets.expand_as(points))
         collisions = None
         if self.proxy is not None:
@@ -157,7 +157,7 @@ class GripperEnvironment(Environment):
             ok = ok & (evaluation.collisions == 0)
         return ok
 
-    def _kinematics(self, q: Tensor, jacobian: bool = False) -> tuple[Tensor, Tensor, Tensor | None]:
+    def kinematics(self, q: Tensor, jacobian: bool = False) -> tuple[Tensor, Tensor, Tensor | None]:
         """q (T, n) -> the chain's frames P_1..P_n (T, n, 4, 4), the gripper points (T, 2, 3) and,
         if asked, their Jacobian (T, 6, n). Joint k turns about (or slides along) its axis a_k,
         which P_{k+1} carries into the world (M_k(q) leaves a_k and, revolute, the origin fixed):
@@ -190,20 +190,20 @@ class GripperEnvironment(Environment):
     def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor
                 ) -> tuple[Tensor, Tensor, Tensor]:
         """``steps`` damped least-squares steps (lambda = 0.05, the closed-form Jacobian of
-        :meth:`_kinematics`, no collision test) towards each trial's nearer pairing, within the
+        :meth:`kinematics`, no collision test) towards each trial's nearer pairing, within the
         bounds, each kept where it lowers the point error: the learner proposes, a few local steps
         settle the proposal, and the settled configuration is what is evaluated and reported.
         Returns it (T, n) with its chain frames (T, n, 4, 4) and gripper points (T, 2, 3)."""
         T = q.shape[0]
         tg = targets.expand(T, 2, 3)
-        levels, pts, J = self._kinematics(q, jacobian=True)
+        levels, pts, J = self.kinematics(q, jacobian=True)
         swap = _pairing(pts, tg)
         goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
         err = (goal - pts.reshape(T, 6)).norm(dim=-1)
         lam = torch.full((T,), 0.05, dtype=q.dtype, device=q.device)
         for step in range(steps):
             new = torch.minimum(torch.maximum(q + damped_pinv_step(J, goal - pts.reshape(T, 6), lam), lower), upper)
-            new_levels, new_pts, _ = self._kinematics(new)
+            new_levels, new_pts, _ = self.kinematics(new)
             new_err = (goal - new_pts.reshape(T, 6)).norm(dim=-1)
             better = new_err < err
             q = torch.where(better.unsqueeze(1), new, q)

@@ -24,7 +24,7 @@ def test_new_expert_when_target_out_of_every_experts_reach(index_chain):
         trainer.experts.b3[0] = trainer.experts.normalize_q(torch.zeros(4))
     target = trainer.kernel.position(torch.tensor([[0.1, 0.8, 0.9, 0.4]]))
     stats = {k: 0 for k in ("points", "motions", "step1", "step2", "step3", "step4", "unsolved", "new_experts")}
-    trainer._collect(target, stats)
+    trainer.collect(target, stats)
     assert (stats["step1"], stats["step2"], stats["step3"]) == (0, 0, 0)
     assert stats["step4"] == 1 and stats["new_experts"] == 1
     assert trainer.experts.n_active == 2

@@ -108,7 +108,7 @@ def test_a_picture_failure_after_the_result_is_a_warning(tmp_path, monkeypatch, 
     def broken(*args, **kwargs):
         raise RuntimeError("no display\nsecond line")
 
-    monkeypatch.setattr(job, "_pictures", broken)
+    monkeypatch.setattr(job, "write_pictures", broken)
     out = tmp_path / "r.json"
     job.solve_grasp(_job_cfg(out, pictures=True), tmp_path)
     assert json.loads(out.read_text())["robot"] == "hand"

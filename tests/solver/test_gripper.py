@@ -217,7 +217,7 @@ def test_closed_form_points_and_jacobian_match_the_kernel_and_finite_differences
     env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)), dtype=torch.float64)
     g = torch.Generator().manual_seed(10)
     q = env.lower + (env.upper - env.lower) * torch.rand(6, 9, generator=g, dtype=torch.float64)
-    _levels, points, J = env._kinematics(q, jacobian=True)
+    _levels, points, J = env.kinematics(q, jacobian=True)
     assert torch.allclose(points, manus.gripper_points(q), atol=1e-7)
     h, eye = 1e-6, torch.eye(9, dtype=torch.float64)
     fd = torch.stack([(manus.gripper_points(q + h * eye[k]) - manus.gripper_points(q - h * eye[k])).reshape(6, 6)
