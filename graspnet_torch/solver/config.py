@@ -187,6 +187,10 @@ class SolverCfg:
             through the table is not a success). ``None``: true exactly when ``stop`` is set
             (measured on env1/env2: the best trial collision-free for 12/12 seeds against 7/12
             without), false for the paper's protocol.
+        restart_every: with a threshold, every this many iterations the trials still searching
+            restart: new network weights and a new random start, their best so far kept (a learner
+            stuck in a local minimum rarely leaves it; a fresh one often lands in tens of
+            iterations). ``None``: never (the paper).
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
@@ -203,6 +207,7 @@ class SolverCfg:
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
     stop: int | None = setting(1, lo=1, hi=1_000_000)
     stop_clear: bool | None = None
+    restart_every: int | None = setting(None, lo=1, hi=10_000_000)
     report: str = setting("best", choices=("best", "final"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))

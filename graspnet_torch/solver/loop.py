@@ -213,6 +213,15 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                     keep = best.active.nonzero().squeeze(1)
                     net = net.select(keep if live is None else torch.searchsorted(live, keep))
                     live = keep
+            restart = solver.restart_every is not None and (k + 1) % solver.restart_every == 0
+            if restart and k + 1 < solver.max_iterations:
+                # still searching: a new network and a new random start (the best so far is kept)
+                rows = best.active.nonzero().squeeze(1)
+                net.restart(rows if live is None else torch.searchsorted(live, rows), gen)
+                o_prev = o_prev.index_copy(0, rows, torch.rand(rows.numel(), n, generator=gen, dtype=dtype,
+                                                                device=device))
+                o_prev2 = o_prev
+                polished_at = polished_at.index_fill(0, rows, -float("inf"))
     return best.config, best.evaluation, best.r, best.iterations
 
 

@@ -113,6 +113,15 @@ class ConfigurationNetwork(nn.Module):
         out._cache = None
         return out
 
+    def restart(self, rows: Tensor, generator: torch.Generator | None = None) -> None:
+        """New initial weights for the networks of the trials ``rows`` (B,), drawn as at construction."""
+        g = self.cfg.init_range
+        with torch.no_grad():
+            for p in (*self._bp, *self._srv):
+                u = torch.rand((int(rows.numel()), *p.shape[1:]), generator=generator, dtype=torch.float64)
+                w = (u * 2 - 1) * g
+                p[rows.to(p.device)] = w.to(p)
+
     def forward(self, x: Tensor, noise: Tensor) -> SRVStep:
         """x: (T, 2n) current configuration and its change; noise: (T, n) standard normal draws."""
         x = x.unsqueeze(1)
