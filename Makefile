@@ -29,7 +29,7 @@ test: $(STAMP)  ## ruff check + pytest
 	$(PY) -m ruff check .
 	$(PY) -m pytest
 
-reproduce: $(STAMP)  ## every experiment of the paper -> reports/REPRODUCTION.md and its figures (~30 min on 2 cores)
+reproduce: $(STAMP)  ## every experiment -> reports/REPRODUCTION.md and its figures (32 min on 2 cores before arm, random_hand, tradeoff, proxy)
 	$(PY) scripts/reproduce.py out=reports hydra.run.dir=outputs/reproduce/full
 
 reproduce-quick: $(STAMP)  ## the reduced protocol of every experiment (~2 min) -> outputs/reproduce-quick/REPRODUCTION.md
