@@ -42,20 +42,11 @@ def agreement_problems(folder: Path, objects: tuple[str, ...] = tuple(REAL_OBJEC
                        tasks: tuple[str, ...] = TASKS) -> dict[str, GraspProblem]:
     """name -> problem: a closure contact set on each real object at a random pose, then each task
     moved to a random pose with its object written as a mesh into ``folder`` (one generator, seed 0)."""
-    import torch
-
     import graspnet_torch as gt
-    from graspnet_torch.robot.transforms import matrix_to_pose
-    from graspnet_torch.tasks.objects import as_mesh, closure_problem, random_pose, real_objects
-    from graspnet_torch.tasks.shapes import Shape
+    from graspnet_torch.tasks.objects import as_mesh, random_pose, real_mesh_problems
 
-    hand = gt.load_robot("hand")
     rng = np.random.default_rng(0)
-    out = {}
-    for name, (path, scale) in real_objects().items():
-        if name in objects:
-            pose = matrix_to_pose(torch.as_tensor(random_pose(rng))).numpy()
-            out[name] = closure_problem(hand, Shape("mesh", (), pose, path, scale), seed=0)
+    out = dict(zip(objects, real_mesh_problems(gt.load_robot("hand"), objects, rng), strict=True))
     for task in tasks:
         out[f"{task} (mesh)"] = as_mesh(gt.GraspProblem.from_task(task).moved(random_pose(rng)), folder)
     return out
