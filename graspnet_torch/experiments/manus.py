@@ -12,8 +12,8 @@ This project's checks (issue 10): at every ``approach_every``-th position with a
 solution from the protocol, an ``approach`` drawn within 0.15 m (base x, y) and 20 degrees (every
 revolute joint) of it, solved with the default search window (+-0.2 m, +-30 degrees); and
 ``random_problems`` random reachable problems (a random configuration's gripper points are the
-object's two points, no object, no table). Both are solved with ``gt.solve_many``, 8 learners each;
-the result's best counts.
+object's two points, no object, no table). Both are solved with ``gt.solve_many``, ``check_trials``
+(8) learners each; the result's best counts.
 """
 
 from __future__ import annotations
