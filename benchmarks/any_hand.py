@@ -47,7 +47,7 @@ from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.files import read_document
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import configs_dir, repo_root
-from graspnet_torch.solver.config import PAPER_PROTOCOL
+from graspnet_torch.solver.config import paper_protocol
 from graspnet_torch.table import format_table
 
 DEFAULT_ROBOT = repo_root() / "examples" / "dexmate_f5d6" / "dexmate_f5d6_right.yaml"
@@ -221,7 +221,7 @@ def main() -> int:
           f"target: under {TRAIN_TARGET_S / 60:.0f} min")
 
     checker = UrdfChecker(robot.cfg.urdf, robot.cfg)
-    variants = {"default": None, "solver=paper": dict(PAPER_PROTOCOL)}
+    variants = {"default": None, "solver=paper": paper_protocol()}
     problems = [gt.random_reachable_problem(robot, seed, n_fingers=(2, 3)) for seed in range(args.problems)]
     gt.solve(problems[0], trials=TRIALS, seed=0, robot=robot, finger_ik=ik)  # warm-up
     err = {v: [] for v in variants}

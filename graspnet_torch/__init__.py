@@ -21,7 +21,19 @@ from graspnet_torch.robot import (
     load_robot,
     load_robot_cfg,
 )
-from graspnet_torch.solver import GraspResult, NoiseCfg, RewardCfg, SolverCfg, TrialResult, solve, solve_many
+from graspnet_torch.solver import (
+    CmaesCfg,
+    FingersCfg,
+    GraspResult,
+    GripperCfg,
+    NoiseCfg,
+    PolishCfg,
+    RewardCfg,
+    SolverCfg,
+    TrialResult,
+    solve,
+    solve_many,
+)
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
 from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks, random_reachable_problem
 
@@ -31,6 +43,7 @@ __all__ = [
     "ChainKernel",
     "ChainSpec",
     "CheckpointError",
+    "CmaesCfg",
     "ConfigError",
     "ConfigurationNetwork",
     "Contact",
@@ -38,11 +51,14 @@ __all__ = [
     "ExpertSetCfg",
     "FCNNTrainCfg",
     "FingerIK",
+    "FingersCfg",
     "GraspProblem",
     "GraspResult",
     "GraspnetError",
+    "GripperCfg",
     "InternalError",
     "NoiseCfg",
+    "PolishCfg",
     "PoseBounds",
     "Posture",
     "ProblemError",

@@ -61,15 +61,19 @@ def bench_args(doc: str) -> argparse.Namespace:
 def loop_rate(task: str | GraspProblem, trials: int, iterations: int, repeats: int, reward: RewardCfg,
               refine: int | None = None) -> float:
     """Best of ``repeats`` solves of a task (a name or a problem): trial-iterations per second of
-    the loop (set-up excluded), a fixed budget with no early stop and no polish; ``refine`` None:
-    the robot's."""
+    the loop (set-up excluded), a fixed budget with no early stop and no polish; ``refine``: the
+    steps inside the loop per evaluation (FCNN refinement; a gripper's settling steps), None: the
+    defaults."""
     import graspnet_torch as gt
     from graspnet_torch.solver import SolverCfg
 
     best = 0.0
     for seed in range(repeats):
-        solver = SolverCfg(threshold=None, max_iterations=iterations, history=False, final_refine=0,
-                           **({} if refine is None else {"refine": refine}))
+        fingers, gripper = {"final_refine": 0}, {"polish_iterations": 0}  # no polish after the loop
+        if refine is not None:
+            fingers, gripper = {**fingers, "refine": refine}, {**gripper, "settle": refine}
+        solver = SolverCfg.from_mapping({"threshold": None, "max_iterations": iterations, "history": False,
+                                         "fingers": fingers, "gripper": gripper})
         res = gt.solve(task, trials=trials, seed=seed, solver=solver, reward=reward)
         best = max(best, trials * iterations / res.outcome.wall_time_s)
     return best

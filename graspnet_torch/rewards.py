@@ -5,6 +5,7 @@ All functions are elementwise over leading batch dimensions; errors and distance
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import torch
@@ -79,24 +80,24 @@ def add_noise(reward: Tensor, sigma: float, generator: torch.Generator | None = 
 class Reward:
     """The reinforcement of the ``reward`` group, as a function of an evaluation, the iteration i
     (1-based) and the budget p: R_1 (eq. 20), or R_2, R_3, R_4 (eq. 21-23) from its collision
-    count. An evaluation without a collision component counts no collision. For a gripper (an
-    evaluation with ``alignment``) the base is the MANUS criterion R = (R1 + R2) / 2 of eq. 29
-    (R1 = alignment, R2 = 1 - tanh(a d)), shaped the same way by collisions.
+    count. An evaluation without a collision component counts no collision. The base that
+    collisions shape is R_1 = 1 - tanh(a E) (eq. 14), or the environment's
+    (:meth:`~graspnet_torch.solver.environment.Environment.reward_base`: a gripper's eq. 29).
 
     Args:
         cfg: kind, a, beta and p (``None``: p = ``budget``).
         budget: the loop's iteration budget.
+        base: ``base(evaluation, a) -> (T,)``, the reinforcement before shaping (None: R_1).
     """
 
-    def __init__(self, cfg: RewardCfg, budget: int):
+    def __init__(self, cfg: RewardCfg, budget: int, base: Callable[[Evaluation, float], Tensor] | None = None):
         self.cfg = cfg
         self.p = cfg.p if cfg.p is not None else budget
+        self.base = base
 
     def __call__(self, evaluation: Evaluation, iteration: int | Tensor) -> Tensor:
         """(T,) reinforcement, noise-free; ``iteration`` an int or (T,) per trial."""
-        r = r1(evaluation.error, self.cfg.a)
-        if evaluation.alignment is not None:  # a gripper (MANUS): R = (|n_g . n_o| + 1 - tanh(a d)) / 2 (eq. 24-29)
-            r = (evaluation.alignment + r) / 2
+        r = r1(evaluation.error, self.cfg.a) if self.base is None else self.base(evaluation, self.cfg.a)
         if self.cfg.kind == "r1" or evaluation.collisions is None:
             return r
         c = evaluation.collisions

@@ -19,7 +19,7 @@ object's two points, no object, no table). Both are solved with ``gt.solve_many`
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -85,11 +85,12 @@ def baselines(runs: int, every: int) -> dict:
     robot, _ = robot_and_ik("manus")
     defaults = robot.cfg.solver_defaults
     reward = RewardCfg(**defaults["reward"])
-    solver = SolverCfg(**{**defaults["solver"], "refine": 0})
+    solver = SolverCfg.from_mapping({**defaults["solver"], "gripper": {"settle": 0}})
+    dls = replace(solver, gripper=replace(solver.gripper, polish_iterations=1200))  # damped least squares alone
     out = {"dls": ([], [], []), "cmaes": ([], [], [])}
 
     def collect(into, env, cfg, ev, scene) -> None:
-        for f in env.report(cfg, ev):
+        for f in env.report(cfg, ev).fields:
             into[0].append(f["distance_mm"])
             into[1].append(f["alignment"])
             into[2].append(scene.count(trial_posture(robot, f)))
@@ -101,12 +102,12 @@ def baselines(runs: int, every: int) -> dict:
         scene = CollisionScene(robot, problem)
         gen = torch.Generator().manual_seed(1000 + k)
         starts = env.lower + (env.upper - env.lower) * torch.rand(runs, env.n, generator=gen)
-        cfg, ev = env.finish(starts, env.evaluate(starts), 1200)
+        dls_env = build_environment(robot, problem, None, dls, torch.float32, "cpu", reward)
+        cfg, ev = dls_env.finish(starts, dls_env.evaluate(starts))
         collect(out["dls"], env, cfg, ev, scene)
-        cmaes = SolverCfg(**{**solver.__dict__, "method": "cmaes", "max_iterations": 1000, "stop": None,
-                             "history": False})  # one CMA-ES per start
+        cmaes = replace(solver, method="cmaes", max_iterations=1000, stop=None, history=False)  # one per start
         o = run_cmaes(env, runs, 0, cmaes, reward, start=starts)
-        cfg, ev = env.finish(o.config, o.evaluation, solver.final_refine)
+        cfg, ev = env.finish(o.config, o.evaluation)
         collect(out["cmaes"], env, cfg, ev, scene)
     return {name: summary(*(np.array(v) for v in vals)) for name, vals in out.items()}
 

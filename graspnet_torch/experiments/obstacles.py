@@ -150,11 +150,11 @@ def cmaes_rows(runs: int, results: dict, environments: tuple[str, ...] = ("env1"
         t0 = time.perf_counter()
         cmaes = SolverCfg.paper(method="cmaes", max_iterations=2000, history=False)  # one CMA-ES per start
         o = run_cmaes(environment, runs, 0, cmaes, reward_cfg("r3"), start=starts[:runs])
-        config, ev = environment.finish(o.config, o.evaluation, solver.final_refine)
-        for k, fields in enumerate(environment.report(config, ev)):
+        config, ev = environment.finish(o.config, o.evaluation)
+        for k, fields in enumerate(environment.report(config, ev).fields):
             collisions = scene.count(trial_posture(robot, fields))
             ok = bool(o.success[k])
-            stats_.append((ok, ok and collisions == 0, int(o.iterations[k]), fields["error"] * 1000))
+            stats_.append((ok, ok and collisions == 0, int(o.iterations[k]), fields["total_error_mm"]))
         evals = [s[2] for s in stats_ if s[0]]
         out[env] = {"success": sum(s[0] for s in stats_), "free": sum(s[1] for s in stats_),
                     "evals": float(np.mean(evals)) if evals else float("nan"), "seconds": time.perf_counter() - t0}

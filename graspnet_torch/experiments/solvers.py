@@ -33,7 +33,7 @@ import numpy as np
 import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress, require
 from graspnet_torch.settings import setting
-from graspnet_torch.solver.config import PAPER_PROTOCOL
+from graspnet_torch.solver.config import paper_protocol
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
@@ -43,11 +43,12 @@ SOLVED_PCT = 99.0
 RATIO_VS_DLS = 1.5
 NOISE_MM = 3.0
 MANY_PER_S = 200.0
-HAND = {"srv (default)": {}, "solver=paper": dict(PAPER_PROTOCOL), "cmaes": {"method": "cmaes"},
+HAND = {"srv (default)": {}, "solver=paper": paper_protocol(), "cmaes": {"method": "cmaes"},
         "dls": {"method": "dls", "max_iterations": 100}}
-ABLATIONS = {"srv, no whole polish (polish=fingers)": {"polish": "fingers"},  # the additions one at a time
+ABLATIONS = {  # the additions one at a time
+             "srv, no whole polish (polish.mode=fingers)": {"polish": {"mode": "fingers"}},
              "srv, no batch stop (stop=null)": {"stop": None},
-             "srv, polish after the loop only (polish_from=null)": {"polish_from": None}}
+             "srv, polish after the loop only (polish.from_r=null)": {"polish": {"from_r": None}}}
 
 
 def _median_ms(x: list[float]) -> float:
@@ -116,7 +117,8 @@ def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
     for sigma in progress(levels, desc="solvers: noise levels", unit="level"):
         preset = OmegaConf.load(configs_dir() / "noise" / f"sigma{sigma:g}.yaml")  # the preset noise=sigma...
         a, scale = float(preset.reward.a), float(preset.srv.sigma.scale)
-        solver = {"threshold": None, "polish": preset.solver.polish, "max_iterations": 2000, "history": False}
+        solver = {"threshold": None, "polish": {"mode": preset.solver.polish.mode}, "max_iterations": 2000,
+                  "history": False}
         variants = {f"srv, preset (a = {a:g}, scale {scale:g})": (gt.RewardCfg(a=a), gt.SRVNetCfg(
                         sigma=gt.SigmaCfg(scale=scale)), solver),
                     f"cmaes (a = {a:g})": (gt.RewardCfg(a=a), None, {**solver, "method": "cmaes"}),
@@ -138,7 +140,7 @@ def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
 
 
 def arm(seeds: int) -> str:
-    variants = {"srv (default)": {}, "solver=paper": dict(PAPER_PROTOCOL), "cmaes": {"method": "cmaes"},
+    variants = {"srv (default)": {}, "solver=paper": paper_protocol(), "cmaes": {"method": "cmaes"},
                 "dls": {"method": "dls"}}
     rows = []
     for env in progress(("env1", "env2"), desc="solvers: arm", unit="env"):

@@ -19,6 +19,7 @@ import numpy as np
 from graspnet_torch.experiments.report import ExperimentReport, progress
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
+from graspnet_torch.solver.config import FingersCfg
 from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 
 __all__ = ["SETTINGS", "TABLE2", "TradeoffCfg", "final_error_mm", "run_tradeoff", "table2_means_mm"]
@@ -48,7 +49,7 @@ def final_error_mm(srv: SRVNetCfg, reward: RewardCfg, sigma_n: float, seed: int,
     import graspnet_torch as gt
 
     res = gt.solve("block5", trials=trials, seed=seed, noise=sigma_n, srv=srv, reward=reward,
-                   solver=SolverCfg.paper(threshold=None, max_iterations=steps, final_refine=0))
+                   solver=SolverCfg.paper(threshold=None, max_iterations=steps, fingers=FingersCfg(final_refine=0)))
     total = res.outcome.history["total"].double().numpy()  # (K, T) metres
     return float(np.median(total[-100:].mean(0))) * 1000
 

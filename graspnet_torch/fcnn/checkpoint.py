@@ -25,7 +25,7 @@ from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.fingers import FingerChain
 from graspnet_torch.robot.robot import Robot, load_robot
 
-__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "load_finger_ik", "non_finite_tensors",
+__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "finger_ik_of", "load_finger_ik", "non_finite_tensors",
            "robot_checkpoint", "save_finger_ik"]
 
 FORMAT = "graspnet_torch.fcnn/1"
@@ -119,6 +119,11 @@ def _experts_from(entry: dict, robot: Robot, finger: str, where: str) -> ExpertS
         full[key] = state[key]
     experts.load_state_dict(full)
     return experts
+
+
+def finger_ik_of(robot: Robot) -> FingerIK | None:
+    """A robot's trained finger IK (:func:`load_finger_ik`), or None for a robot without fingers."""
+    return load_finger_ik(robot) if robot.n_fingers else None
 
 
 def load_finger_ik(robot: str | Robot = "hand", path: str | Path | None = None) -> FingerIK:

@@ -153,6 +153,11 @@ def check_overrides(argv: list[str], schema: type) -> None:
             continue
         found = lookup(schema, key)
         if found is None:
+            from graspnet_torch.solver.config import RENAMED
+
+            group, _, name = key.partition(".")
+            if group == "solver" and name in RENAMED:
+                raise ConfigError(f"unknown setting '{key}' (now solver.{RENAMED[name]})")
             parent, _, _ = key.rpartition(".")
             scope = lookup(schema, parent) if parent else (schema, {})
             names = sorted(scope[0].__dataclass_fields__) if scope and hasattr(scope[0], "__dataclass_fields__") else []

@@ -11,7 +11,8 @@ from graspnet_torch.jobs.configs import ReferencePostureJobCfg
 from graspnet_torch.jobs.solve_grasp import resolve_problem
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build
-from graspnet_torch.solver.hand import check_reach
+from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import ReferenceFit, find_reference_posture
 
@@ -25,7 +26,7 @@ def prepare_reference(cfg: Mapping[str, Any] | ReferencePostureJobCfg,
     problem = resolve_problem(job.problem, job.task, None, job.allow_outside_paths)
     if problem.robot_cfg is not None and problem.robot_cfg.arm is not None:
         raise ProblemError(f"{problem.source}: reference_posture fits free hands; robot '{problem.robot}' has an arm")
-    check_reach(Robot(problem.robot_cfg), problem)
+    HandEnvironment.check(Robot(problem.robot_cfg), problem, SolverCfg())
     return job, problem
 
 

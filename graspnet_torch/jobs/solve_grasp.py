@@ -8,7 +8,6 @@ curves (like the paper's Fig. 3).
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -26,7 +25,7 @@ from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import robot_and_ik, solve, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
-from graspnet_torch.solver.hand import check_reach
+from graspnet_torch.solver.environments import environment_class
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
@@ -140,18 +139,13 @@ def log_hparams(log_dir: Path, result: GraspResult, overrides: Sequence[str] = (
         writer.add_hparams(hp, metrics, run_name=".")
 
 
-def _trial_table(result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
+def _trial_table(robot, result: GraspResult, fingers: tuple[str, ...], max_rows: int = 30) -> str:
     """One row per trial (the first ``max_rows``; the result JSON has them all)."""
-    if result.trials and result.trials[0].distance_mm is not None:  # a gripper
-        headers = ["trial", "success", "iterations", "d mm", "alignment", "collisions", "reinforcement"]
-        rows = [[k, "yes" if t.success else "no", t.iterations, t.distance_mm, round(t.alignment, 6), t.collisions,
-                 round(t.reinforcement, 5)] for k, t in enumerate(result.trials[:max_rows])]
-    else:
-        headers = ["trial", "success", "iterations", "total mm", *[f"{f} mm" for f in fingers], "collisions",
-                   "reinforcement"]
-        rows = [[k, "yes" if t.success else "no", t.iterations, t.total_error_mm,
-                 *[t.fingertip_error_mm[f] for f in fingers], t.collisions, round(t.reinforcement, 5)]
-                for k, t in enumerate(result.trials[:max_rows])]
+    env = environment_class(robot)
+    columns = [env.columns(t, fingers) for t in result.trials[:max_rows]]
+    headers = ["trial", "success", "iterations", *(columns[0] if columns else ()), "collisions", "reinforcement"]
+    rows = [[k, "yes" if t.success else "no", t.iterations, *c.values(), t.collisions, round(t.reinforcement, 5)]
+            for k, (t, c) in enumerate(zip(result.trials, columns, strict=False))]
     more = len(result.trials) - max_rows
     return format_table(headers, rows, floatfmt=".3g") + (f"\n... {more} more trials in the result" if more > 0 else "")
 
@@ -199,11 +193,7 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
 
         link_shapes(UrdfModel(rc.urdf), "collision")
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
-    check_reach(robot, problem)
-    if problem.points is not None:  # a gripper: its approach names known joints within their limits
-        from graspnet_torch.solver.gripper import gripper_bounds
-
-        gripper_bounds(robot, problem, solver.approach_m, solver.approach_deg)
+    environment_class(robot).check(robot, problem, solver)  # every contact within reach; a gripper's approach
 
 
 def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
@@ -246,7 +236,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
                    noise=job.noise, robot=robot, finger_ik=ik, device=device)
     fingers = problem.fingers
     best = result.best
-    print(_trial_table(result, fingers))
+    print(_trial_table(robot, result, fingers))
     n_ok = sum(t.success for t in result.trials)
     errors = np.array([t.error_mm for t in result.trials])
     clear = ", collision-free" if any(t.collisions for t in result.trials) or _has_environment(robot, problem) else ""
@@ -260,12 +250,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
         plural = "es" if solver.stop > 1 else ""
         stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{plural})"
     free = sum(t.collisions == 0 for t in result.trials)
-    if best.distance_mm is not None:  # a gripper: d (eq. 26) and the alignment (eq. 24)
-        quality = (f"best d {best.distance_mm:.3f} mm, alignment {best.alignment:.6f} "
-                   f"({math.degrees(math.acos(min(1.0, best.alignment))):.2f} deg)")
-    else:
-        per_finger = ", ".join(f"{f} {best.fingertip_error_mm[f]:.3f}" for f in fingers)
-        quality = f"best total error {best.total_error_mm:.3f} mm ({per_finger})"
+    quality = f"best {environment_class(robot).summary(best, fingers)}"
     print(f"\n{problem.name or problem.source} (solver={solver.method}): {stops}; {quality}, "
           f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials "
           f"collision-free (FCL); "
@@ -305,10 +290,7 @@ def posture_panels(robot, problem: GraspProblem, result: GraspResult) -> list:
 
     posture = posture_of(robot, result.best)
     meshes = tuple(s.trimesh() for s in ((problem.object,) if problem.object else ()) + problem.obstacles)
-    if problem.points is not None:  # a gripper: the object's two points and the gripper's two
-        contacts = np.concatenate([problem.points_world(), np.asarray(result.best.gripper_points)])
-    else:
-        contacts = problem.contacts_world()
+    contacts = environment_class(robot).marks(problem, result.best)  # the contacts (a gripper: its points too)
     red: frozenset[str] = frozenset()
     from graspnet_torch.collision.scene import has_environment
 

@@ -202,6 +202,14 @@ class Robot:
         return self.body is not None
 
     @property
+    def kind(self) -> str:
+        """'hand' (a free palm with fingers), 'arm_hand' (fingers on a body chain) or 'gripper' (a
+        body chain with two marked gripper points, no fingers): which environment solves it."""
+        if not self.fingers:
+            return "gripper"
+        return "arm_hand" if self.has_body else "hand"
+
+    @property
     def dof(self) -> int:
         """Degrees of freedom the solver controls: finger joints + body joints, or + 6 palm-pose
         DOF for a free-floating hand."""
@@ -418,6 +426,20 @@ class Robot:
             si[name] = [math.radians(v) if t == "revolute" else v for v, t in zip(row, types, strict=False)] + \
                 row[len(types):]
         return self.free_finger_joints(si, dtype)
+
+    def body_joints_to_file(self, q: Tensor) -> dict[str, float]:
+        """(m,) body joints (rad or m) -> by URDF joint name in chain order, in file units: degrees
+        (revolute), metres (prismatic)."""
+        deg = 180.0 / math.pi
+        return {n: v * (deg if t == "revolute" else 1.0)
+                for n, v, t in zip(self.body_joint_names, q.tolist(), self.body.joint_types, strict=True)}
+
+    def body_joints_from_file(self, values: dict[str, float]) -> Tensor:
+        """The inverse of :meth:`body_joints_to_file`: (m,) float64 (rad or m)."""
+        d = math.pi / 180
+        return torch.tensor([values[n] * (d if t == "revolute" else 1.0)
+                             for n, t in zip(self.body_joint_names, self.body.joint_types, strict=True)],
+                            dtype=torch.float64)
 
     def joint_values(self, posture: Posture) -> dict[str, float]:
         """Every movable URDF joint's value in a posture (radians / metres), mimic joints at their

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -11,23 +10,23 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.fcnn.checkpoint import load_finger_ik
+from graspnet_torch.fcnn.checkpoint import finger_ik_of
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
-from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.postures import reference_posture, trial_posture
+from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import with_defaults
-from graspnet_torch.solver.arm import ArmHandEnvironment
-from graspnet_torch.solver.config import ALIGNMENT_MIN, NoiseCfg, RewardCfg, SolverCfg
-from graspnet_torch.solver.environment import Environment, Evaluation
-from graspnet_torch.solver.hand import HandEnvironment
+from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.environment import Environment, Report
+from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["build_environment", "failure_reason", "reference_posture", "robot_and_ik", "search", "solve", "solve_many",
-           "trial_posture"]
+           "trial_posture"]  # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -35,7 +34,7 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 @lru_cache(maxsize=8)
 def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK | None]:
     robot = Robot.from_config(robot_name)
-    return robot, (load_finger_ik(robot) if robot.n_fingers else None)
+    return robot, finger_ik_of(robot)
 
 
 @lru_cache(maxsize=8)
@@ -55,7 +54,7 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
         if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
             return _shipped_robot_and_ik(robot.name)
     built = Robot(robot)
-    return built, (load_finger_ik(built) if built.n_fingers else None)
+    return built, finger_ik_of(built)
 
 
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
@@ -83,8 +82,7 @@ def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, rew
 def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> dict:
     return {"trials": trials, "max_iterations": solver.max_iterations, "threshold": solver.threshold,
             "tolerance_mm": solver.tolerance_mm, "stop_rule": solver.stop_rule,
-            "stop": solver.stop, "solver": solver.method, "polish": solver.polish,
-            "refine": solver.refine, "final_refine": solver.final_refine, "reward": reward.kind,
+            "stop": solver.stop, "solver": solver.method, "polish": solver.polish.mode, "reward": reward.kind,
             "reward_a": reward.a, "reward_p": reward.p if reward.p is not None else solver.max_iterations,
             "lr_bp": srv.lr_bp, "lr_srv": srv.lr_srv, "lr_lms": srv.lr_lms,
             "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
@@ -92,8 +90,8 @@ def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: Rewar
 
 def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
-    fields = env.report(outcome.config, outcome.evaluation)
-    results, failure = _trials(robot, problem, fields, outcome, reward, solver)
+    report = env.report(outcome.config, outcome.evaluation)
+    results, failure = _trials(robot, problem, env, report, outcome, reward, solver)
     return GraspResult(robot=robot.name, trials=results, problem=problem.name or problem.source, seed=seed,
                        settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome, failure=failure)
 
@@ -116,7 +114,7 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
     """
     problem = _as_problem(problem)
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
-    if robot is None or (finger_ik is None and problem.points is None):
+    if robot is None or finger_ik is None:
         shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
@@ -144,16 +142,13 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
             outcome = run_cmaes(env, trials, seed, solver, reward, noise)
         else:
             outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
-        if solver.final_refine > 0 or (solver.polish == "whole" and env.whole_polish):
-            done = None
-            if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
-                pid = getattr(env, "problem_index", None)
-                pid = None if pid is None else pid.cpu()
+        done = None
+        if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
+            pid = None if env.problem_index is None else env.problem_index.cpu()
 
-                def done(converged: Tensor) -> Tensor:
-                    return enough_succeeded(converged, pid, solver.stop)
-            outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, solver.final_refine,
-                                                            done)
+            def done(converged: Tensor) -> Tensor:
+                return enough_succeeded(converged, pid, solver.stop)
+        outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, done)
     outcome.wall_time_s = time.perf_counter() - t0
     return outcome
 
@@ -189,92 +184,28 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
-    fields = env.report(outcome.config, outcome.evaluation)
+    report = env.report(outcome.config, outcome.evaluation)
     results = []
     for k, problem in enumerate(batch):
         rows = slice(k * trials, (k + 1) * trials)
         part = outcome.select(rows)
         part.wall_time_s = outcome.wall_time_s / len(batch)  # the batch's time, shared out
-        trial_results, failure = _trials(robot, problem, fields[rows], part, reward, solver)
+        trial_results, failure = _trials(robot, problem, env, report.select(rows), part, reward, solver)
         results.append(GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source,
                                    seed=seed, settings=_settings_dict(trials, solver, srv, reward, noise),
                                    outcome=part, failure=failure))
     return results
 
 
-def build_environment(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], finger_ik: FingerIK | None,
-                      solver: SolverCfg, dtype: torch.dtype = torch.float32, device: str | torch.device = "cpu",
-                      reward: RewardCfg | None = None, runs: int = 1) -> Environment:
-    """The environment of a robot and a problem (or a batch of problems, ``runs`` trials each):
-    a free palm (robots without an arm), a palm carried by an arm (an arm with fingers, any arm
-    and any hand) or a gripper (two marked points). It counts collisions (the torch proxy of
-    :mod:`graspnet_torch.collision.proxy`) when the reward uses them (R2-R4) and the problem has
-    an object or obstacles."""
-    collisions = reward is not None and reward.kind != "r1"
-    if robot.n_fingers == 0:  # a gripper with two marked points (MANUS)
-        from graspnet_torch.solver.gripper import GripperEnvironment
-
-        return GripperEnvironment(robot, problem, dtype, device, collisions, solver.approach_m, solver.approach_deg,
-                                  solver.refine, runs=runs)
-    cls = ArmHandEnvironment if robot.has_body else HandEnvironment
-    env = cls(robot, problem, finger_ik, solver.refine, solver.candidates, dtype, device, collisions, runs)
-    env.polish, env.polish_iterations = solver.polish, solver.polish_iterations
-    env.polish_tol = solver.polish_tolerance_mm / 1000
-    return env
-
-
-def trial_posture(robot: Robot, trial: TrialResult | dict) -> Posture:
-    """The :class:`~graspnet_torch.robot.Posture` of a reported trial (its degrees -> radians):
-    palm pose, every finger's joints and, for robots with a body, the body joints by name."""
-    get = trial.get if isinstance(trial, dict) else lambda k: getattr(trial, k)
-    d = math.pi / 180
-    palm = get("palm_pose")
-    pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
-    joints = get("joints") or {}
-    q = robot.finger_joints_from_file(joints) if robot.n_fingers else torch.zeros(0, 0, dtype=torch.float64)
-    body = torch.zeros(0, dtype=torch.float64)
-    if robot.has_body:
-        arm = get("arm_joints")
-        body = torch.tensor([arm[n] * (d if kind == "revolute" else 1.0)
-                             for n, kind in zip(robot.body_joint_names, robot.body.joint_types, strict=True)],
-                            dtype=torch.float64)
-    return Posture(palm_pose=pose, fingers=q, body=body)
-
-
-def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
-    """The problem's reference posture as a :class:`~graspnet_torch.robot.Posture` (fingers not
-    listed at home; an arm's joints not listed at home, its palm by forward kinematics)."""
-    ref = problem.reference
-    if ref is None:
-        raise ValueError(f"{problem.source}: no reference posture")
-    home = robot.home_posture(torch.float64)
-    q = home.fingers.clone()
-    for f, v in ref.joints.items():
-        q[robot.finger_index(f)] = torch.as_tensor(v, dtype=torch.float64)
-    if robot.has_body:
-        unknown = sorted(set(ref.arm_joints or {}) - set(robot.body_joint_names))
-        if unknown:
-            from graspnet_torch.errors import ProblemError
-
-            raise ProblemError(f"{problem.source}: reference.arm_joints: unknown joint(s) {', '.join(unknown[:5])} "
-                               f"of robot '{robot.name}'")
-        body = home.body.clone()
-        for k, name in enumerate(robot.body_joint_names):
-            if ref.arm_joints and name in ref.arm_joints:
-                body[k] = ref.arm_joints[name]
-        from graspnet_torch.robot.transforms import rt_to_pose
-
-        return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=q, body=body)
-    return Posture(palm_pose=torch.as_tensor(ref.palm_pose, dtype=torch.float64), fingers=q, body=home.body)
-
-
-def _trials(robot: Robot, problem: GraspProblem, fields: list[dict], outcome: LoopOutcome, reward: RewardCfg,
-            solver: SolverCfg) -> tuple[list[TrialResult], str | None]:
-    """Per-trial results of one problem from the environment's float64 fields of its reported
+def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Report, outcome: LoopOutcome,
+            reward: RewardCfg, solver: SolverCfg) -> tuple[list[TrialResult], str | None]:
+    """Per-trial results of one problem from the environment's float64 report of its reported
     configurations: the collision count by FCL (INTERFACE.md) of each reported posture when the
     problem has an object or obstacles, the noise-free reinforcement recomputed from them, and
-    ``success``: the grasp (every contact finger within ``solver.tolerance_mm``, a gripper's d
-    within it and aligned, no collision). Also the one-line reason no trial succeeded, or None."""
+    ``success``: the grasp (the report's ``landed``: every contact within ``solver.tolerance_mm``,
+    and no collision). Also the one-line reason no trial succeeded, or None."""
+    from dataclasses import replace
+
     from graspnet_torch.collision.scene import has_environment
 
     reports = None
@@ -282,49 +213,34 @@ def _trials(robot: Robot, problem: GraspProblem, fields: list[dict], outcome: Lo
         from graspnet_torch.collision import CollisionScene
 
         scene = CollisionScene(robot, problem)
-        reports = [scene.check(trial_posture(robot, f)) for f in fields]
+        reports = [scene.check(trial_posture(robot, f)) for f in report.fields]
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
-    error = torch.tensor([f["error"] for f in fields], dtype=torch.float64)
-    evaluation = Evaluation(error=error, collisions=collisions)
-    if outcome.evaluation.alignment is not None:  # a gripper: the base of R is eq. 29's
-        evaluation.alignment = torch.tensor([f["alignment"] for f in fields], dtype=torch.float64)
-    r = Reward(reward, solver.max_iterations)(evaluation, outcome.iterations.cpu())
+    evaluation = replace(report.evaluation, collisions=collisions)
+    r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
     out = []
-    for t, f in enumerate(fields):
-        f = dict(f)
-        if "distance_mm" not in f:
-            f["total_error_mm"] = f["error"] * 1000
-        f.pop("error")
+    for t, f in enumerate(report.fields):
         count = 0 if collisions is None else int(collisions[t])
-        out.append(TrialResult(success=count == 0 and _on_contacts(f, solver.tolerance_mm),
-                               iterations=int(outcome.iterations[t]), reinforcement=float(r[t]),
-                               wall_time_s=outcome.wall_time_s, collisions=count, **f))
+        out.append(TrialResult(success=count == 0 and report.landed[t], iterations=int(outcome.iterations[t]),
+                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s, collisions=count,
+                               error_mm=report.error_mm[t], **f))
     failure = None
     if not any(t.success for t in out):
-        failure = failure_reason(robot, problem, out, reports, solver.tolerance_mm)
+        failure = failure_reason(robot, problem, out, reports, report.landed, solver.tolerance_mm)
     return out, failure
 
 
-def _on_contacts(fields: dict, tolerance_mm: float) -> bool:
-    """Every contact finger within the tolerance of its contact (a gripper: d within it, aligned)."""
-    if fields.get("distance_mm") is not None:
-        return fields["distance_mm"] <= tolerance_mm and fields["alignment"] > ALIGNMENT_MIN
-    return max(fields["fingertip_error_mm"].values()) <= tolerance_mm
-
-
-def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult],
-                   reports: Sequence | None, tolerance_mm: float) -> str:
+def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult], reports: Sequence | None,
+                   landed: Sequence[bool], tolerance_mm: float) -> str:
     """Why no trial is a grasp, in one line: a contact out of reach of the search space (no palm
     position or arm configuration in it brings that finger there), else every configuration that
-    reached the contacts colliding (with what, by FCL), else the budget ended far away (the best
-    trial's errors)."""
-    from graspnet_torch.solver.search_space import unreachable_contacts
-
-    far = unreachable_contacts(robot, problem)
+    reached the contacts (``landed``) colliding (with what, by FCL), else the budget ended far
+    away (the best trial's errors)."""
+    env = environment_class(robot)
+    far = env.unreachable(robot, problem)
     if far:
         return (f"out of reach: no configuration in the search space brings the {', '.join(far)} fingertip"
                 f"{'s' if len(far) > 1 else ''} to {'their contacts' if len(far) > 1 else 'its contact'}")
-    landed = [k for k, t in enumerate(trials) if _on_contacts(t.to_dict(), tolerance_mm)]
+    landed = [k for k, ok in enumerate(landed) if ok]
     if landed and reports is not None:
         what: dict[str, int] = {}
         names = [f"obstacles[{k}]" for k in range(len(problem.obstacles))] + ["the floor"]
@@ -340,10 +256,5 @@ def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialRe
         common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:3])
         return (f"colliding: all {len(landed)} configuration(s) that reached the contacts collide (FCL: {common})")
     best = min(trials, key=lambda t: t.error_mm)
-    if best.fingertip_error_mm is not None:
-        worst = max(best.fingertip_error_mm, key=best.fingertip_error_mm.get)
-        detail = f"{best.total_error_mm:.3g} mm from its contacts ({worst} {best.fingertip_error_mm[worst]:.3g} mm)"
-    else:
-        detail = f"d = {best.distance_mm:.3g} mm, alignment {best.alignment:.4f}"
-    return (f"far: the budget ended with the best trial {detail} after {best.iterations} iteration(s) "
+    return (f"far: the budget ended with the best trial {env.describe(best)} after {best.iterations} iteration(s) "
             f"(tolerance {tolerance_mm:g} mm)")

@@ -18,7 +18,8 @@ from torch import Tensor
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Robot
-from graspnet_torch.solver.environment import Evaluation, FingerEnvironment
+from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.fingers import FingerEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["ArmHandEnvironment", "arm_bounds"]
@@ -52,13 +53,13 @@ class ArmHandEnvironment(FingerEnvironment):
         fingers: the contact fingers, in problem order.
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], ik: FingerIK, refine: int = 0,
-                 candidates: int = 1, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
-                 collisions: bool = False, runs: int = 1):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
+                 runs: int = 1):
         if not robot.has_body or robot.n_fingers == 0:
             first = problem if isinstance(problem, GraspProblem) else problem[0]
             raise ProblemError(f"{first.source}: robot '{robot.name}' is not an arm with fingers")
-        super().__init__(robot, problem, ik, refine, candidates, dtype, device, collisions, runs)
+        super().__init__(robot, problem, solver, ik, dtype, device, collisions, runs)
         self.n = len(robot.body_joint_names)
         bounds = [arm_bounds(robot, p) for p in self.problems]
         lo = np.stack([b[0] for b in bounds])
@@ -78,14 +79,53 @@ class ArmHandEnvironment(FingerEnvironment):
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
 
-    def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
-        """The shared fields (palm pose from the arm's forward kinematics) plus ``arm_joints`` by
-        URDF joint name in chain order (degrees; metres for prismatic joints)."""
-        out = super().report(config, evaluation)
-        q_arm = self.clamp(config)
-        deg = 180.0 / math.pi
-        scale = [deg if kind == "revolute" else 1.0 for kind in self.robot.body.joint_types]
-        for k, fields in enumerate(out):
-            fields["arm_joints"] = {name: v * s for name, v, s in zip(self.robot.body_joint_names,
-                                                                      q_arm[k].tolist(), scale, strict=True)}
-        return out
+    def palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
+        """With a collision proxy, its arm chain gives the palm too (one pass of forward kinematics)."""
+        if self.proxy is None:
+            return self.palm_frame(config), None
+        levels, palm = self.proxy.body_levels_and_palm(config)
+        return palm, levels
+
+    def body(self, config: Tensor) -> Tensor:
+        return config
+
+    def add_fields(self, fields: list[dict], config: Tensor) -> None:
+        """``arm_joints`` by URDF joint name in chain order (degrees; metres for prismatic joints)."""
+        for k, f in enumerate(fields):
+            f["arm_joints"] = self.robot.body_joints_to_file(config[k])
+
+    @classmethod
+    def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
+        """Refuse a contact farther from the arm's first joint than the arm's links, their
+        prismatic travel and the finger can reach; and ``bounds`` that do not fit the arm."""
+        from graspnet_torch.solver.hand import finger_reach_bound
+
+        origin, arm = _arm_reach(robot)
+        for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
+            reach = arm + finger_reach_bound(robot, contact.finger)
+            gap = float(np.linalg.norm(point - origin))
+            if gap > reach:
+                raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the arm's "
+                                   f"first joint but the arm and {contact.finger} reach at most {reach:.3f} m")
+
+    @classmethod
+    def unreachable(cls, robot: Robot, problem: GraspProblem) -> list[str]:
+        """The contact fingers whose contact lies farther from the arm's first joint than the arm's
+        links (and prismatic travel) and the finger's sampled reach."""
+        from graspnet_torch.solver.search_space import finger_reach
+
+        if not problem.contacts:
+            return []
+        origin, arm = _arm_reach(robot)
+        gap = np.linalg.norm(problem.contacts_world() - origin, axis=1) - arm
+        reach = finger_reach(robot)
+        return [c.finger for c, g in zip(problem.contacts, gap, strict=True) if g > reach[robot.finger_index(c.finger)]]
+
+
+def _arm_reach(robot: Robot) -> tuple[np.ndarray, float]:
+    """The arm's first joint in the world and the most its links and prismatic travel reach."""
+    body = robot.body
+    arm = float(np.linalg.norm(body.offsets[1:, :3, 3], axis=1).sum())
+    arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
+               if kind == "prismatic")
+    return body.offsets[0][:3, 3], arm

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cache
 
+from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import build, setting
 
-__all__ = ["ALIGNMENT_MIN", "PAPER_PROTOCOL", "SOLVERS", "NoiseCfg", "RewardCfg", "SolverCfg"]
+__all__ = ["RENAMED", "SOLVERS", "CmaesCfg", "FingersCfg", "GripperCfg", "NoiseCfg", "PolishCfg", "RewardCfg",
+           "SolverCfg", "paper_protocol"]
 
 
 @dataclass(frozen=True)
@@ -47,11 +50,91 @@ class NoiseCfg:
 
 SOLVERS = ("srv", "cmaes", "dls")
 
-# The paper's protocol (section 2.4, Tables 2-4): every trial runs to its own stop and only the
-# fingers are refined after the loop (the palm pose is what the network chose).
-PAPER_PROTOCOL = {"stop": None, "polish": "fingers", "polish_from": None, "stop_rule": "reinforcement"}
 
-ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
+@dataclass(frozen=True)
+class PolishCfg:
+    """The local polish (``solver.polish``): Levenberg-Marquardt in float64 over the whole
+    configuration (palm pose or arm joints with the contact fingers' free joints), within bounds
+    and limits, never worse, never into a collision the collision proxy sees. Beyond the paper.
+
+    Attributes:
+        mode: 'whole' (default): after the loop (and inside it, ``from_r``) polish the whole
+            configuration; 'fingers': refine only the fingers after the loop
+            (``fingers.final_refine``; the paper: the palm pose is what the network chose).
+        iterations: steps of the whole polish.
+        tolerance_mm: a polished (or ``dls``) trial stops once its error (E of eq. 3, or d of
+            eq. 26) is below this.
+        from_r: with ``mode: whole``, no sensor noise and a threshold, a trial whose observed
+            reinforcement first exceeds this (and each time it betters it) has its best
+            configuration polished inside the loop; where the polish lands, the trial has
+            succeeded, else it learns on (``None``: the polish only after the loop). 0.9 with a = 1:
+            E < 100 mm, measured on random reachable hand problems (README, "Which solver?").
+    """
+
+    mode: str = setting("whole", choices=("fingers", "whole"))
+    iterations: int = setting(30, lo=0, hi=10_000)
+    tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
+    from_r: float | None = setting(0.9, lo=-1.0, hi=1.0)
+
+
+@dataclass(frozen=True)
+class CmaesCfg:
+    """CMA-ES (``solver.cmaes``, with ``solver.method: cmaes``).
+
+    Attributes:
+        population: per trial (``None``: the ``cmaes`` default, 4 + 3 ln n).
+        step_size: initial step size, in units of the normalised bounds [0, 1].
+    """
+
+    population: int | None = setting(None, lo=2, hi=100_000)
+    step_size: float = setting(0.25, lo=0.0, lo_open=True, hi=10.0)
+
+
+@dataclass(frozen=True)
+class FingersCfg:
+    """The FCNN's part (``solver.fingers``): robots whose fingers it places (hand, arm_hand).
+
+    Attributes:
+        refine: FCNN refinement iterations (eq. 5) inside the loop, per evaluation (0: the paper's
+            FCNN, competition among experts only).
+        final_refine: refinement iterations applied after the loop to the reported configuration's
+            fingers (the palm pose kept) with ``polish.mode: fingers``; the whole polish moves the
+            fingers too.
+        candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
+    """
+
+    refine: int = setting(0, lo=0, hi=1000)
+    final_refine: int = setting(3, lo=0, hi=1000)
+    candidates: int = setting(1, lo=1, hi=64)
+
+
+@dataclass(frozen=True)
+class GripperCfg:
+    """A gripper with two marked points (``solver.gripper``; the MANUS, paper section 7).
+
+    Attributes:
+        settle: damped least-squares steps that settle each proposal before it is evaluated (the
+            learner proposes, a few local steps settle it, the settled configuration is reported).
+        polish_iterations: Levenberg-Marquardt steps of the body's joints after the loop (every
+            trial, both pairings of eq. 26-28).
+        approach_m, approach_deg: a problem with an ``approach`` configuration searches within
+            +- these of it (prismatic joints in metres, revolute joints in degrees), clipped to the
+            joint limits (section 7 automates the last phase only).
+    """
+
+    settle: int = setting(2, lo=0, hi=1000)
+    polish_iterations: int = setting(200, lo=0, hi=10_000)
+    approach_m: float = setting(0.2, lo=0.0, lo_open=True, hi=10.0)
+    approach_deg: float = setting(30.0, lo=0.0, lo_open=True, hi=360.0)
+
+
+# Flat keys of earlier versions -> where they live now (a one-line hint when one is given).
+RENAMED = {"polish_iterations": "polish.iterations", "polish_tolerance_mm": "polish.tolerance_mm",
+           "polish_from": "polish.from_r", "population": "cmaes.population", "step_size": "cmaes.step_size",
+           "refine": "fingers.refine (a gripper: gripper.settle)",
+           "final_refine": "fingers.final_refine (a gripper: gripper.polish_iterations)",
+           "candidates": "fingers.candidates", "approach_m": "gripper.approach_m",
+           "approach_deg": "gripper.approach_deg"}
 
 
 @dataclass(frozen=True)
@@ -72,6 +155,11 @@ class SolverCfg:
       restarts; it minimises the model's error directly, so it never sees the reinforcement
       (refused with sensor noise); one step = one iteration.
 
+    The search's settings are the top-level keys; the polish, CMA-ES and each kind of robot's
+    environment have their own group (:class:`PolishCfg`, :class:`CmaesCfg`, :class:`FingersCfg`,
+    :class:`GripperCfg`). Every default is the dataclass's (``configs/solver/srv.yaml`` lists the
+    same values; a robot config's ``solver_defaults`` may override them for that robot).
+
     Attributes:
         method: 'srv', 'cmaes' or 'dls'.
         max_iterations: iteration budget per trial (srv: loop iterations; cmaes: evaluations;
@@ -83,55 +171,28 @@ class SolverCfg:
             it. A result's ``success`` means the grasp: every contact finger within it and, where
             the problem has an object or obstacles, no collision (FCL).
         stop_rule: 'grasp' (default): a trial stops once its configuration is a grasp in the
-            model (every contact finger within ``tolerance_mm``, a gripper aligned to
-            ``ALIGNMENT_MIN``, and clear where the collision proxy counts collisions);
-            'reinforcement': once its observed reinforcement exceeds ``threshold`` (the paper's
-            rule, ``solver=paper``). With sensor noise the model's error is not observed, so the
-            reinforcement rule applies (the noise presets run their whole budget). CMA-ES stops on
-            the reinforcement rule either way (it has no in-loop polish).
-        refine: steps inside the loop, per evaluation: FCNN refinement iterations (eq. 5) for a
-            hand (0: the paper's FCNN, competition among experts only); for a gripper (MANUS),
-            damped least-squares steps that settle each proposal before it is evaluated.
-        final_refine: refinement iterations applied after the loop to the reported configuration's
-            fingers (the palm pose is kept); the reported errors are those of the refined joints.
-            Not used with ``polish: whole``, which moves the fingers too.
-        polish: 'whole' (default) polishes the palm pose (or arm joints) together with the
-            contact fingers' free joints after the loop (and inside it, ``polish_from``):
-            ``polish_iterations`` Levenberg-Marquardt steps in float64 within bounds and limits,
-            never worse, never into a collision the proxy sees; 'fingers' refines only the
-            fingers (``final_refine``; the paper: the palm pose is what the network chose). A
-            gripper (MANUS) always polishes its whole configuration (``final_refine``).
-        polish_tolerance_mm: a polished (or ``dls``) trial stops once its error (E of eq. 3, or
-            d of eq. 26) is below this.
-        polish_from: with ``polish: whole``, no sensor noise and a threshold, a trial whose
-            observed reinforcement first exceeds this (and each time it betters it) has its best
-            configuration polished inside the loop; where the polish lands above the threshold,
-            the trial has succeeded, else it learns on (``None``: the polish only after the loop).
-            0.9 with a = 1: E < 100 mm, measured on random reachable hand problems (README, "Which
-            solver?"): as sure as 0.95 and 0.99, and faster.
-        candidates: FCNN experts whose answers are refined (1 = the paper's winner only).
-        approach_m, approach_deg: a gripper problem with an ``approach`` configuration searches
-            within +- these of it (prismatic joints in metres, revolute joints in degrees),
-            clipped to the joint limits (section 7 automates the last phase only).
+            model (every contact finger within ``tolerance_mm``, a gripper aligned, and clear
+            where the collision proxy counts collisions); 'reinforcement': once its observed
+            reinforcement exceeds ``threshold`` (the paper's rule, ``solver=paper``). With sensor
+            noise the model's error is not observed, so the reinforcement rule applies (the noise
+            presets run their whole budget). CMA-ES stops on the reinforcement rule either way.
         time_budget: wall-clock seconds after which the loop stops (``None``: no limit).
         stop: a problem ends once this many of its trials have succeeded (srv, cmaes: r > threshold;
             dls: within the tolerance), the others reported as they stand (default 1: "give me a
             grasp", the trials are restarts of one search; ``None``: every trial runs to its own
             stop, the paper's independent runs).
-        population: CMA-ES population per trial (``None``: the ``cmaes`` default, 4 + 3 ln n).
-        step_size: CMA-ES initial step size, in units of the normalised bounds [0, 1].
         stop_clear: a trial stops only at a configuration the collision proxy finds clear (the
             paper stops on the reinforcement alone, so an early colliding configuration, weakly
-            shaped by R3/R4 while i << p, can end a trial; the MANUS defaults to true: a grasp
-            through the table is not a success). ``None``: true exactly when ``stop`` is set (a
-            problem that ends at its first success ends at a clear one; measured on env1/env2: the
-            best trial collision-free for 12/12 seeds against 7/12 without), false for the
-            paper's protocol.
+            shaped by R3/R4 while i << p, can end a trial; the MANUS's config sets true: a grasp
+            through the table is not a success). ``None``: true exactly when ``stop`` is set
+            (measured on env1/env2: the best trial collision-free for 12/12 seeds against 7/12
+            without), false for the paper's protocol.
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
             errors, time) for logs and plots.
         dtype: 'float32' (hot path) or 'float64'.
+        polish, cmaes, fingers, gripper: the groups above.
     """
 
     method: str = setting("srv", choices=SOLVERS)
@@ -141,21 +202,14 @@ class SolverCfg:
     stop_rule: str = setting("grasp", choices=("grasp", "reinforcement"))
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
     stop: int | None = setting(1, lo=1, hi=1_000_000)
-    approach_m: float = setting(0.2, lo=0.0, lo_open=True, hi=10.0)
-    approach_deg: float = setting(30.0, lo=0.0, lo_open=True, hi=360.0)
-    refine: int = setting(0, lo=0, hi=1000)
-    final_refine: int = setting(3, lo=0, hi=1000)
-    polish: str = setting("whole", choices=("fingers", "whole"))
-    polish_iterations: int = setting(30, lo=0, hi=10_000)
-    polish_tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
-    polish_from: float | None = setting(0.9, lo=-1.0, hi=1.0)
-    candidates: int = setting(1, lo=1, hi=64)
     stop_clear: bool | None = None
     report: str = setting("best", choices=("best", "final"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))
-    population: int | None = setting(None, lo=2, hi=100_000)
-    step_size: float = setting(0.25, lo=0.0, lo_open=True, hi=10.0)
+    polish: PolishCfg = PolishCfg()
+    cmaes: CmaesCfg = CmaesCfg()
+    fingers: FingersCfg = FingersCfg()
+    gripper: GripperCfg = GripperCfg()
 
     @classmethod
     def from_mapping(cls, d: dict | None, where: str = "solver") -> SolverCfg:
@@ -163,9 +217,10 @@ class SolverCfg:
 
     @classmethod
     def paper(cls, **changes) -> SolverCfg:
-        """The paper's protocol (every trial to its own stop, the fingers refined, the palm pose
-        kept), with ``changes``: what the reproductions of its tables use."""
-        return cls(**{**PAPER_PROTOCOL, **changes})
+        """The paper's protocol (``configs/solver/paper.yaml``: every trial to its own stop, the
+        fingers refined, the palm pose kept), with ``changes`` (top-level keys, or whole groups):
+        what the reproductions of its tables use."""
+        return replace(build(cls, paper_protocol(), "solver=paper"), **changes)
 
     @property
     def stops_clear(self) -> bool:
@@ -177,3 +232,17 @@ class SolverCfg:
     def stop_threshold(self) -> float | None:
         """The threshold a trial stops at, or ``None`` when runs use their whole budget."""
         return self.threshold if self.threshold is not None and self.threshold <= 1 else None
+
+
+@cache
+def _paper_yaml() -> str:
+    return (configs_dir() / "solver" / "paper.yaml").read_text(encoding="utf-8")
+
+
+def paper_protocol() -> dict:
+    """The paper's protocol as ``configs/solver/paper.yaml`` states it over ``srv`` (its one
+    definition): {key: value}, groups as mappings."""
+    import yaml
+
+    data = yaml.safe_load(_paper_yaml())
+    return {k: v for k, v in data.items() if k != "defaults"}

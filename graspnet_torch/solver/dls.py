@@ -7,7 +7,7 @@ then Levenberg-Marquardt (:mod:`graspnet_torch.solver.least_squares`, float64, f
 Jacobian) puts the fingertips (gripper points) on the contacts: every step kept only where it
 lowers the error and, with a collision-shaped reward (R2-R4) and something to collide with, does
 not raise the collision proxy's count. A restart stops once its error is below
-``solver.polish_tolerance_mm`` (a problem once ``solver.stop`` restarts have), or after
+``solver.polish.tolerance_mm`` (a problem once ``solver.stop`` restarts have), or after
 ``max_iterations`` steps. It minimises the model's error directly and never sees the
 reinforcement, so it is refused with sensor noise; the reported reinforcement and success are
 the reward's of what it found, as for every solver.
@@ -24,7 +24,8 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.rewards import Reward, r1
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment
-from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded
+from graspnet_torch.solver.loop import LoopOutcome
+from graspnet_torch.solver.tracker import enough_succeeded
 
 __all__ = ["run_dls"]
 
@@ -37,11 +38,10 @@ def run_dls(env: Environment, trials: int, seed: int, solver: SolverCfg | None =
     if noise is not None and noise.sigma > 0:
         raise ConfigError("solver=dls minimises the model's fingertip error and never sees the reinforcement, so "
                           "sensor noise (noise.sigma > 0) does not apply to it: use solver=srv or solver=cmaes")
-    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations)
+    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations, env.reward_base)
     like = env.lower
     gen = torch.Generator().manual_seed(seed)
-    problem_index = getattr(env, "problem_index", None)
-    pid = None if problem_index is None else problem_index.cpu()
+    pid = None if env.problem_index is None else env.problem_index.cpu()
     done = None
     if solver.stop is not None:
         def done(converged: Tensor) -> Tensor:
@@ -50,7 +50,7 @@ def run_dls(env: Environment, trials: int, seed: int, solver: SolverCfg | None =
     t0 = time.perf_counter()
     with torch.inference_mode():
         x0 = env.random_whole(trials, gen)
-        solved = env.local_solve(x0, solver.max_iterations, solver.polish_tolerance_mm / 1000, done, trace)
+        solved = env.local_solve(x0, solver.max_iterations, solver.polish.tolerance_mm / 1000, done, trace)
         config, evaluation = env.whole_result(solved, like)
         steps = solved.steps.clamp(min=1).to(like.device)
         r = reward_fn(evaluation, steps)

@@ -1,35 +1,43 @@
-"""What the closed loop drives: an environment turns configurations into an evaluation.
+"""The environment contract: everything a solver (srv, paper, cmaes, dls, ``solve_many``) may ask of
+a robot-and-problem pair, with one signature each.
 
-The loop (``solver/loop.py``) never knows which robot it drives. A robot-and-problem pair becomes
-an environment with
+A solver never knows which robot it drives. The configuration it searches is ``n`` numbers within
+``lower``/``upper`` (a free palm: 6 pose values; an arm: its joints; a mobile manipulator: base and
+arm); the environment turns configurations into an :class:`Evaluation` (E of eq. 3, per-finger
+errors, the finger joints the FCNN chose, collision counts, a gripper's alignment), says what the
+reinforcement's base is (eq. 14, or eq. 29 for a gripper) and when a configuration is a grasp,
+polishes configurations by least squares over the *whole* configuration x (the configuration with
+the contact fingers' joints; what ``solver=dls`` moves), and reports each trial in float64 with the
+result fields it adds to the common core (INTERFACE.md).
 
-- ``n``, ``lower``, ``upper``: the size of the configuration the network chooses and its bounds
-  (a free palm: 6 pose values; an arm: its joints);
-- ``evaluate(config (T, n)) -> Evaluation``: the error the reinforcement is built from (E of
-  eq. 3) and optional parts (per-finger errors, the finger joints the FCNN chose, collision
-  counts);
-- ``finish(config, evaluation, iterations) -> (config, Evaluation)``: a last refinement of what
-  is reported (the fingers' joints; a gripper's whole configuration);
-- ``report(...)``: the result fields of each trial, recomputed in float64.
-
-Rewards (R1-R4, eq. 20-23) are functions of the evaluation, the iteration and the budget
-(:class:`graspnet_torch.rewards.Reward`). :func:`build_environment` picks the environment of a
-robot and a problem; a new kind of robot is a new environment, never an edit of the loop.
+Robot-kind knowledge that is needed before an environment exists (whether a problem is in reach,
+how a trial is described on the command line, what a picture marks) is asked of the environment
+*class* (:meth:`Environment.check`, :meth:`Environment.unreachable`, :meth:`Environment.describe`,
+...). :func:`graspnet_torch.solver.environments.environment_class` maps a robot's kind to its class.
+A new kind of robot is a new environment, never an edit of a solver.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 from torch import Tensor
 
 if TYPE_CHECKING:
+    from graspnet_torch.robot.robot import Robot
+    from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.least_squares import LMResult
+    from graspnet_torch.solver.result import TrialResult
+    from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["Environment", "Evaluation", "FingerEnvironment"]
+__all__ = ["Done", "Environment", "Evaluation", "Report"]
+
+Done = Callable[[Tensor], Tensor]  # done(converged (B,) bool) -> (B,) bool: the rows that may stop
 
 
 @dataclass
@@ -43,8 +51,9 @@ class Evaluation:
         collisions: (T,) collision count, or None when the environment has no collision component.
         alignment: (T,) a gripper's |n_gripper . n_object| (eq. 24), or None; then ``error`` is d
             (eq. 26) and the reinforcement's base is (R1 + R2) / 2 (eq. 29).
-        config: (T, n) the configuration that was evaluated when the environment refined the
-            proposal (a gripper's ``solver.refine`` steps), or None (the proposal itself).
+        config: (T, n) the configuration that was evaluated: the proposal itself, or where the
+            environment settled it (a gripper's settling steps). :meth:`Environment.evaluate` always
+            sets it; evaluations built otherwise (a polish, a report) may leave it None.
     """
 
     error: Tensor
@@ -62,8 +71,8 @@ class Evaluation:
         """Per trial: this evaluation where ``mask`` (T,) is true, else ``other``."""
         out = {}
         for name, mine in self.tensors().items():
-            theirs = getattr(other, name)
-            out[name] = torch.where(mask.view(-1, *([1] * (mine.dim() - 1))), mine, theirs)
+            theirs = getattr(other, name)  # a part only one side has (a polished row's config) is dropped
+            out[name] = None if theirs is None else torch.where(mask.view(-1, *([1] * (mine.dim() - 1))), mine, theirs)
         return replace(self, **out)
 
     def put(self, trials: Tensor, part: Evaluation, config: Tensor) -> Evaluation:
@@ -82,347 +91,141 @@ class Evaluation:
     def clone(self) -> Evaluation:
         return replace(self, **{k: v.clone() for k, v in self.tensors().items()})
 
-    def grasped(self, tolerance: float, alignment: float = 0.999) -> Tensor:
-        """(T,) whether each configuration is a grasp in the model: every finger within
-        ``tolerance`` metres of its contact (without per-finger errors, ``error`` within it: a
-        gripper's d), a gripper's alignment above ``alignment``, and no collision where they are
-        counted."""
-        far = self.finger_errors.amax(-1) if self.finger_errors is not None else self.error
-        ok = far < tolerance
-        if self.alignment is not None:
-            ok = ok & (self.alignment > alignment)
-        if self.collisions is not None:
-            ok = ok & (self.collisions == 0)
-        return ok
+
+@dataclass
+class Report:
+    """The float64 report of T trials (:meth:`Environment.report`).
+
+    Attributes:
+        fields: per trial, the result fields the environment adds to the common core (INTERFACE.md:
+            the palm pose, finger joints and fingertip errors; arm joints; a gripper's d, alignment
+            and points).
+        evaluation: the float64 evaluation of the reported configurations without collisions (the
+            caller adds the FCL counts): what the reinforcement and ``grasped`` are recomputed from.
+        error_mm: (T,) the error each trial is ranked by (E of eq. 3, or a gripper's d), millimetres.
+        landed: (T,) every contact within ``solver.tolerance_mm`` (a gripper: d within it, aligned):
+            the grasp but for collisions.
+    """
+
+    fields: list[dict]
+    evaluation: Evaluation
+    error_mm: list[float]
+    landed: list[bool]
+
+    def select(self, trials: slice) -> Report:
+        """The report of a range of trials (a batch of problems: one problem's trials)."""
+        ev = replace(self.evaluation, **{k: v[trials] for k, v in self.evaluation.tensors().items()})
+        return Report(self.fields[trials], ev, self.error_mm[trials], self.landed[trials])
 
 
-class Environment(Protocol):
-    """What the loop needs from a robot-specific environment."""
+class Environment(ABC):
+    """What every solver may call. Settings reach an environment when it is built.
 
-    n: int
-    lower: Tensor  # (n,) or (T, n)
-    upper: Tensor  # (n,) or (T, n)
-    subsets: bool  # evaluate(config[idx], idx) allowed: once most trials stopped, the loop evaluates the rest only
-
-    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
-        """(T, n) configurations -> their evaluation; ``trials`` (B,): the trials that rows of a
-        (B, n) ``config`` belong to when only some are evaluated (None: all, in order)."""
-        ...
-
-
-class FingerEnvironment:
-    """What every environment whose fingers are placed by the FCNN shares (free palm, arm + hand):
-    the contacts expressed in each contact finger's base frame from a palm frame, the finger
-    joints by expert competition (+ refinement), the final polish and the float64 report.
-
-    One problem, or a batch of P problems with ``runs`` trials each (trial t on problem
-    t // runs, :attr:`problem_index`): then the fingers are the union of the problems' contact
-    fingers in robot order, the contacts are per trial (T, F, 3) and a mask (T, F) keeps each
-    trial's errors to its own problem's fingers (the others are inert: zero error, zero Jacobian,
-    at home in collision counts and results).
-
-    Subclasses set ``n``, ``lower``, ``upper`` ((n,), or (T, n) for a batch) and define
-    :meth:`palm_frame` (the palm in the world for a configuration) and :meth:`bounds64` (the exact
-    bounds, float64).
+    Attributes:
+        n: size of the searched configuration.
+        lower, upper: (n,) bounds, or (T, n) per trial for a batch of problems.
+        problem_index: (T,) each trial's problem in a batch of problems (trial t on problem
+            t // runs), or None (one problem).
+        subsets: ``evaluate(config[idx], idx)`` allowed: once most trials have stopped, the loop
+            evaluates the others only.
+        polishes: the environment has an in-loop polish (:meth:`polish`).
     """
 
     n: int
     lower: Tensor
     upper: Tensor
-    frame64: tuple[Tensor, Tensor] | None = None  # the search frame in the world (R, t), per trial or one
-    subsets = False  # every trial evaluated every iteration: fixed-seed results stay bit-for-bit what they were
+    problem_index: Tensor | None = None
+    subsets: bool = False
+    polishes: bool = False
 
-    def __init__(self, robot, problem, ik, refine: int, candidates: int, dtype: torch.dtype,
-                 device: torch.device | str, collisions: bool = False, runs: int = 1):
-        import numpy as np
+    # -- the search ---------------------------------------------------------------------------
 
-        from graspnet_torch.errors import ProblemError
-        from graspnet_torch.tasks.problem import GraspProblem
-
-        problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
-        for p in problems:
-            missing = [f for f in p.fingers if f not in ik.experts]
-            if missing:
-                raise ProblemError(f"{p.source}: no FCNN experts for finger(s) {', '.join(missing)}")
-        self.robot, self.problems, self.problem, self.ik = robot, problems, problems[0], ik
-        self.refine, self.candidates = refine, candidates
-        kw = {"dtype": dtype, "device": device}
-        self.mask = self.problem_index = None
-        if len(problems) == 1:
-            self.fingers = self.problem.fingers
-            contacts64 = np.asarray(self.problem.contacts_world(), dtype=np.float64)  # (F, 3)
-        else:  # a batch: the union of the contact fingers, per-trial contacts and a mask
-            used = {f for p in problems for f in p.fingers}
-            self.fingers = tuple(f for f in robot.finger_names if f in used)
-            column = {f: k for k, f in enumerate(self.fingers)}
-            contacts = np.zeros((len(problems), len(self.fingers), 3))
-            mask = np.zeros((len(problems), len(self.fingers)))
-            for i, p in enumerate(problems):
-                for f, x in zip(p.fingers, p.contacts_world(), strict=True):
-                    contacts[i, column[f]], mask[i, column[f]] = x, 1.0
-            rep = np.repeat(np.arange(len(problems)), runs)
-            contacts64 = contacts[rep]  # (T, F, 3)
-            self.mask = torch.as_tensor(mask[rep], **kw)  # (T, F)
-            self.problem_index = torch.as_tensor(rep, device=device)
-            self.subsets = True  # once most trials have stopped, the loop evaluates the others only
-        self.contacts64 = torch.as_tensor(contacts64, dtype=torch.float64)  # exact, for the polish and the report
-        self.contacts = self.contacts64.to(**kw)
-        self.runs = runs
-        self.idx = [robot.finger_index(f) for f in self.fingers]
-        base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]), **kw)
-        self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
-        ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
-        self.proxy = None
-        from graspnet_torch.collision.scene import has_environment
-
-        if collisions and has_environment(robot, self.problem):
-            from graspnet_torch.collision.proxy import CollisionProxy
-
-            self.proxy = CollisionProxy(robot, problems if len(problems) > 1 else self.problem, dtype=dtype,
-                                        device=device)
-            self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
-            self._idx = torch.as_tensor(self.idx, device=device)
-
-    def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
-        """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
-        raise NotImplementedError
-
-    def bounds64(self) -> tuple[Tensor, Tensor]:
-        """The exact bounds of the configuration, float64 on the CPU: (n,) or (T, n) for a batch."""
-        raise NotImplementedError
-
-    def clamp(self, config: Tensor, rows: Tensor | None = None) -> Tensor:
-        """(B, n) configurations of trials ``rows`` (None: all, in order) -> float64 on the CPU,
-        within the exact bounds."""
-        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
-        return torch.minimum(torch.maximum(config.detach().to(torch.float64).cpu(), lo), hi)
-
-    def _rows(self, value: Tensor | None, rows: Tensor | None) -> Tensor | None:
-        """A per-trial tensor of a batch at the trials ``rows`` (as is for one problem)."""
-        if value is None or self.mask is None or rows is None:
-            return value
-        return value[rows.to(value.device)]
-
-    def targets(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
-                ) -> Tensor:
-        """Contacts in each contact finger's base frame. config: (B, n) -> (B, F, 3); ``palm``: its
-        palm frame if already known; ``rows``: the trials of the rows (None: all, in order)."""
-        from graspnet_torch.robot.transforms import untransform_points
-
-        R, t = palm if palm is not None else self.palm_frame(config)
-        in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self._rows(self.contacts, rows))
-        return untransform_points(self.base_R, self.base_t, in_palm)
-
-    def finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
-                      ) -> tuple[Tensor, Tensor]:
-        """Finger joints (B, F, j) within limits and fingertip errors (B, F) in metres (zero for
-        a finger a trial's problem does not use)."""
-        targets = self.targets(config, palm, rows)
-        if self.candidates > 1 and self.refine > 0:
-            q, err = self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
-        elif self.refine <= 0:
-            q, err = self.ik.compete(targets, self.fingers)
-        else:
-            q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
-            q, err = self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
-        mask = self._rows(self.mask, rows)
-        return q, err if mask is None else err * mask
-
-    def _every(self, q: Tensor, rows: Tensor | None) -> Tensor:
-        """Every finger's joints (B, F_all, j): the contact fingers' ``q`` (B, F, j), the others
-        (and in a batch, the fingers a trial's problem does not use) at home."""
-        home = self.home.expand(q.shape[0], -1, -1)
-        mask = self._rows(self.mask, rows)
-        if mask is not None:
-            q = torch.where(mask.unsqueeze(-1) > 0, q, home[:, self.idx])
-        return home.index_copy(1, self._idx, q)
-
-    def _pid(self, rows: Tensor | None) -> Tensor | None:
-        return self._rows(self.problem_index, rows) if self.problem_index is not None else None
-
+    @abstractmethod
     def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
-        """config: (B, n) of the trials ``trials`` (None: all, in order) -> E (B,) of eq. 3,
-        per-finger errors (B, F), finger joints (B, F, j) and, with a collision proxy, the
-        collision count (B,) of the whole posture (the fingers without a contact at home)."""
-        levels = None
-        if self.proxy is not None and self.robot.has_body:  # the proxy's arm chain gives the palm too
-            levels, palm = self.proxy.body_levels_and_palm(config)
-        else:
-            palm = self.palm_frame(config)
-        q, errors = self.finger_joints(config, palm, trials)
-        collisions = None
-        if self.proxy is not None:
-            collisions = self.proxy.count(palm, self._every(q, trials), config if self.robot.has_body else None,
-                                          levels, self._pid(trials))
-        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions)
+        """(B, n) configurations of the trials ``trials`` (None: all T, in order) -> their
+        evaluation, with ``config`` the configuration evaluated (the proposal, or where the
+        environment settled it)."""
 
-    polish = "fingers"  # 'whole': also polish the configuration with the fingers (SolverCfg.polish)
-    polish_iterations = 0
-    polish_tol = 0.0  # metres: a polished trial stops below this error
-    whole_polish = True  # the environment has a whole polish (SolverCfg.polish applies)
+    def reward_base(self, evaluation: Evaluation, a: float) -> Tensor:
+        """(T,) the reinforcement before collision shaping: R_1 = 1 - tanh(a E) (eq. 14)."""
+        from graspnet_torch.rewards import r1
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int,
-               done: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, Evaluation]:
-        """Refine the finger joints of the reported configurations (the configuration kept); never
-        worse. With ``polish = 'whole'``, instead polish the configuration and the fingers together
-        (:meth:`polish_whole`; ``done`` as :meth:`local_solve`'s: the rows that may stop, given
-        the converged ones). Returns the configurations and their evaluation."""
-        whole = self.polish == "whole" and self.polish_iterations > 0
-        if iterations > 0 and not whole:  # the whole polish moves the fingers too
-            with torch.inference_mode():
-                q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
-            if self.mask is not None:
-                err = err * self.mask
-            evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
-                                    collisions=evaluation.collisions)
-        if whole:
-            config, evaluation = self.polish_whole(config, evaluation, self.polish_iterations, self.polish_tol, done)
-        return config, evaluation
+        return r1(evaluation.error, a)
 
-    # The whole configuration x = [configuration (n), the contact fingers' joints (F * j)], float64 on
-    # the CPU: what the whole polish and solver=dls move together (padding slots have limits [0, 0]).
+    def grasped(self, evaluation: Evaluation, tolerance: float) -> Tensor:
+        """(T,) whether each configuration is a grasp in the model: every contact finger within
+        ``tolerance`` metres of its contact and no collision where they are counted."""
+        far = evaluation.finger_errors.amax(-1) if evaluation.finger_errors is not None else evaluation.error
+        ok = far < tolerance
+        if evaluation.collisions is not None:
+            ok = ok & (evaluation.collisions == 0)
+        return ok
 
-    def whole_bounds(self, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """Lower and upper bounds of x, (m,) or (B, m) for a batch: the configuration's bounds,
-        then the joint limits."""
-        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
-        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
-        if lo.dim() == 2:
-            flo, fhi = flo.expand(lo.shape[0], -1), fhi.expand(lo.shape[0], -1)
-        return torch.cat([lo, flo], -1), torch.cat([hi, fhi], -1)
+    @abstractmethod
+    def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
+        """After the search: the reported configurations (T, n) refined (the fingers' joints; the
+        whole polish; a gripper's polish), never worse. ``done``: the rows that may stop."""
 
-    def whole_start(self, config: Tensor, joints: Tensor, rows: Tensor | None = None) -> Tensor:
-        """x (B, m) of configurations (B, n) and contact-finger joints (B, F, j), within bounds."""
-        lo, hi = self.whole_bounds(rows)
-        B = config.shape[0]
-        x = torch.cat([self.clamp(config, rows), joints.detach().to(torch.float64).cpu().reshape(B, -1)], 1)
-        return torch.minimum(torch.maximum(x, lo), hi)
+    def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
+               ) -> tuple[Tensor, Evaluation]:
+        """Inside the loop (when :attr:`polishes`): polish the configurations (B, n) of the trials
+        ``trials`` (B,), never worse."""
+        raise NotImplementedError(f"{type(self).__name__} has no in-loop polish")
 
+    # -- the whole configuration x: what solver=dls and the polishes move ------------------------
+
+    @abstractmethod
     def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
-        """x (T, m) uniform within the bounds and joint limits (``solver=dls``'s restarts)."""
-        lo, hi = self.whole_bounds()
-        u = torch.rand(trials, lo.shape[-1], generator=gen, dtype=torch.float64, device=gen.device).cpu()
-        return lo + (hi - lo) * u
+        """x (T, m) uniform within the bounds (and joint limits), float64 on the CPU."""
 
-    def _goal64(self, rows: Tensor | None = None) -> Tensor:
-        """The contacts, flattened, float64: (3F,) or (B, 3F) for a batch (zero where masked)."""
-        c = self._rows(self.contacts64, rows)
-        if self.mask is None:
-            return c.reshape(-1)
-        return (c * self._rows(self.mask, rows).to(c).unsqueeze(-1).cpu()).reshape(c.shape[0], -1)
+    @abstractmethod
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
+                    trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:
+        """Levenberg-Marquardt on x (B, m) of the trials ``rows`` (None: all, in order), within
+        bounds, never into a collision the proxy sees; a row stops below ``tol`` or when ``done``
+        says so; ``trace`` receives the error (B,) after every step."""
 
-    def _tips64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
-        """Contact fingertips in the world, flattened, of x (B, m) float64 of the trials ``rows``
-        -> (B, 3F) (zero where a batch's mask is)."""
-        from graspnet_torch.robot.transforms import transform_points
-
-        F, j = len(self.idx), self.robot.joints_per_finger
-        R, t = self.palm_frame(x[:, : self.n])
-        kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
-        local = kernel.position(x[:, self.n:].reshape(-1, F, j))
-        in_palm = transform_points(self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu(), local)
-        tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
-        mask = self._rows(self.mask, rows)
-        if mask is not None:
-            tips = tips * mask.to(tips).cpu().unsqueeze(-1)
-        return tips.reshape(x.shape[0], -1)
-
-    def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
-        """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
-        F, j = len(self.idx), self.robot.joints_per_finger
-        config = x[:, : self.n].to(self.lower)
-        q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
-        return self.proxy.count(self.palm_frame(config), self._every(q, rows), config if self.robot.has_body else None,
-                                None, self._pid(rows)).cpu()
-
-    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0,
-                    done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
-                    rows: Tensor | None = None) -> LMResult:
-        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
-        on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
-        their contacts, within bounds and limits, never into a collision the proxy sees (when
-        there is one)."""
-        from graspnet_torch.solver.least_squares import levenberg_marquardt
-
-        trials = None if rows is None else rows.cpu()
-
-        def tips(xx: Tensor, r: Tensor) -> Tensor:
-            return self._tips64(xx, r if trials is None else trials[r])
-
-        def count(xx: Tensor, r: Tensor) -> Tensor:
-            return self._count64(xx, r if trials is None else trials[r])
-
-        lo, hi = self.whole_bounds(trials)
-        return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
-                                   trace=trace, count=count if self.proxy is not None else None)
-
-    def whole_result(self, solved: LMResult, like: Tensor, collisions: Tensor | None = None,
-                     rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
-        """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""
-        B, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
-        goal = self._goal64(None if rows is None else rows.cpu())
-        finger_err = (goal - solved.value).reshape(B, F, 3).norm(dim=-1)
-        kw = {"dtype": like.dtype, "device": like.device}
-        count = solved.count if solved.count is not None else collisions
-        return solved.x[:, : self.n].to(**kw), Evaluation(
-            error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
-            joints=solved.x[:, self.n:].reshape(B, F, j).to(**kw),
-            collisions=None if count is None else count.to(like.device))
-
-    def polish_whole(self, config: Tensor, evaluation: Evaluation, iterations: int, tol: float = 0.0,
-                     done: Callable[[Tensor], Tensor] | None = None, trials: Tensor | None = None
+    @abstractmethod
+    def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None
                      ) -> tuple[Tensor, Evaluation]:
-        """Levenberg-Marquardt on the whole configuration (palm pose or arm joints) together with
-        the contact fingers' free joints (:meth:`local_solve`), from the reported ones, of the
-        trials ``trials`` (None: all, in order): never worse. The loop finds the basin; the
-        fingers alone, with the palm fixed, end where the palm left them (a few mm), the whole
-        polish lands in it. Rows stop at |e| < ``tol`` or when ``done`` says so."""
-        x = self.whole_start(config, evaluation.joints, trials)
-        solved = self.local_solve(x, iterations, tol, done, rows=trials)
-        return self.whole_result(solved, config, evaluation.collisions, trials)
+        """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""
 
-    def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
-        """Per trial, the result fields of the reported configuration, recomputed in float64: the
-        palm pose, every finger's joints (the non-contact fingers at home), the fingertip errors of
-        its problem's contact fingers by forward kinematics against the contacts, and ``error``
-        (E, metres). The loop runs in float32, whose rounded limits can exceed the exact ones by
-        ~1e-7: configurations and joints are clamped to the exact bounds and limits first."""
-        import math
+    # -- the result ------------------------------------------------------------------------------
 
-        from graspnet_torch.robot.transforms import rt_to_pose, transform_points
+    @abstractmethod
+    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
+        """The reported configurations (T, n), recomputed in float64: clamped to the exact bounds,
+        the errors by forward kinematics against the problem (INTERFACE.md)."""
 
-        robot = self.robot
-        exact = self.clamp(config)
-        T = exact.shape[0]
-        flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
-        home = robot.home_posture(torch.float64).fingers.expand(T, -1, -1)
-        q = home.clone()
-        chosen = torch.clamp(evaluation.joints.detach().to(torch.float64).cpu(), flo[self.idx], fhi[self.idx])
-        if self.mask is not None:  # a finger a trial's problem does not use stays at home
-            chosen = torch.where(self.mask.cpu().unsqueeze(-1) > 0, chosen, home[:, self.idx])
-        q[:, self.idx] = chosen
-        R, t = self.palm_frame(exact)
-        contacts = self.contacts64
-        if self.frame64 is not None:  # the search frame G -> the world: the palm G o pose, the contacts G c
-            from graspnet_torch.robot.transforms import compose
+    # -- robot-kind knowledge needed without an environment ------------------------------------
 
-            G_R, G_t = self.frame64
-            R, t = compose(G_R, G_t, R, t)
-            contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
-        tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
-        err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
-        palm = rt_to_pose(R, t)
-        deg = 180.0 / math.pi
-        column = {f: k for k, f in enumerate(self.fingers)}
-        out = []
-        for k in range(T):
-            pose = palm[k].tolist()
-            problem = self.problems[0 if self.problem_index is None else int(self.problem_index[k])]
-            errors = {f: float(err[k, column[f]]) for f in problem.fingers}
-            out.append({
-                "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
-                "joints": robot.finger_joints_to_file(q[k]),  # every joint, mimic joints at their coupled values
-                "fingertip_error_mm": {f: e * 1000 for f, e in errors.items()},
-                "error": sum(errors.values()),
-            })
-        return out
+    @classmethod
+    def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
+        """Refuse (:class:`~graspnet_torch.errors.ProblemError`) a problem this robot cannot attempt,
+        before any work (a contact beyond any reach; a gripper's approach outside its limits)."""
+        return None
+
+    @classmethod
+    def unreachable(cls, robot: Robot, problem: GraspProblem) -> list[str]:
+        """The contacts no configuration of the search space reaches (by name), for a failure's reason."""
+        return []
+
+    @staticmethod
+    @abstractmethod
+    def describe(trial: TrialResult) -> str:
+        """A trial's errors in a few words (``3.5 mm from its contacts (thumb 3 mm)``)."""
+
+    @staticmethod
+    @abstractmethod
+    def summary(trial: TrialResult, fingers: Sequence[str]) -> str:
+        """A trial's errors on one line (``total error 0.012 mm (thumb 0.004, index 0.008)``)."""
+
+    @staticmethod
+    @abstractmethod
+    def columns(trial: TrialResult, fingers: Sequence[str]) -> dict[str, float]:
+        """The trial's error columns of the command line's table (headers -> values)."""
+
+    @staticmethod
+    def marks(problem: GraspProblem, trial: TrialResult) -> np.ndarray:
+        """(k, 3) points a picture marks (world, metres): the contacts."""
+        return problem.contacts_world()

@@ -21,17 +21,21 @@ from torch import Tensor
 from graspnet_torch.collision.proxy import ChainLevels, motion_terms
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.rewards import manus_reward
+from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.robot import Robot
-from graspnet_torch.solver.environment import Evaluation
+from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
+    from graspnet_torch.fcnn.ik import FingerIK
     from graspnet_torch.solver.least_squares import LMResult
+    from graspnet_torch.solver.result import TrialResult
 
-__all__ = ["CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
+__all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
 
 CLEARANCE_M = 0.005  # the loop and the polish keep 5 mm from obstacles, floor and own links (proxy margin)
+ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
 
 
 def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
@@ -60,7 +64,7 @@ def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
     return lower, upper
 
 
-class GripperEnvironment:
+class GripperEnvironment(Environment):
     """Evaluates body configurations of a gripper robot for one two-point problem, or for a batch
     of problems (``runs`` trials each, trial t on problem t // runs), batched.
 
@@ -72,11 +76,11 @@ class GripperEnvironment:
     """
 
     subsets = True
-    whole_polish = False  # its finish always polishes every joint (final_refine); SolverCfg.polish does not apply
+    polishes = False  # its finish always polishes every joint (final_refine); SolverCfg.polish does not apply
 
-    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
-                 device: torch.device | str = "cpu", collisions: bool = False, approach_m: float = 0.2,
-                 approach_deg: float = 30.0, refine: int = 0, runs: int = 1):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg,
+                 ik: FingerIK | None = None, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
+                 collisions: bool = False, runs: int = 1):
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         for p in problems:
             if robot.gripper_kernel is None or p.points is None:
@@ -84,8 +88,9 @@ class GripperEnvironment:
                                    f"'points'")
         self.robot, self.problems, self.problem = robot, problems, problems[0]
         self.n = len(robot.body_joint_names)
-        self.refine = refine
-        bounds = [gripper_bounds(robot, p, approach_m, approach_deg) for p in problems]
+        cfg = solver.gripper
+        self.refine, self.final_refine, self.tolerance_mm = cfg.settle, cfg.polish_iterations, solver.tolerance_mm
+        bounds = [gripper_bounds(robot, p, cfg.approach_m, cfg.approach_deg) for p in problems]
         targets = np.stack([p.points_world() for p in problems])  # (P, 2, 3)
         kw = {"dtype": dtype, "device": device}
         self.problem_index = None
@@ -118,12 +123,15 @@ class GripperEnvironment:
             self.proxy = CollisionProxy(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
-    def evaluate(self, config: Tensor, trials: Tensor | None = None, settle: bool = True) -> Evaluation:
-        """config: (T, n) -> d (T,) of eq. 26 as ``error``, the alignment (T,) of eq. 24 and, with a
-        proxy, the collision count. ``trials`` (B,): the trials the rows of ``config`` (B, n)
-        belong to, when the loop evaluates only its active trials (None: all, in order).
-        ``settle``: first the ``refine`` settling steps (the loop's proposals), else as given."""
-        proposal = config
+    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
+        """config: (T, n) -> the ``solver.gripper.settle`` settling steps, then d (T,) of eq. 26 as
+        ``error``, the alignment (T,) of eq. 24 and, with a proxy, the collision count; ``config``
+        the settled configurations. ``trials`` (B,): the trials the rows of ``config`` (B, n)
+        belong to, when the loop evaluates only its active trials (None: all, in order)."""
+        return self.settled(config, trials, True)
+
+    def settled(self, config: Tensor, trials: Tensor | None = None, settle: bool = True) -> Evaluation:
+        """:meth:`evaluate`, with the settling steps (``settle``) or of the configurations as given."""
         targets, lower, upper, pid = self._per_trial(trials)
         if self.refine > 0 and settle:
             config, levels, points = self._refine(config, self.refine, targets, lower, upper)
@@ -135,8 +143,18 @@ class GripperEnvironment:
             end = levels[:, -1] @ self._palm_offset
             none = self._no_fingers.expand(config.shape[0], 0, 0)
             collisions = self.proxy.count((end[:, :3, :3], end[:, :3, 3]), none, config, list(levels.unbind(1)), pid)
-        return Evaluation(error=d, alignment=alignment, collisions=collisions,
-                          config=config if config is not proposal else None)
+        return Evaluation(error=d, alignment=alignment, collisions=collisions, config=config)
+
+    def reward_base(self, evaluation: Evaluation, a: float) -> Tensor:
+        """R = (R1 + R2) / 2 of eq. 29: R1 = |n_gripper . n_object| (eq. 24), R2 = 1 - tanh(a d)."""
+        return (evaluation.alignment + r1(evaluation.error, a)) / 2
+
+    def grasped(self, evaluation: Evaluation, tolerance: float) -> Tensor:
+        """d within ``tolerance`` metres, aligned above :data:`ALIGNMENT_MIN`, no collision where counted."""
+        ok = (evaluation.error < tolerance) & (evaluation.alignment > ALIGNMENT_MIN)
+        if evaluation.collisions is not None:
+            ok = ok & (evaluation.collisions == 0)
+        return ok
 
     def _kinematics(self, q: Tensor, jacobian: bool = False) -> tuple[Tensor, Tensor, Tensor | None]:
         """q (T, n) -> the chain's frames P_1..P_n (T, n, 4, 4), the gripper points (T, 2, 3) and,
@@ -196,9 +214,8 @@ class GripperEnvironment:
                 J = self._jacobian(levels, pts)
         return q, levels, pts
 
-    def finish(self, config: Tensor, evaluation: Evaluation, iterations: int,
-               done: Callable[[Tensor], Tensor] | None = None) -> tuple[Tensor, Evaluation]:
-        """Polish the reported configurations: ``iterations`` damped least-squares steps (float64)
+    def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
+        """Polish the reported configurations: ``solver.gripper.polish_iterations`` damped least-squares steps (float64)
         on the two gripper points against the object points of each trial's nearer pairing,
         within the bounds, each step kept only where it lowers d (never worse). The analogue of
         the hand's final finger refinement: the loop finds the basin, the polish lands in it.
@@ -207,6 +224,7 @@ class GripperEnvironment:
 
             dq = J^T (J J^T + lambda^2 I)^-1 e,   J = d(points)/dq (6 x n, forward differences, float64)
         """
+        iterations = self.final_refine
         if iterations <= 0:
             return config, evaluation
         q = self.clamp(config)
@@ -218,7 +236,7 @@ class GripperEnvironment:
         crossed = err[T:] < err[:T]
         q = torch.where(crossed.unsqueeze(1), q2[T:], q2[:T])
         ev = self.evaluate(q.to(config))
-        return (q.to(config) if ev.config is None else ev.config), ev
+        return ev.config, ev
 
     def _least_squares(self, q: Tensor, goal: Tensor, iterations: int, tol: float = 0.0,
                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
@@ -255,13 +273,15 @@ class GripperEnvironment:
         u = torch.rand(trials, self.n, generator=gen, dtype=torch.float64, device=gen.device).cpu()
         return lo + (hi - lo) * u
 
-    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0,
-                    done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
-                    ) -> LMResult:
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
+                    trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:
         """Levenberg-Marquardt from x (T, n) onto both pairings of the object points at once
         (eq. 26-28), each trial keeping its better one; a trial stops once either pairing is
-        within ``tol`` or ``done`` says so."""
+        within ``tol`` or ``done`` says so. Every trial at once (``rows`` None: no in-loop polish)."""
         from graspnet_torch.solver.least_squares import LMResult
+
+        if rows is not None:
+            raise NotImplementedError("the gripper's local solve runs on every trial at once")
 
         T = x.shape[0]
         targets = self._targets64.expand(T, 2, 3)
@@ -283,11 +303,10 @@ class GripperEnvironment:
                         count=None if solved.count is None else solved.count[pick],
                         steps=torch.maximum(solved.steps[:T], solved.steps[T:]))
 
-    def whole_result(self, solved: LMResult, like: Tensor, collisions: Tensor | None = None
-                     ) -> tuple[Tensor, Evaluation]:
+    def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
         """The configurations (T, n) of solved rows and their evaluation (no settling steps)."""
         config = solved.x.to(like)
-        return config, self.evaluate(config, settle=False)
+        return config, self.settled(config, settle=False)
 
     def _count(self, q: Tensor, pid: Tensor | None = None) -> Tensor:
         """(B,) the proxy's collision count of configurations (B, n) of the trials of problems
@@ -305,7 +324,7 @@ class GripperEnvironment:
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
         return torch.clamp(config.detach().to(torch.float64).cpu(), lo, hi)
 
-    def report(self, config: Tensor, evaluation: Evaluation) -> list[dict]:
+    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
         """Per trial, recomputed in float64: every body joint by name (m / degrees), the palm
         (gripper) pose, the two gripper points, d in mm, the alignment and ``error`` (d, metres)."""
         from graspnet_torch.robot.transforms import rt_to_pose
@@ -315,20 +334,44 @@ class GripperEnvironment:
         _r, alignment, _r2, d = manus_reward(points, self._targets64.expand_as(points))
         palm = rt_to_pose(*self.robot.palm_frame(q))
         deg = 180.0 / math.pi
-        scale = [deg if kind == "revolute" else 1.0 for kind in self.robot.body.joint_types]
         out = []
         for k in range(q.shape[0]):
             pose = palm[k].tolist()
             out.append({
-                "arm_joints": {n: v * s for n, v, s in zip(self.robot.body_joint_names, q[k].tolist(), scale,
-                                                           strict=True)},
+                "arm_joints": self.robot.body_joints_to_file(q[k]),
                 "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
                 "gripper_points": points[k].tolist(),
                 "distance_mm": float(d[k]) * 1000,
                 "alignment": float(alignment[k]),
-                "error": float(d[k]),
             })
-        return out
+        evaluation = Evaluation(error=torch.tensor([float(x) for x in d], dtype=torch.float64),
+                                alignment=torch.tensor([f["alignment"] for f in out], dtype=torch.float64))
+        return Report(fields=out, evaluation=evaluation, error_mm=[f["distance_mm"] for f in out],
+                      landed=[f["distance_mm"] <= self.tolerance_mm and f["alignment"] > ALIGNMENT_MIN for f in out])
+
+    @classmethod
+    def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
+        """The problem's ``approach`` names known joints within their limits (:func:`gripper_bounds`)."""
+        gripper_bounds(robot, problem, solver.gripper.approach_m, solver.gripper.approach_deg)
+
+    @staticmethod
+    def describe(trial: TrialResult) -> str:
+        return f"d = {trial.distance_mm:.3g} mm, alignment {trial.alignment:.4f}"
+
+    @staticmethod
+    def summary(trial: TrialResult, fingers: Sequence[str]) -> str:
+        """d (eq. 26) and the alignment (eq. 24)."""
+        return (f"d {trial.distance_mm:.3f} mm, alignment {trial.alignment:.6f} "
+                f"({math.degrees(math.acos(min(1.0, trial.alignment))):.2f} deg)")
+
+    @staticmethod
+    def columns(trial: TrialResult, fingers: Sequence[str]) -> dict[str, float]:
+        return {"d mm": trial.distance_mm, "alignment": round(trial.alignment, 6)}
+
+    @staticmethod
+    def marks(problem: GraspProblem, trial: TrialResult) -> np.ndarray:
+        """The object's two points and the gripper's two."""
+        return np.concatenate([problem.points_world(), np.asarray(trial.gripper_points)])
 
 
 def _dls(J: Tensor, e: Tensor, lam: Tensor, eye: Tensor) -> Tensor:

@@ -17,35 +17,11 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.transforms import pose_to_rt
-from graspnet_torch.solver.environment import FingerEnvironment
+from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.fingers import FingerEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["HandEnvironment", "check_reach", "finger_reach_bound"]
-
-
-def check_reach(robot: Robot, problem: GraspProblem) -> None:
-    """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther from
-    the box of palm positions than the finger can reach (its base offset plus the lengths of its
-    links, an upper bound whatever the joints); without bounds, contacts that no palm position
-    reaches together (:func:`~graspnet_torch.solver.search_space.palm_search_space`). For a robot
-    with an arm: farther from the arm's first joint than the arm's links, their prismatic travel
-    and the finger can reach."""
-    if robot.has_body:
-        _check_arm_reach(robot, problem)
-        return
-    bounds = problem.bounds()
-    if bounds is None:
-        from graspnet_torch.solver.search_space import palm_search_space
-
-        palm_search_space(robot, problem)
-        return
-    lo, hi = bounds.lower[:3], bounds.upper[:3]
-    for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
-        reach = finger_reach_bound(robot, contact.finger)
-        gap = float(np.linalg.norm(point - np.clip(point, lo, hi)))
-        if gap > reach:
-            raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the palm's "
-                               f"search space but the {contact.finger} reaches at most {reach:.3f} m from the palm")
+__all__ = ["HandEnvironment", "finger_reach_bound"]
 
 
 class HandEnvironment(FingerEnvironment):
@@ -65,9 +41,9 @@ class HandEnvironment(FingerEnvironment):
 
     n = 6
 
-    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], ik: FingerIK, refine: int = 1,
-                 candidates: int = 1, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
-                 collisions: bool = False, runs: int = 1):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
+                 runs: int = 1):
         from graspnet_torch.solver.search_space import palm_search_space
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
@@ -75,8 +51,7 @@ class HandEnvironment(FingerEnvironment):
             raise ProblemError(f"{problems[0].source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
         self.spaces = [palm_search_space(robot, p) for p in problems]
         local = [p.moved(np.linalg.inv(s.frame)) for p, s in zip(problems, self.spaces, strict=True)]
-        super().__init__(robot, local if len(local) > 1 else local[0], ik, refine, candidates, dtype, device,
-                         collisions, runs)
+        super().__init__(robot, local if len(local) > 1 else local[0], solver, ik, dtype, device, collisions, runs)
         self.world_problems = problems
         frames = np.stack([s.frame for s in self.spaces])
         lo = np.stack([s.lower for s in self.spaces])
@@ -99,6 +74,42 @@ class HandEnvironment(FingerEnvironment):
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
 
+    @classmethod
+    def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
+        """Refuse a contact that no palm pose within the bounds can bring a fingertip to: farther
+        from the box of palm positions than the finger can reach (its base offset plus the lengths
+        of its links, an upper bound whatever the joints); without bounds, contacts that no palm
+        position reaches together (:func:`~graspnet_torch.solver.search_space.palm_search_space`)."""
+        bounds = problem.bounds()
+        if bounds is None:
+            from graspnet_torch.solver.search_space import palm_search_space
+
+            palm_search_space(robot, problem)
+            return
+        lo, hi = bounds.lower[:3], bounds.upper[:3]
+        for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
+            reach = finger_reach_bound(robot, contact.finger)
+            gap = float(np.linalg.norm(point - np.clip(point, lo, hi)))
+            if gap > reach:
+                raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the palm's "
+                                   f"search space but the {contact.finger} reaches at most {reach:.3f} m from the "
+                                   f"palm")
+
+    @classmethod
+    def unreachable(cls, robot: Robot, problem: GraspProblem) -> list[str]:
+        """The contact fingers whose contact lies farther from the box of palm positions than the
+        finger's sampled reach (:func:`~graspnet_torch.solver.search_space.finger_reach`)."""
+        from graspnet_torch.solver.search_space import finger_reach, palm_search_space
+
+        if not problem.contacts:
+            return []
+        space = palm_search_space(robot, problem)
+        G = space.frame
+        local = (problem.contacts_world() - G[:3, 3]) @ G[:3, :3]
+        gap = np.linalg.norm(local - np.clip(local, space.lower[:3], space.upper[:3]), axis=1)
+        reach = finger_reach(robot)
+        return [c.finger for c, g in zip(problem.contacts, gap, strict=True) if g > reach[robot.finger_index(c.finger)]]
+
 
 def finger_reach_bound(robot: Robot, finger: str) -> float:
     """Upper bound of a fingertip's distance from the palm origin, whatever the joints: its base
@@ -109,16 +120,3 @@ def finger_reach_bound(robot: Robot, finger: str) -> float:
                  if t == "prismatic")
     return float(np.linalg.norm(f.base_in_palm[:3, 3]) + np.linalg.norm(spec.offsets[:, :3, 3], axis=1).sum() + travel)
 
-
-def _check_arm_reach(robot: Robot, problem: GraspProblem) -> None:
-    body = robot.body
-    origin = body.offsets[0][:3, 3]  # the first joint, in the world
-    arm = float(np.linalg.norm(body.offsets[1:, :3, 3], axis=1).sum())
-    arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
-               if kind == "prismatic")
-    for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
-        reach = arm + finger_reach_bound(robot, contact.finger)
-        gap = float(np.linalg.norm(point - origin))
-        if gap > reach:
-            raise ProblemError(f"{problem.source}: the {contact.finger} contact lies {gap:.3f} m from the arm's first "
-                               f"joint but the arm and {contact.finger} reach at most {reach:.3f} m")

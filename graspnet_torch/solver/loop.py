@@ -27,8 +27,9 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.rewards import Reward, add_noise
-from graspnet_torch.solver.config import ALIGNMENT_MIN, NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
+from graspnet_torch.solver.tracker import Tracker, enough_succeeded
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
 __all__ = ["LoopOutcome", "enough_succeeded", "run_loop"]
@@ -93,7 +94,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     """Run T trials of the closed loop on one environment (settings default to the paper's)."""
     solver, srv = solver or SolverCfg(), srv or SRVNetCfg()
     noise = noise or NoiseCfg()
-    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations)
+    reward_fn = Reward(reward or RewardCfg(), solver.max_iterations, env.reward_base)
     dtype, device = env.lower.dtype, env.lower.device
     T, n = trials, env.n
     gen = torch.Generator(device=device).manual_seed(seed)
@@ -125,7 +126,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     if threshold is None:
         success = torch.zeros(T, dtype=torch.bool, device=device)
     elif solver.stop_rule == "grasp" and noise.sigma == 0:
-        success = best_ev.grasped(solver.tolerance_mm / 1000, ALIGNMENT_MIN)
+        success = env.grasped(best_ev, solver.tolerance_mm / 1000)
     else:
         success = best_r > threshold
     start = torch.addcmul(env.lower, env.upper - env.lower, o_start)
@@ -142,59 +143,37 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
     o_prev2 = o_prev
-    active = torch.ones(T, dtype=torch.bool, device=device)
-    all_active = True
-    iterations = torch.full((T,), solver.max_iterations, dtype=torch.long, device=device)
-    best_config = best_ev = best_r = best_obs = None
-    n_active = T
-    succeeded = torch.zeros(T, dtype=torch.bool, device=device)
+    best = Tracker(T, reward, solver.max_iterations, env.problem_index, solver.stop, device)
     polish_from = None  # the polish inside the loop (SolverCfg.polish_from; never with sensor noise)
-    if (solver.polish_from is not None and solver.polish == "whole" and getattr(env, "whole_polish", False)
-            and noise.sigma == 0 and threshold is not None):
-        polish_from = solver.polish_from
+    if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
+        polish_from = solver.polish.from_r
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     tolerance = solver.tolerance_mm / 1000
-    problem_index = getattr(env, "problem_index", None)  # (T,) a batch of problems: each trial's
     for k in range(solver.max_iterations):
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
         step = net(x, torch.randn(T, n, generator=gen, dtype=dtype, device=device))
         config = torch.addcmul(env.lower, span, step.o)  # (13)
-        if all_active or n_active * 2 > T or not getattr(env, "subsets", False):
+        if best.all_active or best.n_active * 2 > T or not env.subsets:
             ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
         else:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
-            idx = active.nonzero().squeeze(1)
+            idx = best.active.nonzero().squeeze(1)
             ev = ev.put(idx, env.evaluate(config[idx], idx), config)
-        if ev.config is not None:  # the environment settled the proposal (a gripper's refine steps)
-            config = ev.config
+        config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
-        net.reinforce(observed, None if all_active else active)  # (16)-(19)
-        if best_config is None:
-            best_config, best_ev, best_r, best_obs = config, ev, r, observed
-        else:
-            if best_ev.collisions is not None and reward.cfg.kind in ("r3", "r4"):
-                # shaping grows with i (eq. 22-23): the kept configuration is scored as it would be
-                # now (its noise draw kept), so an early colliding one does not outrank later clear ones
-                rescored = reward(best_ev, k + 1)
-                best_obs, best_r = best_obs + (rescored - best_r), rescored
-            better = (observed > best_obs) if solver.report == "best" else torch.ones_like(active)
-            if not all_active:
-                better &= active
-            best_obs = torch.where(better, observed, best_obs)
-            best_r = torch.where(better, r, best_r)
-            best_config = torch.where(better.unsqueeze(1), config, best_config)
-            best_ev = ev.where(better, best_ev)
+        net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
+        best.rescore(k + 1)
+        best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
         if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
-            near = active & (observed > polish_from) & (observed > polished_at)
+            near = best.active & (observed > polish_from) & (observed > polished_at)
             if bool(near.any()):
                 polished_at = torch.where(near, observed, polished_at)
-                best_config, best_ev, best_r, best_obs, landed = _polish_near(
-                    env, near, best_config, best_ev, best_r, best_obs, reward, k + 1, threshold, solver,
-                    tolerance if grasp_rule else None)
-                observed = torch.where(landed, best_obs, observed)  # the stop below sees the landed ones
-                r = torch.where(landed, best_r, r)  # a landed trial is where the polish put it: its curves
-                ev = best_ev.where(landed, ev)  # end there, and its collision count is the landed one's
+                landed = _polish_near(env, near, best, reward, k + 1, threshold, solver,
+                                      tolerance if grasp_rule else None)
+                observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
+                r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
+                ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", step.r_hat),
                                ("sigma", step.sigma), ("total", ev.error), ("errors", ev.finger_errors),
@@ -202,66 +181,47 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 if value is not None:
                     hist.setdefault(key, []).append(value)
             hist.setdefault("time", []).append(time.perf_counter() - t0)
-        o_new = step.o if all_active else torch.where(active.unsqueeze(1), step.o, o_prev)
+        o_new = step.o if best.all_active else torch.where(best.active.unsqueeze(1), step.o, o_prev)
         o_prev2, o_prev = o_prev, o_new
         if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
-            iterations = torch.where(active, torch.full_like(iterations, k + 1), iterations)
+            best.halt(k + 1)
             break
         if threshold is not None:
             if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
-                done = active & ev.grasped(tolerance, ALIGNMENT_MIN)
+                done = best.active & env.grasped(ev, tolerance)
             else:  # the paper's rule: the observed reinforcement exceeds the threshold
-                done = active & (observed > threshold)
+                done = best.active & (observed > threshold)
                 if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
                     done &= ev.collisions == 0
-            if bool(done.any()):
-                succeeded |= done
-                if solver.stop is not None:  # a problem with enough successes ends: its other trials too
-                    done = done | (active & enough_succeeded(succeeded, problem_index, solver.stop))
-                iterations = torch.where(done, torch.full_like(iterations, k + 1), iterations)
-                active = active & ~done
-                all_active = False
-                n_active = int(active.sum())
-                if not bool(active.any()):
-                    break
-    return best_config, best_ev, best_r, iterations
+            if bool(done.any()) and not best.finish(done, k + 1):
+                break
+    return best.config, best.evaluation, best.r, best.iterations
 
 
-def _polish_near(env: Environment, near: Tensor, config: Tensor, ev: Evaluation, r: Tensor, obs: Tensor,
-                 reward: Reward, iteration: int, threshold: float, solver: SolverCfg, tolerance: float | None = None
-                 ) -> tuple[Tensor, Evaluation, Tensor, Tensor, Tensor]:
-    """Polish the best configurations of the trials ``near`` (T,) (the environment's whole polish,
-    ``solver.polish_iterations`` steps to ``solver.polish_tolerance_mm``) and keep each where it
-    is better; returns the best configuration, evaluation, reinforcement and observed
-    reinforcement of every trial, and (T,) which polished trials have now landed: are a grasp
-    within ``tolerance`` (metres; None: exceed the threshold)."""
+def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, iteration: int, threshold: float,
+                 solver: SolverCfg, tolerance: float | None = None) -> Tensor:
+    """Polish the best configurations of the trials ``near`` (T,) (the environment's
+    :meth:`~graspnet_torch.solver.environment.Environment.polish`) and keep each where it is
+    better; returns (T,) which polished trials have now landed: are a grasp within ``tolerance``
+    (metres; None: exceed the threshold)."""
+    config, ev, r = best.config, best.evaluation, best.r
     idx = near.nonzero().squeeze(1)
     part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
     done = None
     if solver.stop is not None:  # the polish ends once enough of a problem's trials have landed
-        pid = getattr(env, "problem_index", None)
-        pid = None if pid is None else pid[idx].cpu()
+        pid = None if env.problem_index is None else env.problem_index[idx].cpu()
 
         def done(converged: Tensor) -> Tensor:
             return enough_succeeded(converged, pid, solver.stop)
-    new_config, new_ev = env.polish_whole(config[idx], part, solver.polish_iterations,
-                                          solver.polish_tolerance_mm / 1000, done, trials=idx)
+    new_config, new_ev = env.polish(config[idx], part, idx, done)
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
     take = torch.zeros_like(near).index_fill(0, idx[better], True)
-    full_config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
-    full_ev = ev.put(idx, new_ev.where(better, part), full_config)
-    full_r = r.index_copy(0, idx, torch.where(better, new_r, r[idx]))
-    full_obs = torch.where(take, full_r, obs)
-    landed = full_r > threshold if tolerance is None else full_ev.grasped(tolerance, ALIGNMENT_MIN)
-    return full_config, full_ev, full_r, full_obs, take & landed
+    best.config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
+    best.evaluation = ev.put(idx, new_ev.where(better, part), best.config)
+    best.r = r.index_copy(0, idx, torch.where(better, new_r, r[idx]))
+    best.observed = torch.where(take, best.r, best.observed)
+    landed = best.r > threshold if tolerance is None else env.grasped(best.evaluation, tolerance)
+    return take & landed
 
 
-def enough_succeeded(succeeded: Tensor, problem_index: Tensor | None, stop: int) -> Tensor:
-    """(T,) True for the trials of problems with at least ``stop`` successes (``problem_index``
-    (T,): each trial's problem; None: one problem)."""
-    if problem_index is None:
-        return succeeded.sum().expand(succeeded.shape[0]) >= stop
-    counts = torch.zeros(int(problem_index.max()) + 1, dtype=torch.long, device=succeeded.device)
-    counts.index_add_(0, problem_index, succeeded.long())
-    return counts[problem_index] >= stop

@@ -9,45 +9,57 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.io import atomic_write_text
 
-__all__ = ["GraspResult", "TrialResult"]
+__all__ = ["FIELD_ORDER", "GraspResult", "TrialResult"]
 
 
-@dataclass
+# The result JSON's trial fields in the order they are written (INTERFACE.md): the common core, then
+# what an environment adds (a fingered robot: the palm pose, joints and fingertip errors; a robot
+# with a body: its arm joints; a gripper: d, the alignment and its points).
+FIELD_ORDER = ("success", "iterations", "reinforcement", "wall_time_s", "palm_pose", "joints", "fingertip_error_mm",
+               "total_error_mm", "collisions", "arm_joints", "distance_mm", "alignment", "gripper_points")
+
+
 class TrialResult:
-    """One trial: the configuration it found and how good it is. ``success`` means the grasp: every
-    contact finger within ``solver.tolerance_mm`` of its contact (a gripper: d within it, aligned)
-    and, where the problem has an object or obstacles, no collision (FCL); ``reinforcement`` is
-    the reward's value there (the paper's threshold applies to it). Hand and arm_hand results have
-    the finger fields; a gripper (MANUS) result has ``distance_mm``, ``alignment`` and
-    ``gripper_points`` instead (INTERFACE.md); fields that do not apply are left out of the JSON."""
+    """One trial: the configuration it found and how good it is.
 
-    success: bool
-    iterations: int
-    reinforcement: float  # noise-free, at the reported configuration
-    wall_time_s: float
-    palm_pose: list[float] | None = None  # palm_link in the world: x, y, z (m), rx, ry, rz (deg)
-    joints: dict[str, list[float]] | None = None  # every finger, joints in chain order (deg)
-    fingertip_error_mm: dict[str, float] | None = None  # contact fingers
-    total_error_mm: float | None = None  # eq. 3
-    collisions: int = 0
-    arm_joints: dict[str, float] | None = None  # robots with a body: by URDF joint name, chain order (deg; m)
-    distance_mm: float | None = None  # a gripper: d of eq. 26
-    alignment: float | None = None  # a gripper: |n_gripper . n_object| (eq. 24)
-    gripper_points: list[list[float]] | None = None  # a gripper: its two marked points in the world (m)
+    The common core: ``success`` (the grasp: every contact within ``solver.tolerance_mm`` and,
+    where the problem has an object or obstacles, no collision by FCL), ``iterations``,
+    ``reinforcement`` (the reward's value there, noise-free; the paper's threshold applies to it),
+    ``wall_time_s``, ``collisions`` and ``error_mm`` (the error the trial is ranked by: E of eq. 3,
+    or a gripper's d). Everything else is what the robot's environment reports
+    (:meth:`~graspnet_torch.solver.environment.Environment.report`), read as attributes
+    (``trial.fingertip_error_mm``; a field the robot does not report reads None) and written to
+    the JSON (INTERFACE.md)."""
 
-    @property
-    def error_mm(self) -> float:
-        """The error the trial is ranked by: E (eq. 3) for fingers, d (eq. 26) for a gripper."""
-        return self.total_error_mm if self.total_error_mm is not None else self.distance_mm
+    def __init__(self, success: bool, iterations: int, reinforcement: float, wall_time_s: float, collisions: int = 0,
+                 error_mm: float | None = None, **fields):
+        self.success, self.iterations, self.reinforcement = success, iterations, reinforcement
+        self.wall_time_s, self.collisions, self.fields = wall_time_s, collisions, fields
+        self.error_mm = error_mm if error_mm is not None else fields.get("total_error_mm")
+
+    def __getattr__(self, name: str):
+        if name in FIELD_ORDER:  # a field of the JSON this robot does not report
+            return self.__dict__.get("fields", {}).get(name)
+        raise AttributeError(f"{type(self).__name__!r} has no attribute {name!r}")
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, TrialResult) and self.to_dict() == other.to_dict() and self.error_mm == other.error_mm
+
+    def __repr__(self) -> str:
+        return f"TrialResult({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        core = {"success": self.success, "iterations": self.iterations, "reinforcement": self.reinforcement,
+                "wall_time_s": self.wall_time_s, "collisions": self.collisions}
+        every = {**core, **{k: v for k, v in self.fields.items() if v is not None}}
+        return {k: every[k] for k in sorted(every, key=lambda k: (FIELD_ORDER.index(k) if k in FIELD_ORDER
+                                                                  else len(FIELD_ORDER)))}
 
 
 @dataclass

@@ -36,7 +36,7 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space",
-           "sample_hand_configurations", "unreachable_contacts"]
+           "sample_hand_configurations"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -170,28 +170,3 @@ def sample_hand_configurations(robot: Robot, space: PalmSearchSpace, n: int,
     flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
     q = flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=generator, dtype=torch.float64)
     return pose, q
-
-
-def unreachable_contacts(robot: Robot, problem: GraspProblem) -> list[str]:
-    """The contact fingers whose contact no configuration of the search space brings the fingertip
-    to, by the fingers' sampled reach (:func:`finger_reach`): a free hand's contact farther from
-    the box of palm positions, an arm's farther from its first joint than the arm's links (and
-    prismatic travel) and the finger reach. (Problems beyond the bound of the link lengths are
-    refused before any work: :func:`~graspnet_torch.solver.hand.check_reach`.)"""
-    if not problem.contacts:
-        return []
-    reach = finger_reach(robot)
-    world = problem.contacts_world()
-    fingers = [c.finger for c in problem.contacts]
-    if robot.has_body:
-        body = robot.body
-        arm = float(np.linalg.norm(body.offsets[1:, :3, 3], axis=1).sum())
-        arm += sum(max(abs(lo), abs(hi)) for lo, hi, kind in zip(body.lower, body.upper, body.joint_types, strict=True)
-                   if kind == "prismatic")
-        gap = np.linalg.norm(world - body.offsets[0][:3, 3], axis=1) - arm
-    else:
-        space = palm_search_space(robot, problem)
-        G = space.frame
-        local = (world - G[:3, 3]) @ G[:3, :3]
-        gap = np.linalg.norm(local - np.clip(local, space.lower[:3], space.upper[:3]), axis=1)
-    return [f for f, g in zip(fingers, gap, strict=True) if g > reach[robot.finger_index(f)]]

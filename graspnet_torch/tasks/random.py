@@ -5,7 +5,7 @@ known to exist.
 ==============================  ==================================================================
 :func:`random_hand_problem`     a free hand: the palm within ``palm_bounds`` (or anywhere turned)
 :func:`random_arm_problem`      a hand on an arm: the arm's joints within their limits
-:func:`random_reachable_problem`  either of the two, by the robot (``gt.random_reachable_problem``)
+:func:`random_reachable_problem`  either of the two, by ``robot.kind`` (``gt.random_reachable_problem``)
 :func:`random_gripper_problems`   a two-point gripper (MANUS): its gripper points as object points
 :func:`random_obstacle_problems`  a hand on an arm among random obstacles that clear the posture
 ==============================  ==================================================================
@@ -23,8 +23,8 @@ from torch import Tensor
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["random_arm_problem", "random_gripper_problems", "random_hand_problem", "random_obstacle_problems",
-           "random_reachable_problem"]
+__all__ = ["CONTACT_GENERATORS", "random_arm_problem", "random_gripper_problems", "random_hand_problem",
+           "random_obstacle_problems", "random_reachable_problem"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -87,14 +87,23 @@ def random_arm_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] |
     return _fingers_problem(robot, robot.fingertips_world_from_body(body, q), g, seed, n_fingers)
 
 
+CONTACT_GENERATORS = {"hand": random_hand_problem, "arm_hand": random_arm_problem}
+"""``robot.kind`` -> the generator of its contact problems (a gripper has none: see
+:func:`random_gripper_problems`)."""
+
+
 def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None) -> GraspProblem:
-    """A problem whose contacts are the fingertips of a random posture of a robot with fingers:
-    :func:`random_arm_problem` for a hand on an arm, :func:`random_hand_problem` for a free hand.
+    """A problem whose contacts are the fingertips of a random posture of a robot with fingers: the
+    generator of the robot's kind (``robot.kind``): :func:`random_hand_problem` for a free hand,
+    :func:`random_arm_problem` for a hand on an arm.
 
     ``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2 to all)
     chosen at random touch their fingertips. Deterministic in ``seed``.
     """
-    return (random_arm_problem if robot.has_body else random_hand_problem)(robot, seed, n_fingers)
+    generator = CONTACT_GENERATORS.get(robot.kind)
+    if generator is None:
+        raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
+    return generator(robot, seed, n_fingers)
 
 
 def random_gripper_problems(robot: Robot, n: int, seed: int = 11) -> list[GraspProblem]:

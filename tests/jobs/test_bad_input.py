@@ -87,8 +87,9 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["-m", "seed=0,1", "trials=200000000"], "trials=200000000 x max_iterations=2000 needs about"),
     (["srv.hidden=[4096,4096]"], "srv.hidden[0]=4096: expected an integer in [1, 1024]"),
     (["solver.stop=0"], "solver.stop=0: expected an integer in [1, 1000000]"),
-    (["solver.approach_deg=-5"], "solver.approach_deg=-5: expected a number in (0, 360]"),
-    (["solver.approach_m=abc"], "solver.approach_m='abc': expected a number"),
+    (["solver.gripper.approach_deg=-5"], "solver.gripper.approach_deg=-5: expected a number in (0, 360]"),
+    (["solver.gripper.approach_m=abc"], "solver.gripper.approach_m='abc': expected a number"),
+    (["solver.polish_iterations=5"], "unknown setting 'solver.polish_iterations' (now solver.polish.iterations)"),
     (["reward=r5"], "unknown reward 'r5': expected one of default, r1, r2, r3, r4"),
     (["srv.lr_bp=null"], "srv.lr_bp=None: expected a number in [0, 100]"),
 ])

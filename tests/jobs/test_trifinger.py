@@ -110,7 +110,7 @@ def _tips_from_urdf(urdf: bytes, palm_link: str, tips: dict[str, str], result: d
 def test_random_reachable_problems_are_solved_and_check_from_the_urdf(trained, seed):
     _folder, robot, ik, _rows = trained
     problem = gt.random_reachable_problem(robot, seed, n_fingers=(2, 3))
-    result = gt.solve(problem, trials=10, seed=0, solver={"polish": "whole"}, robot=robot, finger_ik=ik)
+    result = gt.solve(problem, trials=10, seed=0, solver={"polish": {"mode": "whole"}}, robot=robot, finger_ik=ik)
     data = json.loads(result.to_json())
     assert data["total_error_mm"] < 1.0, data["fingertip_error_mm"]
     tips = {f: robot.cfg.fingers[f].tip for f in robot.finger_names}

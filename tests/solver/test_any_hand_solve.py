@@ -62,7 +62,7 @@ def test_solve_recomputed_from_the_urdf_with_exact_mimic_couplings(trained, seed
     robot, ik, _ = trained
     problem = gt.random_reachable_problem(robot, seed, n_fingers=(2, 3))
     result = gt.solve(problem, trials=8, seed=0, robot=robot, finger_ik=ik, max_iterations=300,
-                      solver={"polish": "whole"})
+                      solver={"polish": {"mode": "whole"}})
     assert result.total_error_mm < 1.0
     data = json.loads(result.to_json())
     joints = data["joints"]
@@ -92,7 +92,7 @@ def test_an_arm_carries_another_hand(trained, tmp_path):
     arm_ik = gt.load_finger_ik(arm)  # the hand's checkpoint: fingerprints match
     problem = gt.random_reachable_problem(arm, 2, n_fingers=2)
     result = gt.solve(problem, trials=8, seed=0, robot=arm, finger_ik=arm_ik, max_iterations=400,
-                      solver={"polish": "whole"})
+                      solver={"polish": {"mode": "whole"}})
     data = json.loads(result.to_json())
     assert list(data["arm_joints"]) == list(arm.body_joint_names)
     assert result.total_error_mm < 1.0

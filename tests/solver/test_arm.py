@@ -38,7 +38,7 @@ def test_the_hand_checkpoint_serves_the_arm_hand(arm_hand):
 
 def test_evaluation_agrees_with_forward_kinematics(arm_hand):
     problem, qa = problem_from_arm_posture(arm_hand, ("thumb", "index", "middle"), seed=1)
-    env = ArmHandEnvironment(arm_hand, problem, gt.load_finger_ik(arm_hand), dtype=torch.float64)
+    env = ArmHandEnvironment(arm_hand, problem, gt.SolverCfg(), gt.load_finger_ik(arm_hand), dtype=torch.float64)
     assert env.n == 7
     configs = torch.stack([qa, (env.lower + env.upper) / 2])
     ev = env.evaluate(configs)

@@ -27,7 +27,7 @@ def test_evaluation_is_eq_24_to_28_of_forward_kinematics(manus):
     """d = min of the two pairings' summed distances and |n_g . n_o|, with the gripper points from
     pytorch-kinematics link frames (float64)."""
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
-    env = GripperEnvironment(manus, problem, dtype=torch.float64)
+    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)), dtype=torch.float64)
     assert env.n == 9
     g = torch.Generator().manual_seed(0)
     q = env.lower + (env.upper - env.lower) * torch.rand(5, 9, generator=g, dtype=torch.float64)
@@ -41,7 +41,7 @@ def test_evaluation_is_eq_24_to_28_of_forward_kinematics(manus):
         n_g, n_o = (p2 - p1) / np.linalg.norm(p2 - p1), (target[1] - target[0]) / np.linalg.norm(target[1] - target[0])
         assert float(ev.error[k]) == pytest.approx(min(d1, d2), abs=1e-6)  # pk holds URDF origins in float32
         assert float(ev.alignment[k]) == pytest.approx(abs(n_g @ n_o), abs=1e-6)
-    r = gt.rewards.Reward(gt.RewardCfg(), 2000)(ev, 1)
+    r = gt.rewards.Reward(gt.RewardCfg(), 2000, env.reward_base)(ev, 1)
     expected = (ev.alignment + 1 - torch.tanh(ev.error)) / 2  # eq. 29 with a = 1
     assert torch.allclose(r, expected)
 
@@ -80,7 +80,7 @@ def test_bad_gripper_problems_are_refused(change, message):
 def test_bad_approach_is_refused(manus, approach, message):
     problem = gt.GraspProblem.from_mapping({**CUBE, "approach": approach}, source="cube")
     with pytest.raises(gt.ProblemError) as info:
-        GripperEnvironment(manus, problem)
+        GripperEnvironment(manus, problem, gt.SolverCfg())
     assert message in str(info.value)
 
 
@@ -110,11 +110,12 @@ def test_polish_lands_from_random_starts(manus):
     q0 = torch.tensor([[0.1, -0.2, 0.3, 0.5, 0.4, -1.0, 0.7, 0.2, -0.4]], dtype=torch.float64)
     points = manus.gripper_points(q0)[0].tolist()
     problem = gt.GraspProblem.from_mapping({"robot": "manus", "points": points}, source="reachable")
-    env = GripperEnvironment(manus, problem, dtype=torch.float64)
+    cfg = gt.SolverCfg(gripper=gt.GripperCfg(polish_iterations=200))
+    env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64)
     g = torch.Generator().manual_seed(5)
     starts = env.lower + (env.upper - env.lower) * torch.rand(40, 9, generator=g, dtype=torch.float64)
     before = env.evaluate(starts)
-    q, ev = env.finish(starts, before, 200)
+    q, ev = env.finish(starts, before)
     assert float((ev.error < 1e-3).double().mean()) >= 0.75
     assert bool((ev.error <= before.error + 1e-12).all())  # never worse
     assert bool(((q >= env.lower - 1e-12) & (q <= env.upper + 1e-12)).all())
@@ -124,14 +125,15 @@ def test_polish_and_refine_never_step_into_a_collision(manus):
     """With collisions counted, a polish step that raises the proxy's count is refused: starts
     that are clear stay clear."""
     problem = gt.GraspProblem.from_task("cube")
-    env = GripperEnvironment(manus, problem, dtype=torch.float64, collisions=True)
+    cfg = gt.SolverCfg(gripper=gt.GripperCfg(polish_iterations=100))
+    env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64, collisions=True)
     g = torch.Generator().manual_seed(6)
     starts = env.lower + (env.upper - env.lower) * torch.rand(60, 9, generator=g, dtype=torch.float64)
     before = env.evaluate(starts)
-    q, ev = env.finish(starts, before, 100)
+    q, ev = env.finish(starts, before)
     clear = before.collisions == 0
     assert int(clear.sum()) >= 10
-    assert bool((env._count(q)[clear] == 0).all())
+    assert bool((env.settled(q, settle=False).collisions[clear] == 0).all())
     assert bool((ev.error <= before.error + 1e-12).all())
 
 
@@ -139,12 +141,12 @@ def test_refine_steps_are_evaluated_and_reported(manus):
     """With solver.refine, the environment evaluates (and the loop reports) the settled
     configuration, which is closer than the proposal."""
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
-    plain = GripperEnvironment(manus, problem)
-    refined = GripperEnvironment(manus, problem, refine=2)
+    plain = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)))
+    refined = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=2)))
     g = torch.Generator().manual_seed(7)
     q = plain.lower + (plain.upper - plain.lower) * torch.rand(50, 9, generator=g)
     ev0, ev2 = plain.evaluate(q), refined.evaluate(q)
-    assert ev0.config is None and ev2.config is not None
+    assert ev0.config is q and not torch.equal(ev2.config, q)  # the proposal as given; the settled one
     assert bool((ev2.error <= ev0.error + 1e-6).all()) and float(ev2.error.mean()) < 0.7 * float(ev0.error.mean())
     assert torch.allclose(plain.evaluate(ev2.config).error, ev2.error, atol=1e-6)
 
@@ -163,14 +165,15 @@ def test_a_batch_of_problems_evaluates_as_each_problem_alone(manus):
     each trial the evaluation its own problem's environment gives; a subset of trials (the loop's
     active ones) gives the same rows."""
     problems = [_cube_at(0.7, -0.3), _cube_at(0.9, 0.1), _cube_at(1.1, 0.4)]
-    batch = GripperEnvironment(manus, problems, dtype=torch.float64, collisions=True, refine=2, runs=4)
+    settle2 = gt.SolverCfg(gripper=gt.GripperCfg(settle=2))
+    batch = GripperEnvironment(manus, problems, settle2, dtype=torch.float64, collisions=True, runs=4)
     assert batch.lower.shape == (12, 9) and batch.problem_index.tolist() == [0] * 4 + [1] * 4 + [2] * 4
     g = torch.Generator().manual_seed(8)
     q = batch.lower + (batch.upper - batch.lower) * torch.rand(12, 9, generator=g, dtype=torch.float64)
     q[:, 0] = 0.3  # the base near the tables: some collide
     ev = batch.evaluate(q)
     for k, problem in enumerate(problems):
-        alone = GripperEnvironment(manus, problem, dtype=torch.float64, collisions=True, refine=2)
+        alone = GripperEnvironment(manus, problem, settle2, dtype=torch.float64, collisions=True)
         rows = slice(4 * k, 4 * k + 4)
         one = alone.evaluate(q[rows])
         assert torch.allclose(one.error, ev.error[rows]) and torch.equal(one.collisions, ev.collisions[rows])
@@ -207,7 +210,8 @@ def test_closed_form_points_and_jacobian_match_the_kernel_and_finite_differences
     """The gripper points from the chain frames equal the URDF kernel's, and the closed-form
     Jacobian (w x (p - o) per revolute joint, w per prismatic one) equals central differences
     (float64)."""
-    env = GripperEnvironment(manus, gt.GraspProblem.from_mapping(CUBE, source="cube"), dtype=torch.float64)
+    problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
+    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)), dtype=torch.float64)
     g = torch.Generator().manual_seed(10)
     q = env.lower + (env.upper - env.lower) * torch.rand(6, 9, generator=g, dtype=torch.float64)
     _levels, points, J = env._kinematics(q, jacobian=True)

@@ -10,6 +10,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.solver import SolverCfg
+from graspnet_torch.solver.environment import Environment, Evaluation
 
 
 def problem_from_posture(robot, fingers, seed=0):
@@ -120,22 +121,47 @@ def test_fixed_seed_glass3_matches_the_recorded_result():
             assert got["fingertip_error_mm"][f] == pytest.approx(e, abs=1e-3)
 
 
-class _Colliding:
+class _Colliding(Environment):
     """A one-joint environment whose every configuration is on target (E = 0) but collides during
-    the first five evaluations."""
+    the first five evaluations: the loop needs nothing but the contract's search part."""
 
-    n, subsets = 1, False
+    n = 1
 
     def __init__(self):
         self.lower, self.upper = torch.zeros(1), torch.ones(1)
         self.calls = 0
 
     def evaluate(self, config, trials=None):
-        from graspnet_torch.solver.environment import Evaluation
-
         self.calls += 1
         hits = torch.full((config.shape[0],), 1 if self.calls <= 5 else 0, dtype=torch.long)
-        return Evaluation(error=torch.zeros(config.shape[0]), collisions=hits)
+        return Evaluation(error=torch.zeros(config.shape[0]), collisions=hits, config=config)
+
+    def finish(self, config, evaluation, done=None):
+        return config, evaluation
+
+    def random_whole(self, trials, gen):
+        raise NotImplementedError
+
+    def local_solve(self, x, iterations, tol=0.0, done=None, trace=None, rows=None):
+        raise NotImplementedError
+
+    def whole_result(self, solved, like, rows=None):
+        raise NotImplementedError
+
+    def report(self, config, evaluation):
+        raise NotImplementedError
+
+    @staticmethod
+    def describe(trial):
+        return ""
+
+    @staticmethod
+    def summary(trial, fingers):
+        return ""
+
+    @staticmethod
+    def columns(trial, fingers):
+        return {}
 
 
 @pytest.mark.parametrize("rule, stop_clear, stops_at", [("reinforcement", False, 1), ("reinforcement", True, 6),
@@ -146,7 +172,7 @@ def test_stop_clear_waits_for_a_clear_configuration(rule, stop_clear, stops_at):
     rule (the default) never stops on a colliding configuration."""
     from graspnet_torch.solver.loop import run_loop
 
-    cfg = SolverCfg(max_iterations=50, stop_clear=stop_clear, final_refine=0, stop_rule=rule)
+    cfg = SolverCfg(max_iterations=50, stop_clear=stop_clear, stop_rule=rule)
     out = run_loop(_Colliding(), 2, 0, cfg, reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
     assert out.iterations.tolist() == [stops_at, stops_at]
 

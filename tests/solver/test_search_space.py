@@ -4,14 +4,18 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.solver.search_space import contact_frame, palm_search_space, unreachable_contacts
+from graspnet_torch.solver.hand import HandEnvironment
+from graspnet_torch.solver.search_space import contact_frame, palm_search_space
 from graspnet_torch.tasks.objects import random_pose
+
+PAPER_NO_REFINE = gt.SolverCfg.paper(fingers=gt.FingersCfg(final_refine=0))  # the palm pose and fingers as found
 
 
 def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -100,14 +104,14 @@ def test_success_never_reports_a_finger_beyond_the_tolerance():
     """The paper's protocol stops at r > 0.99 (E < 10 mm) and refines the fingers only: trials end
     a few millimetres off. None of them is a success; every success is within the tolerance; a
     looser tolerance (20 mm) makes them successes."""
-    kw = {"trials": 12, "seed": 0, "max_iterations": 400, "solver": gt.SolverCfg.paper(final_refine=0)}
+    kw = {"trials": 12, "seed": 0, "max_iterations": 400, "solver": PAPER_NO_REFINE}
     result = gt.solve("glass3", **kw)
     off = [t for t in result.trials if t.reinforcement > 0.99 and max(t.fingertip_error_mm.values()) > 1.0]
     assert off, "expected trials that reached r > 0.99 a few mm off"
     assert not any(t.success for t in off)
     for t in result.trials:
         assert not t.success or max(t.fingertip_error_mm.values()) <= 1.0
-    loose = gt.solve("glass3", **{**kw, "solver": gt.SolverCfg.paper(final_refine=0, tolerance_mm=20.0)})
+    loose = gt.solve("glass3", **{**kw, "solver": replace(PAPER_NO_REFINE, tolerance_mm=20.0)})
     assert any(t.success for t in loose.trials if t.collisions == 0)
     for t in loose.trials:
         assert not t.success or (max(t.fingertip_error_mm.values()) <= 20.0 and t.collisions == 0)
@@ -128,7 +132,7 @@ def test_the_grasp_rule_stops_at_a_grasp_and_the_paper_rule_at_its_threshold():
     grasp = gt.solve("glass3", trials=8, seed=1, max_iterations=500)
     assert grasp.success and grasp.best.total_error_mm < 1.0
     assert grasp.settings["stop_rule"] == "grasp" and grasp.settings["tolerance_mm"] == 1.0
-    paper = gt.solve("glass3", trials=8, seed=1, max_iterations=500, solver=gt.SolverCfg.paper(final_refine=0))
+    paper = gt.solve("glass3", trials=8, seed=1, max_iterations=500, solver=PAPER_NO_REFINE)
     stopped = [t for t in paper.trials if t.iterations < 500]
     assert stopped and all(t.reinforcement > 0.99 for t in stopped)
 
@@ -137,7 +141,7 @@ def test_the_grasp_rule_stops_at_a_grasp_and_the_paper_rule_at_its_threshold():
 
 def test_no_success_says_the_budget_ended_far_away():
     result = gt.solve("videotape5", trials=1, seed=0, max_iterations=1,
-                      solver=gt.SolverCfg(polish="fingers", final_refine=0))
+                      solver=gt.SolverCfg.from_mapping({"polish": {"mode": "fingers"}, "fingers": {"final_refine": 0}}))
     assert not result.success
     assert result.failure.startswith("far: the budget ended with the best trial")
     assert result.to_dict()["failure"] == result.failure
@@ -173,15 +177,15 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
     problem = gt.GraspProblem.from_mapping({
         "robot": str(tmp_path / "oddhand.yaml"), "palm_bounds": {"min": [0, 0, 0, 0, 0, 0], "max": [0, 0, 0, 0, 0, 0]},
         "contacts": [{"finger": "thumb", "position": [gap, 0.0, 0.0]}, {"finger": "index", "position": [0, 0, 0.1]}]})
-    assert unreachable_contacts(robot, problem) == ["thumb"]
+    assert HandEnvironment.unreachable(robot, problem) == ["thumb"]
     moved = problem.moved(np.eye(4))  # the search space built from the contacts: reachable by construction
-    assert unreachable_contacts(robot, moved) == []
+    assert HandEnvironment.unreachable(robot, moved) == []
     trial = gt.TrialResult(success=False, iterations=5, reinforcement=0.5, wall_time_s=0.0,
                            fingertip_error_mm={"thumb": 3.0, "index": 0.5}, total_error_mm=3.5)
-    assert failure_reason(robot, problem, [trial], None, 1.0).startswith("out of reach: no configuration in the "
-                                                                          "search space brings the thumb fingertip")
-    assert failure_reason(robot, moved, [trial], None, 1.0).startswith("far: the budget ended with the best trial "
-                                                                        "3.5 mm from its contacts (thumb 3 mm)")
+    reason = failure_reason(robot, problem, [trial], None, [False], 1.0)
+    assert reason.startswith("out of reach: no configuration in the search space brings the thumb fingertip")
+    reason = failure_reason(robot, moved, [trial], None, [False], 1.0)
+    assert reason.startswith("far: the budget ended with the best trial 3.5 mm from its contacts (thumb 3 mm)")
 
 
 def test_palm_bounds_robot_needs_a_box_in_the_robot_config(tmp_path):

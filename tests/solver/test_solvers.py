@@ -7,11 +7,12 @@ import math
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.paths import repo_root
-from graspnet_torch.settings import build, unset
+from graspnet_torch.settings import build
 from graspnet_torch.solver import SolverCfg
 from graspnet_torch.solver.least_squares import levenberg_marquardt
 from graspnet_torch.solver.loop import enough_succeeded
@@ -68,14 +69,15 @@ def test_enough_succeeded_counts_per_problem():
 def test_every_solver_config_composes_into_its_settings(name):
     with initialize_config_dir(config_dir=str(repo_root() / "configs"), version_base=None):
         cfg = compose("solve_grasp", overrides=[f"solver={name}"])
-    solver = build(SolverCfg, unset(SolverCfg, dict(cfg.solver)), "solver")  # null: the robot's default
+    solver = build(SolverCfg, OmegaConf.to_container(cfg.solver), "solver")
     assert solver.method == {"paper": "srv"}.get(name, name)
     if name == "paper":  # the command line's paper protocol is the Python one
-        assert solver == SolverCfg.paper(refine=solver.refine, final_refine=solver.final_refine,
-                                         stop_clear=solver.stop_clear)
-        assert solver.stop_rule == "reinforcement" and solver.stop is None and solver.polish == "fingers"
+        assert solver == SolverCfg.paper()
+        assert solver.stop_rule == "reinforcement" and solver.stop is None and solver.polish.mode == "fingers"
     else:
         assert solver.stop_rule == "grasp" and solver.tolerance_mm == 1.0
+    if name == "srv":  # every default in one place: the group lists the dataclass's values
+        assert solver == SolverCfg()
 
 
 def test_the_default_solver_lands_random_problems_below_a_micrometre(hand):
@@ -117,9 +119,9 @@ def test_cmaes_learns_from_a_noisy_reward_better_than_its_first_generation():
     better than its first generation's (its ablation: the search stopped at once)."""
     kw = dict(trials=4, seed=0, noise=0.2, reward=gt.RewardCfg(a=10.0))
     long = gt.solve("block5", solver={"method": "cmaes", "max_iterations": 600, "threshold": None,
-                                      "polish": "fingers", "final_refine": 0}, **kw)
+                                      "polish": {"mode": "fingers"}, "fingers": {"final_refine": 0}}, **kw)
     short = gt.solve("block5", solver={"method": "cmaes", "max_iterations": 9, "threshold": None,
-                                       "polish": "fingers", "final_refine": 0}, **kw)
+                                       "polish": {"mode": "fingers"}, "fingers": {"final_refine": 0}}, **kw)
     med = lambda r: sorted(t.total_error_mm for t in r.trials)[len(r.trials) // 2]  # noqa: E731
     assert med(long) < 0.3 * med(short), (med(long), med(short))
     assert "step_size" in long.outcome.history and long.outcome.history["iteration"][-1] == 600

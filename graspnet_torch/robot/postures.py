@@ -1,0 +1,57 @@
+"""Postures of results and problems: a reported trial, or a problem's reference, as a :class:`Posture`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import torch
+
+from graspnet_torch.robot.robot import Posture, Robot
+
+if TYPE_CHECKING:
+    from graspnet_torch.solver.result import TrialResult
+    from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["reference_posture", "trial_posture"]
+
+
+def trial_posture(robot: Robot, trial: TrialResult | Mapping[str, Any]) -> Posture:
+    """The :class:`~graspnet_torch.robot.Posture` of a reported trial (its degrees -> radians):
+    palm pose, every finger's joints and, for robots with a body, the body joints by name."""
+    get = trial.get if isinstance(trial, Mapping) else lambda k: getattr(trial, k)
+    d = math.pi / 180
+    palm = get("palm_pose")
+    pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
+    joints = get("joints") or {}
+    q = robot.finger_joints_from_file(joints) if robot.n_fingers else torch.zeros(0, 0, dtype=torch.float64)
+    body = robot.body_joints_from_file(get("arm_joints")) if robot.has_body else torch.zeros(0, dtype=torch.float64)
+    return Posture(palm_pose=pose, fingers=q, body=body)
+
+
+def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
+    """The problem's reference posture as a :class:`~graspnet_torch.robot.Posture` (fingers not
+    listed at home; an arm's joints not listed at home, its palm by forward kinematics)."""
+    ref = problem.reference
+    if ref is None:
+        raise ValueError(f"{problem.source}: no reference posture")
+    home = robot.home_posture(torch.float64)
+    q = home.fingers.clone()
+    for f, v in ref.joints.items():
+        q[robot.finger_index(f)] = torch.as_tensor(v, dtype=torch.float64)
+    if robot.has_body:
+        unknown = sorted(set(ref.arm_joints or {}) - set(robot.body_joint_names))
+        if unknown:
+            from graspnet_torch.errors import ProblemError
+
+            raise ProblemError(f"{problem.source}: reference.arm_joints: unknown joint(s) {', '.join(unknown[:5])} "
+                               f"of robot '{robot.name}'")
+        body = home.body.clone()
+        for k, name in enumerate(robot.body_joint_names):
+            if ref.arm_joints and name in ref.arm_joints:
+                body[k] = ref.arm_joints[name]
+        from graspnet_torch.robot.transforms import rt_to_pose
+
+        return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=q, body=body)
+    return Posture(palm_pose=torch.as_tensor(ref.palm_pose, dtype=torch.float64), fingers=q, body=home.body)

@@ -1,0 +1,361 @@
+"""What every environment whose fingers are placed by the FCNN shares (free palm, arm + hand)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import torch
+from torch import Tensor
+
+from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
+
+if TYPE_CHECKING:
+    from graspnet_torch.solver.config import SolverCfg
+    from graspnet_torch.solver.least_squares import LMResult
+    from graspnet_torch.solver.result import TrialResult
+
+__all__ = ["FingerEnvironment"]
+
+
+class FingerEnvironment(Environment):
+    """What every environment whose fingers are placed by the FCNN shares (free palm, arm + hand):
+    the contacts expressed in each contact finger's base frame from a palm frame, the finger
+    joints by expert competition (+ refinement), the final polish and the float64 report.
+
+    One problem, or a batch of P problems with ``runs`` trials each (trial t on problem
+    t // runs, :attr:`problem_index`): then the fingers are the union of the problems' contact
+    fingers in robot order, the contacts are per trial (T, F, 3) and a mask (T, F) keeps each
+    trial's errors to its own problem's fingers (the others are inert: zero error, zero Jacobian,
+    at home in collision counts and results).
+
+    Subclasses set ``n``, ``lower``, ``upper`` ((n,), or (T, n) for a batch) and define
+    :meth:`palm_frame` (the palm in the world for a configuration) and :meth:`bounds64` (the exact
+    bounds, float64).
+    """
+
+    n: int
+    lower: Tensor
+    upper: Tensor
+    frame64: tuple[Tensor, Tensor] | None = None  # the search frame in the world (R, t), per trial or one
+    subsets = False  # every trial evaluated every iteration: fixed-seed results stay bit-for-bit what they were
+
+    def __init__(self, robot, problem, solver: SolverCfg, ik, dtype: torch.dtype = torch.float32,
+                 device: torch.device | str = "cpu", collisions: bool = False, runs: int = 1):
+        import numpy as np
+
+        from graspnet_torch.errors import ProblemError
+        from graspnet_torch.tasks.problem import GraspProblem
+
+        problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
+        for p in problems:
+            missing = [f for f in p.fingers if f not in ik.experts]
+            if missing:
+                raise ProblemError(f"{p.source}: no FCNN experts for finger(s) {', '.join(missing)}")
+        self.robot, self.problems, self.problem, self.ik = robot, problems, problems[0], ik
+        fingers, polish = solver.fingers, solver.polish
+        self.refine, self.candidates, self.final_refine = fingers.refine, fingers.candidates, fingers.final_refine
+        self.polish_iterations, self.polish_tol = polish.iterations, polish.tolerance_mm / 1000
+        self.polishes = polish.mode == "whole" and polish.iterations > 0
+        self.tolerance_mm = solver.tolerance_mm
+        kw = {"dtype": dtype, "device": device}
+        self.mask = self.problem_index = None
+        if len(problems) == 1:
+            self.fingers = self.problem.fingers
+            contacts64 = np.asarray(self.problem.contacts_world(), dtype=np.float64)  # (F, 3)
+        else:  # a batch: the union of the contact fingers, per-trial contacts and a mask
+            used = {f for p in problems for f in p.fingers}
+            self.fingers = tuple(f for f in robot.finger_names if f in used)
+            column = {f: k for k, f in enumerate(self.fingers)}
+            contacts = np.zeros((len(problems), len(self.fingers), 3))
+            mask = np.zeros((len(problems), len(self.fingers)))
+            for i, p in enumerate(problems):
+                for f, x in zip(p.fingers, p.contacts_world(), strict=True):
+                    contacts[i, column[f]], mask[i, column[f]] = x, 1.0
+            rep = np.repeat(np.arange(len(problems)), runs)
+            contacts64 = contacts[rep]  # (T, F, 3)
+            self.mask = torch.as_tensor(mask[rep], **kw)  # (T, F)
+            self.problem_index = torch.as_tensor(rep, device=device)
+            self.subsets = True  # once most trials have stopped, the loop evaluates the others only
+        self.contacts64 = torch.as_tensor(contacts64, dtype=torch.float64)  # exact, for the polish and the report
+        self.contacts = self.contacts64.to(**kw)
+        self.runs = runs
+        self.idx = [robot.finger_index(f) for f in self.fingers]
+        base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]), **kw)
+        self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
+        ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
+        self.proxy = None
+        from graspnet_torch.collision.scene import has_environment
+
+        if collisions and has_environment(robot, self.problem):
+            from graspnet_torch.collision.proxy import CollisionProxy
+
+            self.proxy = CollisionProxy(robot, problems if len(problems) > 1 else self.problem, dtype=dtype,
+                                        device=device)
+            self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
+            self._idx = torch.as_tensor(self.idx, device=device)
+
+    def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
+        raise NotImplementedError
+
+    def bounds64(self) -> tuple[Tensor, Tensor]:
+        """The exact bounds of the configuration, float64 on the CPU: (n,) or (T, n) for a batch."""
+        raise NotImplementedError
+
+    def clamp(self, config: Tensor, rows: Tensor | None = None) -> Tensor:
+        """(B, n) configurations of trials ``rows`` (None: all, in order) -> float64 on the CPU,
+        within the exact bounds."""
+        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
+        return torch.minimum(torch.maximum(config.detach().to(torch.float64).cpu(), lo), hi)
+
+    def _rows(self, value: Tensor | None, rows: Tensor | None) -> Tensor | None:
+        """A per-trial tensor of a batch at the trials ``rows`` (as is for one problem)."""
+        if value is None or self.mask is None or rows is None:
+            return value
+        return value[rows.to(value.device)]
+
+    def targets(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
+                ) -> Tensor:
+        """Contacts in each contact finger's base frame. config: (B, n) -> (B, F, 3); ``palm``: its
+        palm frame if already known; ``rows``: the trials of the rows (None: all, in order)."""
+        from graspnet_torch.robot.transforms import untransform_points
+
+        R, t = palm if palm is not None else self.palm_frame(config)
+        in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self._rows(self.contacts, rows))
+        return untransform_points(self.base_R, self.base_t, in_palm)
+
+    def finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
+                      ) -> tuple[Tensor, Tensor]:
+        """Finger joints (B, F, j) within limits and fingertip errors (B, F) in metres (zero for
+        a finger a trial's problem does not use)."""
+        targets = self.targets(config, palm, rows)
+        if self.candidates > 1 and self.refine > 0:
+            q, err = self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
+        elif self.refine <= 0:
+            q, err = self.ik.compete(targets, self.fingers)
+        else:
+            q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
+            q, err = self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
+        mask = self._rows(self.mask, rows)
+        return q, err if mask is None else err * mask
+
+    def _every(self, q: Tensor, rows: Tensor | None) -> Tensor:
+        """Every finger's joints (B, F_all, j): the contact fingers' ``q`` (B, F, j), the others
+        (and in a batch, the fingers a trial's problem does not use) at home."""
+        home = self.home.expand(q.shape[0], -1, -1)
+        mask = self._rows(self.mask, rows)
+        if mask is not None:
+            q = torch.where(mask.unsqueeze(-1) > 0, q, home[:, self.idx])
+        return home.index_copy(1, self._idx, q)
+
+    def _pid(self, rows: Tensor | None) -> Tensor | None:
+        return self._rows(self.problem_index, rows) if self.problem_index is not None else None
+
+    def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
+        """config: (B, n) of the trials ``trials`` (None: all, in order) -> E (B,) of eq. 3,
+        per-finger errors (B, F), finger joints (B, F, j) and, with a collision proxy, the
+        collision count (B,) of the whole posture (the fingers without a contact at home)."""
+        palm, levels = self.palm_and_levels(config)
+        q, errors = self.finger_joints(config, palm, trials)
+        collisions = None
+        if self.proxy is not None:
+            collisions = self.proxy.count(palm, self._every(q, trials), self.body(config), levels, self._pid(trials))
+        return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions,
+                          config=config)
+
+    def palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
+        """The palm frame of configurations (T, n) and, where the proxy needs them, the body's chain
+        frames (None: a free palm)."""
+        return self.palm_frame(config), None
+
+    def body(self, config: Tensor) -> Tensor | None:
+        """The body joints of configurations (T, n) for the collision proxy (None: a free palm)."""
+        return None
+
+    def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
+        """Refine the finger joints of the reported configurations (``solver.fingers.final_refine`` steps,
+        the configuration kept); never worse. With ``solver.polish.mode: whole``, instead polish the
+        configuration and the fingers together (:meth:`polish`; ``done`` as :meth:`local_solve`'s:
+        the rows that may stop, given the converged ones). Returns the configurations and their
+        evaluation."""
+        iterations, whole = self.final_refine, self.polishes
+        if iterations > 0 and not whole:  # the whole polish moves the fingers too
+            with torch.inference_mode():
+                q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
+            if self.mask is not None:
+                err = err * self.mask
+            evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
+                                    collisions=evaluation.collisions)
+        if whole:
+            x = self.whole_start(config, evaluation.joints)
+            config, evaluation = self.whole_result(self.local_solve(x, self.polish_iterations, self.polish_tol, done),
+                                                   config)
+        return config, evaluation
+
+    # The whole configuration x = [configuration (n), the contact fingers' joints (F * j)], float64 on
+    # the CPU: what the whole polish and solver=dls move together (padding slots have limits [0, 0]).
+
+    def whole_bounds(self, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Lower and upper bounds of x, (m,) or (B, m) for a batch: the configuration's bounds,
+        then the joint limits."""
+        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
+        if lo.dim() == 2:
+            flo, fhi = flo.expand(lo.shape[0], -1), fhi.expand(lo.shape[0], -1)
+        return torch.cat([lo, flo], -1), torch.cat([hi, fhi], -1)
+
+    def whole_start(self, config: Tensor, joints: Tensor, rows: Tensor | None = None) -> Tensor:
+        """x (B, m) of configurations (B, n) and contact-finger joints (B, F, j), within bounds."""
+        lo, hi = self.whole_bounds(rows)
+        B = config.shape[0]
+        x = torch.cat([self.clamp(config, rows), joints.detach().to(torch.float64).cpu().reshape(B, -1)], 1)
+        return torch.minimum(torch.maximum(x, lo), hi)
+
+    def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
+        """x (T, m) uniform within the bounds and joint limits (``solver=dls``'s restarts)."""
+        lo, hi = self.whole_bounds()
+        u = torch.rand(trials, lo.shape[-1], generator=gen, dtype=torch.float64, device=gen.device).cpu()
+        return lo + (hi - lo) * u
+
+    def _goal64(self, rows: Tensor | None = None) -> Tensor:
+        """The contacts, flattened, float64: (3F,) or (B, 3F) for a batch (zero where masked)."""
+        c = self._rows(self.contacts64, rows)
+        if self.mask is None:
+            return c.reshape(-1)
+        return (c * self._rows(self.mask, rows).to(c).unsqueeze(-1).cpu()).reshape(c.shape[0], -1)
+
+    def _tips64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+        """Contact fingertips in the world, flattened, of x (B, m) float64 of the trials ``rows``
+        -> (B, 3F) (zero where a batch's mask is)."""
+        from graspnet_torch.robot.transforms import transform_points
+
+        F, j = len(self.idx), self.robot.joints_per_finger
+        R, t = self.palm_frame(x[:, : self.n])
+        kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
+        local = kernel.position(x[:, self.n:].reshape(-1, F, j))
+        in_palm = transform_points(self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu(), local)
+        tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
+        mask = self._rows(self.mask, rows)
+        if mask is not None:
+            tips = tips * mask.to(tips).cpu().unsqueeze(-1)
+        return tips.reshape(x.shape[0], -1)
+
+    def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+        """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
+        F, j = len(self.idx), self.robot.joints_per_finger
+        config = x[:, : self.n].to(self.lower)
+        q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
+        return self.proxy.count(self.palm_frame(config), self._every(q, rows), self.body(config), None,
+                                self._pid(rows)).cpu()
+
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
+                    trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:
+        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
+        their contacts, within bounds and limits, never into a collision the proxy sees (when
+        there is one)."""
+        from graspnet_torch.solver.least_squares import levenberg_marquardt
+
+        trials = None if rows is None else rows.cpu()
+
+        def tips(xx: Tensor, r: Tensor) -> Tensor:
+            return self._tips64(xx, r if trials is None else trials[r])
+
+        def count(xx: Tensor, r: Tensor) -> Tensor:
+            return self._count64(xx, r if trials is None else trials[r])
+
+        lo, hi = self.whole_bounds(trials)
+        return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
+                                   trace=trace, count=count if self.proxy is not None else None)
+
+    def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
+        """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""
+        B, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
+        goal = self._goal64(None if rows is None else rows.cpu())
+        finger_err = (goal - solved.value).reshape(B, F, 3).norm(dim=-1)
+        kw = {"dtype": like.dtype, "device": like.device}
+        count = solved.count
+        return solved.x[:, : self.n].to(**kw), Evaluation(
+            error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
+            joints=solved.x[:, self.n:].reshape(B, F, j).to(**kw),
+            collisions=None if count is None else count.to(like.device))
+
+    def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
+               ) -> tuple[Tensor, Evaluation]:
+        """``solver.polish.iterations`` Levenberg-Marquardt steps on the whole configuration (palm
+        pose or arm joints) together with the contact fingers' free joints (:meth:`local_solve`),
+        from the reported ones, of the trials ``trials``: never worse. The loop finds the basin;
+        the fingers alone, with the palm fixed, end where the palm left them (a few mm), the whole
+        polish lands in it. Rows stop below ``solver.polish.tolerance_mm`` or when ``done`` says so."""
+        x = self.whole_start(config, evaluation.joints, trials)
+        solved = self.local_solve(x, self.polish_iterations, self.polish_tol, done, rows=trials)
+        return self.whole_result(solved, config, trials)
+
+    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
+        """Per trial, the result fields of the reported configuration, recomputed in float64: the
+        palm pose, every finger's joints (the non-contact fingers at home), the fingertip errors of
+        its problem's contact fingers by forward kinematics against the contacts, and ``error``
+        (E, metres). The loop runs in float32, whose rounded limits can exceed the exact ones by
+        ~1e-7: configurations and joints are clamped to the exact bounds and limits first."""
+        import math
+
+        from graspnet_torch.robot.transforms import rt_to_pose, transform_points
+
+        robot = self.robot
+        exact = self.clamp(config)
+        T = exact.shape[0]
+        flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+        home = robot.home_posture(torch.float64).fingers.expand(T, -1, -1)
+        q = home.clone()
+        chosen = torch.clamp(evaluation.joints.detach().to(torch.float64).cpu(), flo[self.idx], fhi[self.idx])
+        if self.mask is not None:  # a finger a trial's problem does not use stays at home
+            chosen = torch.where(self.mask.cpu().unsqueeze(-1) > 0, chosen, home[:, self.idx])
+        q[:, self.idx] = chosen
+        R, t = self.palm_frame(exact)
+        contacts = self.contacts64
+        if self.frame64 is not None:  # the search frame G -> the world: the palm G o pose, the contacts G c
+            from graspnet_torch.robot.transforms import compose
+
+            G_R, G_t = self.frame64
+            R, t = compose(G_R, G_t, R, t)
+            contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
+        tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
+        err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
+        palm = rt_to_pose(R, t)
+        deg = 180.0 / math.pi
+        column = {f: k for k, f in enumerate(self.fingers)}
+        out, total = [], []
+        for k in range(T):
+            pose = palm[k].tolist()
+            problem = self.problems[0 if self.problem_index is None else int(self.problem_index[k])]
+            errors = {f: float(err[k, column[f]]) for f in problem.fingers}
+            total.append(sum(errors.values()))
+            out.append({
+                "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
+                "joints": robot.finger_joints_to_file(q[k]),  # every joint, mimic joints at their coupled values
+                "fingertip_error_mm": {f: e * 1000 for f, e in errors.items()},
+                "total_error_mm": total[-1] * 1000,
+            })
+        self.add_fields(out, exact)
+        return Report(fields=out, evaluation=Evaluation(error=torch.tensor(total, dtype=torch.float64)),
+                      error_mm=[f["total_error_mm"] for f in out],
+                      landed=[max(f["fingertip_error_mm"].values()) <= self.tolerance_mm for f in out])
+
+    def add_fields(self, fields: list[dict], config: Tensor) -> None:
+        """Add what a subclass reports beyond the fingers to each trial's ``fields`` (an arm's joints);
+        ``config``: (T, n) the reported configurations, float64 within the exact bounds."""
+
+    @staticmethod
+    def describe(trial: TrialResult) -> str:
+        worst = max(trial.fingertip_error_mm, key=trial.fingertip_error_mm.get)
+        return f"{trial.total_error_mm:.3g} mm from its contacts ({worst} {trial.fingertip_error_mm[worst]:.3g} mm)"
+
+    @staticmethod
+    def summary(trial: TrialResult, fingers: Sequence[str]) -> str:
+        per_finger = ", ".join(f"{f} {trial.fingertip_error_mm[f]:.3f}" for f in fingers)
+        return f"total error {trial.total_error_mm:.3f} mm ({per_finger})"
+
+    @staticmethod
+    def columns(trial: TrialResult, fingers: Sequence[str]) -> dict[str, float]:
+        return {"total mm": trial.total_error_mm, **{f"{f} mm": trial.fingertip_error_mm[f] for f in fingers}}
