@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -32,11 +32,17 @@ test: $(STAMP)  ## ruff check + the whole test suite on two processes (pytest -n
 test-fast: $(STAMP)  ## the inner loop: every test not marked slow (pytest -m "not slow", < 1 min)
 	$(PY) -m pytest -m "not slow"
 
-reproduce: $(STAMP)  ## every experiment of the paper -> reports/REPRODUCTION.md and its figures (~30 min on 2 cores)
+reproduce: $(STAMP)  ## every experiment -> reports/REPRODUCTION.md and its figures (32 min on 2 cores before arm, random_hand, tradeoff, proxy)
 	$(PY) scripts/reproduce.py out=reports hydra.run.dir=outputs/reproduce/full
 
 reproduce-quick: $(STAMP)  ## the reduced protocol of every experiment (~2 min) -> outputs/reproduce-quick/REPRODUCTION.md
 	$(PY) scripts/reproduce.py quick=true out=outputs/reproduce-quick hydra.run.dir=outputs/reproduce-quick
+
+EXPERIMENT_RUN = $(PY) scripts/reproduce.py check=true out=outputs/experiment/$(1) hydra.run.dir=outputs/experiment/$(1) +experiment=$(1)
+
+experiment: $(STAMP)  ## one experiment with its targets checked, E=<name> (configs/experiment/) -> outputs/experiment/<name>/
+	@test -n "$(E)" || { echo "usage: make experiment E=<name> (configs/experiment/)"; exit 2; }
+	$(call EXPERIMENT_RUN,$(E))
 
 lint: $(STAMP)  ## ruff check
 	$(PY) -m ruff check .
@@ -66,17 +72,20 @@ bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): tr
 	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
 	$(PY) benchmarks/any_hand.py --check
 
-bench-meshes: $(STAMP)  ## mesh objects: proxy vs FCL verdicts near real meshes (>= 99 %), loop speed vs the primitive (>= 0.5x)
+bench-meshes: $(STAMP)  ## mesh objects: the loop's speed vs the primitive (>= 0.5x); the experiment proxy: verdicts vs FCL (>= 99 %)
 	$(PY) benchmarks/mesh_objects.py --check
+	$(call EXPERIMENT_RUN,proxy)
 
-bench-solvers: $(STAMP)  ## every solver (srv, paper, cmaes, dls) on the same problems, with targets (~10 min)
-	$(PY) benchmarks/solvers.py --check
+bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cmaes, dls) on the same problems, targets (~11 min)
+	$(call EXPERIMENT_RUN,solvers)
 
-report-manus: $(STAMP)  ## paper section 7.2: 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 -> reports/manus_protocol.md (~6.5 min)
-	$(PY) benchmarks/manus_protocol.py --check
+report-manus: $(STAMP)  ## the experiment manus: section 7.2, 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 (~7 min)
+	$(call EXPERIMENT_RUN,manus)
 
-report-arm: $(STAMP)  ## paper Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES -> reports/acnn_obstacles.md (~6 min)
-	$(PY) benchmarks/acnn_obstacles.py
+report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)
+	$(call EXPERIMENT_RUN,table3)
+	$(call EXPERIMENT_RUN,fig10)
+	$(call EXPERIMENT_RUN,arm)
 
 fcnn: $(STAMP)  ## retrain the shipped FCNN checkpoint checkpoints/hand/fcnn.pt (fixed seed)
 	$(PY) scripts/train_fcnn.py robot=hand export=true hydra.run.dir=outputs/train_fcnn/hand-export

@@ -1,16 +1,20 @@
 """The paper's experiments, each a function of its settings that returns an :class:`ExperimentReport`.
 
-=========  ==========================================================  =====================
-name       what (paper section)                                        settings
-=========  ==========================================================  =====================
-table2     Table 2 and Fig. 4: the HCNN on three grasps (5.2)          :class:`Table2Cfg`
-fig3       Fig. 3: learning with a noisy reinforcement (5.1)           :class:`NoiseStudyCfg`
-table3     Tables 3-4, ANOVA + Bonferroni, Figs. 6, 8, 9 (6.3)         :class:`ObstaclesCfg`
-fig10      Fig. 10: the arm among three obstacles (6.3)                :class:`Fig10Cfg`
-manus      the MANUS 64 x 30 protocol and Fig. 12 (7.2)                :class:`ManusCfg`
-solvers    every solver on the same problems (beyond the paper)        :class:`SolversCfg`
-objects    moved tasks, meshes and real objects (beyond the paper)     :class:`ObjectsCfg`
-=========  ==========================================================  =====================
+===========  =============================================================  ======================
+name         what (paper section)                                           settings
+===========  =============================================================  ======================
+table2       Table 2 and Fig. 4: the HCNN on three grasps (5.2)             :class:`Table2Cfg`
+fig3         Fig. 3: learning with a noisy reinforcement (5.1)              :class:`NoiseStudyCfg`
+table3       Tables 3-4, ANOVA + Bonferroni, Figs. 6, 8, 9 (6.3)            :class:`ObstaclesCfg`
+fig10        Fig. 10: the arm among three obstacles (6.3)                   :class:`Fig10Cfg`
+manus        the MANUS 64 x 30 protocol and Fig. 12 (7.2)                   :class:`ManusCfg`
+solvers      every solver on the same problems (beyond the paper)           :class:`SolversCfg`
+objects      moved tasks, meshes and real objects (beyond the paper)        :class:`ObjectsCfg`
+arm          the arm as a product, random arm problems (beyond the paper)   :class:`ArmCfg`
+random_hand  the HCNN on random reachable hand problems (beyond the paper)  :class:`RandomHandCfg`
+tradeoff     the noise study against Table 2, open choices swept (5.1)      :class:`TradeoffCfg`
+proxy        the collision proxy against FCL near meshes (beyond the paper) :class:`ProxyCfg`
+===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
 
@@ -27,17 +31,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from graspnet_torch.experiments.arm import ArmCfg, run_arm
 from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
 from graspnet_torch.experiments.manus import ManusCfg, run_manus
 from graspnet_torch.experiments.objects import ObjectsCfg, run_objects
 from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig10, run_tables
+from graspnet_torch.experiments.proxy import ProxyCfg, run_proxy
+from graspnet_torch.experiments.random_hand import RandomHandCfg, run_random_hand
 from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
 from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
+from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 
-__all__ = ["EXPERIMENTS", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg", "NoiseStudyCfg",
-           "ObjectsCfg", "ObstaclesCfg", "SolversCfg", "Table2Cfg", "run_fig10", "run_manus", "run_noise_study",
-           "run_objects", "run_solvers", "run_table2", "run_tables"]
+__all__ = ["EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg",
+           "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProxyCfg", "RandomHandCfg", "SolversCfg", "Table2Cfg",
+           "TradeoffCfg", "run_arm", "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proxy",
+           "run_random_hand", "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -57,4 +66,8 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("manus", ManusCfg, run_manus),
     Experiment("solvers", SolversCfg, run_solvers),
     Experiment("objects", ObjectsCfg, run_objects),
+    Experiment("arm", ArmCfg, run_arm),
+    Experiment("random_hand", RandomHandCfg, run_random_hand),
+    Experiment("tradeoff", TradeoffCfg, run_tradeoff),
+    Experiment("proxy", ProxyCfg, run_proxy),
 )}

@@ -7,6 +7,13 @@ start from random configurations: the 64 x runs learners run as one vectorised l
 (``gt.solve_many``, seed ``seed``; each has its own network, start, cube and table). Every run is
 counted, not the best of each solve. Damped least squares and CMA-ES run on every ``every``-th
 position from the same kind of random starts.
+
+This project's checks (issue 10): at every ``approach_every``-th position with a collision-free
+solution from the protocol, an ``approach`` drawn within 0.15 m (base x, y) and 20 degrees (every
+revolute joint) of it, solved with the default search window (+-0.2 m, +-30 degrees); and
+``random_problems`` random reachable problems (a random configuration's gripper points are the
+object's two points, no object, no table). Both are solved with ``gt.solve_many``, ``check_trials``
+(8) learners each; the result's best counts.
 """
 
 from __future__ import annotations
@@ -21,7 +28,8 @@ from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
 from graspnet_torch.settings import setting
 from graspnet_torch.table import markdown_table
 
-__all__ = ["PAPER_D", "ManusCfg", "baselines", "figure12", "protocol", "run_manus", "summary"]
+__all__ = ["PAPER_D", "ManusCfg", "approach_check", "baselines", "figure12", "protocol", "random_check", "run_manus",
+           "summary"]
 
 PAPER_D = (9.6, 4.1)  # mm, section 7.2: mean d +- std over 64 x 30 runs
 
@@ -34,6 +42,9 @@ class ManusCfg:
     seed: int = setting(0, lo=0, hi=2**31)
     every: int = setting(8, lo=1, hi=64)  # the baselines on every k-th position
     baselines: bool = True
+    approach_every: int = setting(1, lo=1, hi=64)  # the approach check on every k-th solved position
+    random_problems: int = setting(40, lo=0, hi=100_000)  # random reachable problems (0: none)
+    check_trials: int = setting(8, lo=1, hi=1000)  # learners per problem of both checks
 
 
 def summary(d_mm: np.ndarray, align: np.ndarray, coll: np.ndarray) -> dict:
@@ -101,6 +112,37 @@ def baselines(runs: int, every: int) -> dict:
     return {name: summary(*(np.array(v) for v in vals)) for name, vals in out.items()}
 
 
+def approach_check(results: list, trials: int, seed: int = 7, every: int = 1) -> dict:
+    """At every ``every``-th position with a collision-free solution in ``results`` (the
+    protocol's, one per position), an ``approach`` near it (:func:`~graspnet_torch.tasks.manus.random_approach`),
+    solved with the default search window; the result's best counts (d < 1 mm, collision-free)."""
+    import graspnet_torch as gt
+    from graspnet_torch.solver.api import robot_and_ik
+    from graspnet_torch.tasks.manus import cube_problem, protocol_positions, random_approach
+
+    robot, _ = robot_and_ik("manus")
+    rng = np.random.default_rng(seed)
+    problems = []
+    for k, ((x, y), res) in enumerate(zip(protocol_positions(), results, strict=True)):
+        good = [t for t in res.trials if t.collisions == 0 and t.distance_mm < 1]
+        if good and k % every == 0:
+            problems.append(cube_problem(x, y, random_approach(robot, good[0].arm_joints, rng)))
+    bests = [r.best for r in gt.solve_many(problems, trials=trials, seed=seed)] if problems else []
+    return {"solved": sum(b.distance_mm < 1 and b.collisions == 0 for b in bests), "tried": len(problems)}
+
+
+def random_check(n: int, trials: int, seed: int = 11) -> dict:
+    """``n`` random reachable problems (:func:`~graspnet_torch.tasks.random.random_gripper_problems`);
+    solved: the best of ``trials`` learners with d < 5 mm and alignment > 0.999."""
+    import graspnet_torch as gt
+    from graspnet_torch.solver.api import robot_and_ik
+    from graspnet_torch.tasks.random import random_gripper_problems
+
+    problems = random_gripper_problems(robot_and_ik("manus")[0], n, seed)
+    bests = [r.best for r in gt.solve_many(problems, trials=trials, seed=seed)] if problems else []
+    return {"solved": sum(b.distance_mm < 5 and b.alignment > 0.999 for b in bests), "tried": n}
+
+
 def figure12(out: Path, seed: int = 0) -> list[Figure]:
     """Fig. 12: R1, R2 and R of one learner against the iteration, and its configuration."""
     import graspnet_torch as gt
@@ -142,6 +184,8 @@ def run_manus(cfg: ManusCfg, out: Path) -> ExperimentReport:
     t_protocol = time.perf_counter() - t0
     base = baselines(cfg.runs, cfg.every) if cfg.baselines else {}
     figs = figure12(out, cfg.seed)
+    appr = approach_check(results, cfg.check_trials, every=cfg.approach_every)
+    rand = random_check(cfg.random_problems, cfg.check_trials)
     rows = [["paper (section 7.2)", f"{PAPER_D[0]} +- {PAPER_D[1]}", "", "", "", "", "", "64 x 30"]]
     named = [("ours: the SRV network + refine + polish (default)", ours)]
     if base:
@@ -156,9 +200,17 @@ def run_manus(cfg: ManusCfg, out: Path) -> ExperimentReport:
     body = [" ".join(__doc__.split("\n\n")[1].split()), "",
             f"Here: {cfg.runs} learners per position, seed {cfg.seed}{where}. Every run counts (one learner each). "
             "Success: d < 1 mm and no collision (FCL: table, floor, the cube beyond 2 mm, the arm against its own "
-            "links). The paper gives d only.", "", "### The workspace protocol, ours beside the paper", "", table, ""]
+            "links). The paper gives d only.", "", "### The workspace protocol, ours beside the paper", "", table, "",
+            "### This project's checks (issue 10)", "",
+            f"- Approach (a collision-free protocol solution moved by up to 0.15 m and 20 degrees, 1 position in "
+            f"{cfg.approach_every}): {appr['solved']}/{appr['tried']} positions solved (best of {cfg.check_trials} "
+            "learners, d < 1 mm, collision-free).",
+            f"- Random reachable problems: {rand['solved']}/{rand['tried']} solved (best of {cfg.check_trials} "
+            "learners, d < 5 mm, alignment > 0.999).", ""]
     numbers = {f"{name}/{key}": float(s[key]) for name, s in (("ours", ours), *base.items())
                for key in ("mean_d", "median_d", "orient", "success", "free")}
+    numbers.update({f"{name}/{key}": float(v[key]) for name, v in (("approach", appr), ("random", rand))
+                    for key in ("solved", "tried")})
     mismatches = []
     if ours["mean_d"] > PAPER_D[0]:
         mismatches.append(f"MANUS: our mean d, {ours['mean_d']:.2f} mm, is above the paper's {PAPER_D[0]} mm.")
@@ -172,4 +224,8 @@ def run_manus(cfg: ManusCfg, out: Path) -> ExperimentReport:
                             checks=[(f"protocol mean d {ours['mean_d']:.3f} mm < 2 mm", ours["mean_d"] < 2),
                                     (f"protocol orientation error {ours['orient']:.2f} deg < 2 deg",
                                      ours["orient"] < 2),
-                                    (f"protocol {t_protocol:.0f} s < 2 minutes", t_protocol < 120)])
+                                    (f"protocol {t_protocol:.0f} s < 2 minutes", t_protocol < 120),
+                                    (f"approach: {appr['solved']}/{appr['tried']} positions d < 1 mm and "
+                                     "collision-free >= 99 %", appr["solved"] >= 0.99 * max(appr["tried"], 1)),
+                                    (f"random reachable: {rand['solved']}/{rand['tried']} d < 5 mm, alignment > "
+                                     "0.999 >= 95 %", rand["solved"] >= 0.95 * rand["tried"])])

@@ -75,25 +75,13 @@ def moved_problems(cfg: ObjectsCfg, folder: Path) -> dict[tuple[str, str], list]
 
 
 def real_mesh_problems(cfg: ObjectsCfg) -> list:
-    """``cfg.sets`` closure contact sets on each real object, each object at a random pose."""
-    import torch
-
+    """``cfg.sets`` closure contact sets on each real object, each object at a random pose
+    (:func:`~graspnet_torch.tasks.objects.real_mesh_problems`)."""
     import graspnet_torch as gt
-    from graspnet_torch.robot.transforms import matrix_to_pose
-    from graspnet_torch.tasks.objects import closure_problem, random_pose, real_objects
-    from graspnet_torch.tasks.problem import Shape
+    from graspnet_torch.tasks.objects import real_mesh_problems as problems
 
-    hand = gt.load_robot("hand")
-    files = real_objects()
-    rng = np.random.default_rng(cfg.seed)
-    problems = []
-    for name in progress(cfg.objects, desc="objects: contact sets", unit="object"):
-        path, scale = files[name]
-        for k in range(cfg.sets):
-            pose = matrix_to_pose(torch.as_tensor(random_pose(rng, cfg.radius))).numpy()
-            obj = Shape("mesh", (), pose, path, scale)
-            problems.append(closure_problem(hand, obj, seed=cfg.seed + k, fingers=cfg.fingers, name=f"{name} {k}"))
-    return problems
+    return problems(gt.load_robot("hand"), cfg.objects, np.random.default_rng(cfg.seed), cfg.sets, cfg.radius,
+                    cfg.fingers, cfg.seed)
 
 
 def _solve_all(problems: list, solver: str, cfg: ObjectsCfg, desc: str) -> dict:

@@ -24,7 +24,7 @@ from typing import Any
 from graspnet_torch.errors import ConfigError, InternalError
 from graspnet_torch.settings import Free, build, clip, setting
 
-__all__ = ["ReproduceJobCfg", "check_complete", "compare_numbers", "prepare_reproduce", "reproduce",
+__all__ = ["ReproduceJobCfg", "check_complete", "compare_numbers", "missed_targets", "prepare_reproduce", "reproduce",
            "shipped_experiments"]
 
 REPORT = "REPRODUCTION.md"
@@ -39,6 +39,7 @@ class ReproduceJobCfg:
     quick: bool = False
     out: str | None = None  # None: the run folder
     threads: int = setting(1, lo=1, hi=1024)
+    check: bool = False  # exit 1 when one of this project's targets is missed (the benchmarks' --check)
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,7 @@ class ReproducePlan:
     out: Path
     quick: bool
     threads: int
+    check: bool = False
 
 
 def shipped_experiments() -> dict[str, Any]:
@@ -89,7 +91,7 @@ def prepare_reproduce(cfg: Mapping[str, Any], run_dir: str) -> ReproducePlan:
             if not parent.is_dir():
                 raise ConfigError(f"out: {clip(str(parent), 200)} is a file, not a folder")
             break
-    return ReproducePlan(plan, out, job.quick, job.threads)
+    return ReproducePlan(plan, out, job.quick, job.threads, job.check)
 
 
 def reproduce(plan: ReproducePlan, overrides: Sequence[str] = ()) -> Path:
@@ -214,3 +216,10 @@ def compare_numbers(a: str | Path, b: str | Path) -> list[str]:
             if not same:
                 out.append(f"{name}: {key}: {u} vs {v}")
     return out
+
+
+def missed_targets(numbers: str | Path) -> list[str]:
+    """This project's targets that a ``reproduction.json`` records as missed, one line each
+    (``experiment: what``); empty when every one was met."""
+    data = json.loads(Path(numbers).read_text(encoding="utf-8"))["experiments"]
+    return [f"{name}: {what}" for name, r in data.items() for what, ok in r.get("checks", []) if not ok]

@@ -1,6 +1,13 @@
-"""Grasp problems: objects, contact sets, problem files and shipped tasks."""
+"""Grasp problems: objects, contact sets, problem files, shipped tasks and random problems."""
 
 from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture, Shape, available_tasks
-from graspnet_torch.tasks.random import random_reachable_problem
+from graspnet_torch.tasks.random import (
+    random_arm_problem,
+    random_gripper_problems,
+    random_hand_problem,
+    random_obstacle_problems,
+    random_reachable_problem,
+)
 
-__all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks", "random_reachable_problem"]
+__all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks", "random_arm_problem",
+           "random_gripper_problems", "random_hand_problem", "random_obstacle_problems", "random_reachable_problem"]

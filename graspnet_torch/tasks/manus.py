@@ -6,11 +6,14 @@ An 8 x 8 grid over 0.6 m x 1 m in front of the platform (x 0.6-1.2 m, y -0.5-0.5
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["GRID_X", "GRID_Y", "cube_problem", "protocol_positions"]
+__all__ = ["GRID_X", "GRID_Y", "cube_problem", "protocol_positions", "random_approach"]
 
 GRID_X = np.linspace(0.6, 1.2, 8)  # m
 GRID_Y = np.linspace(-0.5, 0.5, 8)
@@ -31,3 +34,18 @@ def cube_problem(x: float, y: float, approach: dict | None = None) -> GraspProbl
 def protocol_positions() -> list[tuple[float, float]]:
     """The 64 cube positions (x, y), row by row."""
     return [(float(x), float(y)) for x in GRID_X for y in GRID_Y]
+
+
+def random_approach(robot: Robot, joints: dict[str, float], rng: np.random.Generator, metres: float = 0.15,
+                    degrees: float = 20.0) -> dict[str, float]:
+    """An ``approach`` (body joints by name, m / degrees) near the configuration ``joints`` (same
+    units): every revolute joint moved uniformly by up to ``degrees``, every prismatic one by up
+    to ``metres`` / sqrt(2) (the base's x and y together within ``metres``), clipped to the limits."""
+    approach = {}
+    lower, upper = robot.body_limits
+    for j, (name, kind) in enumerate(zip(robot.body_joint_names, robot.body.joint_types, strict=True)):
+        step = rng.uniform(-degrees, degrees) if kind == "revolute" else rng.uniform(-metres, metres) / math.sqrt(2)
+        scale = 180 / math.pi if kind == "revolute" else 1.0
+        lo, hi = lower[j] * scale, upper[j] * scale
+        approach[name] = float(np.clip(joints[name] + step, lo, hi))
+    return approach

@@ -11,11 +11,14 @@
   in joint space until its fingertip touches the surface (bisection on the mesh's winding number,
   which stays exact up to the surface), and the posture is kept only when FCL finds it
   collision-free (the touching fingertips excepted, as in every count); the contacts are the
-  fingertips, the posture the problem's ``reference``.
+  fingertips, the posture the problem's ``reference``;
+- :func:`real_mesh_problems`: closure contact sets on real object meshes at random poses (the
+  random problems of the mesh kind).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,7 +29,7 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture, Shape
 
-__all__ = ["REAL_OBJECTS", "as_mesh", "closure_problem", "random_pose", "real_objects"]
+__all__ = ["REAL_OBJECTS", "as_mesh", "closure_problem", "random_pose", "real_mesh_problems", "real_objects"]
 
 # name -> (file under pybullet_data, scale to metres): hand-sized, closed surfaces but the mug's
 REAL_OBJECTS = {
@@ -145,6 +148,24 @@ def closure_problem(robot: Robot, obj: Shape, seed: int, fingers: int = 3, attem
         if CollisionScene(robot, problem).count(Posture(palm_pose=pose, fingers=q, body=torch.zeros(0))) == 0:
             return problem
     raise ValueError(f"no collision-free closure on this object in {attempts} attempts (seed {seed})")
+
+
+def real_mesh_problems(robot: Robot, objects: Sequence[str], rng: np.random.Generator, sets: int = 1,
+                       radius: float = 0.3, fingers: int = 3, seed: int = 0) -> list[GraspProblem]:
+    """``sets`` closure contact sets (:func:`closure_problem`, set k with seed ``seed`` + k) on each
+    of the real objects ``objects`` (:func:`real_objects`, in that order), each set with the object
+    at its own random pose within ``radius`` of the origin (:func:`random_pose` from ``rng``)."""
+    from graspnet_torch.robot.transforms import matrix_to_pose
+
+    files = real_objects()
+    problems = []
+    for name in objects:
+        path, scale = files[name]
+        for k in range(sets):
+            pose = matrix_to_pose(torch.as_tensor(random_pose(rng, radius))).numpy()
+            obj = Shape("mesh", (), pose, path, scale)
+            problems.append(closure_problem(robot, obj, seed=seed + k, fingers=fingers, name=f"{name} {k}"))
+    return problems
 
 
 def _problem(robot: Robot, obj: Shape, chosen: list[int], pose: torch.Tensor, q: torch.Tensor,

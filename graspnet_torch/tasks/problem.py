@@ -18,189 +18,23 @@ from typing import Any, Literal
 import numpy as np
 
 from graspnet_torch.errors import ConfigError, ProblemError
-from graspnet_torch.files import confined_file, read_document
-from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.files import read_document
+from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
-from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
+from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
+from graspnet_torch.tasks.shapes import Shape, check_free_contacts, numbers, obstacles_of, pose_degrees, unknown_keys
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
 
-SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
-MAX_OBSTACLES = 1000
-MAX_SCALE = 1e6
 KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds", "bounds", "obstacles", "name",
               "description", "reference",
               "notes"}
-
-
-def _numbers(value: Any, n: int, where: str, what: str = "numbers", lo: float = -MAX_LENGTH_M,
-             hi: float = MAX_LENGTH_M) -> np.ndarray:
-    """n strict numbers (no bools, no strings), finite and within [lo, hi] (default: +-10 m)."""
-    return np.asarray(number_list(value, n, where, ProblemError, lo, hi, what), dtype=np.float64)
-
-
-def _pose(value: Any, where: str) -> np.ndarray:
-    """(x, y, z, rx, ry, rz) in metres and degrees -> metres and radians."""
-    what = "numbers (x, y, z in m, rx, ry, rz in degrees)"
-    p = _numbers(value, 6, where, what, -MAX_ANGLE_DEG, MAX_ANGLE_DEG)
-    if np.any(np.abs(p[:3]) > MAX_LENGTH_M):
-        raise ProblemError(f"{where}: x, y, z must lie within +-{MAX_LENGTH_M:g} m, got {short(value)}")
-    return np.concatenate([p[:3], np.radians(p[3:])])
-
-
-def _keys(data: Mapping, allowed: set[str]) -> list[str]:
-    """The keys of ``data`` not in ``allowed``, as short strings (keys may be numbers in YAML)."""
-    return sorted(clip(k, 40) for k in data if not isinstance(k, str) or k not in allowed)
-
-
-@dataclass(frozen=True)
-class Shape:
-    """An object or obstacle.
-
-    Attributes:
-        kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
-        size: box (x, y, z); cylinder (radius, height) along its z; sphere (radius,); mesh: ().
-        pose: (6,) frame of the shape in the world (m, rad); the shape is centred on it (a mesh:
-            its file's origin is there).
-        mesh: path of a mesh file (kind 'mesh'): STL, OBJ, PLY, GLB, what trimesh reads.
-        scale: a mesh's uniform scale (its file's units to metres, e.g. 0.001 for millimetres).
-    """
-
-    kind: str
-    size: tuple[float, ...]
-    pose: np.ndarray
-    mesh: Path | None = None
-    scale: float = 1.0
-
-    @classmethod
-    def from_mapping(cls, data: Any, where: str, folder: Path | None = None,
-                     allow_outside_paths: bool = False) -> Shape:
-        """Validate a shape; a mesh path is looked up in ``folder`` (the problem file's), then the
-        repository, and must stay within those or an installed package unless ``allow_outside_paths``."""
-        if not isinstance(data, Mapping):
-            raise ProblemError(f"{where}: expected a mapping with shape, size and pose")
-        unknown = _keys(data, {"shape", "size", "pose", "name", "scale"})
-        if unknown:
-            raise ProblemError(f"{where}: unknown key(s) {', '.join(unknown)}")
-        if data.get("scale") is not None and data.get("shape") != "mesh":
-            raise ProblemError(f"{where}.scale: only a mesh takes a scale (give a {short(data.get('shape'))}'s size "
-                               f"in metres)")
-        kind = data.get("shape")
-        if kind not in (*SHAPES, "mesh"):
-            raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {short(kind)}")
-        pose = _pose(data.get("pose", [0, 0, 0, 0, 0, 0]), f"{where}.pose")
-        if kind == "mesh":
-            size = data.get("size")
-            paths = size if isinstance(size, list) else [size]
-            if len(paths) != 1 or not isinstance(paths[0], str):
-                raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
-            bases = (folder, repo_root()) if folder is not None else (repo_root(),)
-            path = confined_file(paths[0], f"{where}.size", bases, ProblemError, allow_outside_paths)
-            scale = data.get("scale", 1.0)
-            if isinstance(scale, bool) or not isinstance(scale, int | float) or not math.isfinite(scale) \
-                    or not 0 < scale <= MAX_SCALE:
-                raise ProblemError(f"{where}.scale: expected a number in (0, {MAX_SCALE:g}] (the mesh file's unit in "
-                                   f"metres, e.g. 0.001 for millimetres), got {short(scale)}")
-            scale = float(scale)
-            _check_mesh(path, f"{where}.size", scale)
-            return cls(kind, (), pose, path, scale)
-        size = _numbers(data.get("size"), SHAPES[kind], f"{where}.size")
-        if np.any(size <= 0):
-            raise ProblemError(f"{where}.size: dimensions must be positive, got {short(data.get('size'))}")
-        return cls(kind, tuple(float(s) for s in size), pose)
-
-    def to_mapping(self) -> dict:
-        pose = [*self.pose[:3].tolist(), *np.degrees(self.pose[3:]).tolist()]
-        size = [str(self.mesh)] if self.kind == "mesh" else list(self.size)
-        out = {"shape": self.kind, "size": size, "pose": pose}
-        if self.kind == "mesh" and self.scale != 1.0:
-            out["scale"] = self.scale
-        return out
-
-    def trimesh(self):
-        """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
-        import trimesh
-
-        from graspnet_torch.robot.chain import rpy_matrix_np
-
-        if self.kind == "box":
-            mesh = trimesh.creation.box(extents=self.size)
-        elif self.kind == "cylinder":
-            mesh = trimesh.creation.cylinder(radius=self.size[0], height=self.size[1], sections=48)
-        elif self.kind == "sphere":
-            mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
-        else:
-            from graspnet_torch.collision.mesh import load_mesh
-
-            mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
-        T = np.eye(4)
-        T[:3, :3] = rpy_matrix_np(self.pose[3:])
-        T[:3, 3] = self.pose[:3]
-        return mesh.apply_transform(T)
-
-
-def _check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
-    """The file must load as a triangle mesh with finite vertices within +-10 m once scaled."""
-    from graspnet_torch.collision.mesh import load_mesh
-
-    try:
-        mesh = load_mesh(Path(path).resolve(), scale)
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = len(mesh.faces)
-    except Exception as exc:  # trimesh raises assorted errors on files it cannot read
-        raise ProblemError(f"{where}: {clip(path.name, 80)} is not a mesh trimesh can read "
-                           f"({type(exc).__name__})") from None
-    if faces == 0 or vertices.size == 0:
-        raise ProblemError(f"{where}: {clip(path.name, 80)} holds no triangles")
-    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > MAX_LENGTH_M:
-        raise ProblemError(f"{where}: {clip(path.name, 80)} has vertices that are not finite or beyond "
-                           f"+-{MAX_LENGTH_M:g} m at scale {scale:g} (metres expected: give scale, e.g. 0.001 for mm)")
-
-
-def _obstacles(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:
-    """The problem's ``obstacles``: a list of at most :data:`MAX_OBSTACLES` shapes."""
-    obstacles = data.get("obstacles")
-    obstacles = [] if obstacles is None else obstacles
-    if not isinstance(obstacles, list):
-        raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
-    if len(obstacles) > MAX_OBSTACLES:
-        raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
-    return tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
 
 
 def _check_texts(data: Mapping, source: str) -> None:
     for key in ("name", "description"):
         if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
             raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
-
-
-def _inside(shape: Shape, points: np.ndarray) -> np.ndarray:
-    """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
-    if shape.kind == "mesh":
-        return np.asarray(shape.trimesh().contains(points), dtype=bool)
-    p = (points - shape.pose[:3]) @ rpy_matrix_np(shape.pose[3:])  # into the shape's frame
-    if shape.kind == "box":
-        return np.all(np.abs(p) < np.asarray(shape.size) / 2, axis=1)
-    if shape.kind == "cylinder":
-        return (np.linalg.norm(p[:, :2], axis=1) < shape.size[0]) & (np.abs(p[:, 2]) < shape.size[1] / 2)
-    return np.linalg.norm(p, axis=1) < shape.size[0]
-
-
-def _check_free_contacts(obstacles: Sequence[Shape], contacts: list[Contact], obj: Shape | None, source: str) -> None:
-    """Refuse an obstacle that swallows a contact: no fingertip could touch it collision-free."""
-    points = np.stack([c.position for c in contacts])
-    if obj is not None:
-        from graspnet_torch.robot.chain import rpy_matrix_np
-
-        points = points @ rpy_matrix_np(obj.pose[3:]).T + obj.pose[:3]
-    for k, shape in enumerate(obstacles):
-        inside = _inside(shape, points)
-        if inside.any():
-            fingers = ", ".join(contacts[i].finger for i in np.nonzero(inside)[0])
-            raise ProblemError(f"{source}: obstacles[{k}] ({shape.kind}) contains the {fingers} contact: no "
-                               f"fingertip can reach it without a collision")
 
 
 @dataclass(frozen=True)
@@ -273,7 +107,7 @@ class GraspProblem:
         if not isinstance(data, Mapping):
             raise ProblemError(f"{source}: a problem must be a mapping with robot and contacts, got "
                                f"{type(data).__name__}")
-        unknown = _keys(data, KNOWN_KEYS)
+        unknown = unknown_keys(data, KNOWN_KEYS)
         if unknown:
             raise ProblemError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
                                f"(expected {', '.join(sorted(KNOWN_KEYS))})")
@@ -310,7 +144,7 @@ class GraspProblem:
         contacts, seen = [], {}
         for k, entry in enumerate(raw):
             where = f"{source}: contacts[{k}]"
-            if not isinstance(entry, Mapping) or _keys(entry, {"finger", "position"}) or "finger" not in entry:
+            if not isinstance(entry, Mapping) or unknown_keys(entry, {"finger", "position"}) or "finger" not in entry:
                 raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {short(entry)}")
             finger = entry["finger"]
             if not isinstance(finger, str) or finger not in fingers:
@@ -320,7 +154,7 @@ class GraspProblem:
                 raise ProblemError(f"{where}.finger: finger '{finger}' appears twice (contacts[{seen[finger]}] "
                                    f"and contacts[{k}])")
             seen[finger] = k
-            contacts.append(Contact(finger, _numbers(entry.get("position"), 3, f"{where}.position",
+            contacts.append(Contact(finger, numbers(entry.get("position"), 3, f"{where}.position",
                                                      "numbers (x, y, z in metres)")))
         shape = {"folder": folder, "allow_outside_paths": allow_outside_paths}
         obj = None
@@ -347,7 +181,7 @@ class GraspProblem:
                 raise ProblemError(f"{source}: 'bounds' are an arm's joint ranges; robot '{robot}' has no arm "
                                    f"(use palm_bounds)")
             raw_b = data["bounds"]
-            if not isinstance(raw_b, Mapping) or _keys(raw_b, {"min", "max"}) or len(raw_b) != 2:
+            if not isinstance(raw_b, Mapping) or unknown_keys(raw_b, {"min", "max"}) or len(raw_b) != 2:
                 raise ProblemError(f"{source}: bounds: expected {{min: [...], max: [...]}} (arm joints in chain "
                                    f"order, degrees or metres)")
             lo_b, hi_b = (np.asarray(number_list(raw_b[k], None, f"{source}: bounds.{k}", ProblemError,
@@ -359,10 +193,11 @@ class GraspProblem:
                 raise ProblemError(f"{source}: bounds: min > max for joint(s) "
                                    f"{', '.join(str(i) for i in np.nonzero(lo_b > hi_b)[0])}")
             joint_bounds = (lo_b, hi_b)
-        obstacles = _obstacles(data, source, shape)
+        obstacles = obstacles_of(data, source, shape)
         reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
         if obstacles:
-            _check_free_contacts(obstacles, contacts, obj, source)
+            check_free_contacts(obstacles, [c.finger for c in contacts], np.stack([c.position for c in contacts]), obj,
+                                source)
         _check_texts(data, source)
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
@@ -384,7 +219,7 @@ class GraspProblem:
             n = len(raw) if isinstance(raw, Sequence) and not isinstance(raw, str) else "none"
             raise ProblemError(f"{source}: points: robot '{robot}' needs exactly 2 object points "
                                f"[[x, y, z], [x, y, z]] (metres, object frame), got {n}")
-        points = np.stack([_numbers(p, 3, f"{source}: points[{k}]") for k, p in enumerate(raw)])
+        points = np.stack([numbers(p, 3, f"{source}: points[{k}]") for k, p in enumerate(raw)])
         if np.linalg.norm(points[0] - points[1]) < 1e-4:
             raise ProblemError(f"{source}: points: the two points are at the same place (closer than 0.1 mm): "
                                f"they define no direction")
@@ -398,7 +233,7 @@ class GraspProblem:
             values = number_list(list(approach.values()), None, f"{source}: approach", ProblemError,
                                  -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values (m, degrees)")
             approach = dict(zip(approach, values, strict=True))
-        obstacles = _obstacles(data, source, shape)
+        obstacles = obstacles_of(data, source, shape)
         _check_texts(data, source)
         return cls(robot=robot, contacts=(), object=obj, obstacles=obstacles, name=data.get("name"),
                    description=data.get("description"), source=source, robot_cfg=robot_cfg, points=points,
@@ -423,7 +258,7 @@ class GraspProblem:
         expected = "{arm_joints: {joint: deg}, joints: {finger: [...]}}" if arm else \
             "{palm_pose: [...], joints: {finger: [...]}}"
         first = "arm_joints" if arm else "palm_pose"
-        if not isinstance(data, Mapping) or _keys(data, {first, "joints"}) or len(data) != 2:
+        if not isinstance(data, Mapping) or unknown_keys(data, {first, "joints"}) or len(data) != 2:
             raise ProblemError(f"{where}: expected {expected}")
         if not isinstance(data["joints"], Mapping):
             raise ProblemError(f"{where}.joints: expected a mapping finger -> joint angles (degrees), got "
@@ -447,7 +282,7 @@ class GraspProblem:
             values = number_list(list(raw.values()), None, f"{where}.arm_joints", ProblemError, -MAX_ANGLE_DEG,
                                  MAX_ANGLE_DEG, "joint angles (degrees)")
             return ReferencePosture(None, joints, {k: math.radians(v) for k, v in zip(raw, values, strict=True)})
-        return ReferencePosture(_pose(data["palm_pose"], f"{where}.palm_pose"), joints)
+        return ReferencePosture(pose_degrees(data["palm_pose"], f"{where}.palm_pose"), joints)
 
     @classmethod
     def from_file(cls, path: str | Path, robot_cfg: RobotCfg | None = None,
@@ -487,17 +322,14 @@ class GraspProblem:
         from its contacts)."""
         from dataclasses import replace
 
-        def move(shape: Shape) -> Shape:
-            return replace(shape, pose=_pose_of(transform @ _matrix_of(shape.pose)))
-
         contacts = self.contacts
         if self.object is None:
             contacts = tuple(Contact(c.finger, transform[:3, :3] @ c.position + transform[:3, 3]) for c in contacts)
         points = self.points
         if self.object is None and points is not None:
             points = points @ transform[:3, :3].T + transform[:3, 3]
-        return replace(self, contacts=contacts, object=None if self.object is None else move(self.object),
-                       obstacles=tuple(move(o) for o in self.obstacles), points=points, palm_bounds=None,
+        return replace(self, contacts=contacts, object=None if self.object is None else self.object.moved(transform),
+                       obstacles=tuple(o.moved(transform) for o in self.obstacles), points=points, palm_bounds=None,
                        reference=None)
 
     def contacts_object(self) -> np.ndarray:
@@ -529,23 +361,6 @@ class GraspProblem:
             out["obstacles"] = [o.to_mapping() for o in self.obstacles]
         return out
 
-
-def _matrix_of(pose: np.ndarray) -> np.ndarray:
-    """(6,) pose (m, rad) -> (4, 4)."""
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rpy_matrix_np(pose[3:]), pose[:3]
-    return T
-
-
-def _pose_of(T: np.ndarray) -> np.ndarray:
-    """(4, 4) -> (6,) pose (m, rad), R = Rz Ry Rx."""
-    import torch
-
-    from graspnet_torch.robot.transforms import matrix_to_pose
-
-    return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
 
 
 def available_tasks() -> list[str]:

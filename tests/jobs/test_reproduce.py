@@ -9,7 +9,7 @@ import pytest
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.experiments.report import ExperimentReport, Figure
-from graspnet_torch.jobs.reproduce import REPORT, check_complete, compare_numbers, render
+from graspnet_torch.jobs.reproduce import REPORT, check_complete, compare_numbers, missed_targets, render
 from tests.in_process import ScriptRun, run_script
 
 
@@ -84,3 +84,12 @@ def test_compare_numbers_names_what_differs(tmp_path):
     write("a.json", {"x": 1.0, "y": float("nan")})
     write("b.json", {"x": 1.5, "y": float("nan")})
     assert compare_numbers(tmp_path / "a.json", tmp_path / "b.json") == ["fig3: x: 1.0 vs 1.5"]
+
+
+def test_missed_targets_lists_each_missed_check_of_every_experiment(tmp_path):
+    (tmp_path / "r.json").write_text(json.dumps({"experiments": {
+        "manus": {"checks": [["mean d < 2 mm", True], ["random 30/40 >= 95 %", False]]},
+        "arm": {"checks": [["env1 29/30", False]]}, "fig10": {"checks": []}}}))
+    assert missed_targets(tmp_path / "r.json") == ["manus: random 30/40 >= 95 %", "arm: env1 29/30"]
+    (tmp_path / "ok.json").write_text(json.dumps({"experiments": {"manus": {"checks": [["mean d < 2 mm", True]]}}}))
+    assert missed_targets(tmp_path / "ok.json") == []

@@ -1,0 +1,218 @@
+"""Shapes of grasp problems: objects and obstacles (box, cylinder, sphere, mesh), their validation
+and the checks that involve them (a mesh file that loads, an obstacle that swallows a contact).
+
+Every refusal is a :class:`~graspnet_torch.errors.ProblemError` with one line that names the file
+and the offending entry; files give angles in degrees, :class:`Shape` holds metres and radians.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.files import confined_file
+from graspnet_torch.paths import repo_root
+from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
+
+__all__ = ["MAX_OBSTACLES", "MAX_SCALE", "SHAPES", "Shape", "check_free_contacts", "check_mesh", "inside", "numbers",
+           "obstacles_of", "pose_degrees", "unknown_keys"]
+
+SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
+MAX_OBSTACLES = 1000
+MAX_SCALE = 1e6
+
+
+def numbers(value: Any, n: int, where: str, what: str = "numbers", lo: float = -MAX_LENGTH_M,
+             hi: float = MAX_LENGTH_M) -> np.ndarray:
+    """n strict numbers (no bools, no strings), finite and within [lo, hi] (default: +-10 m)."""
+    return np.asarray(number_list(value, n, where, ProblemError, lo, hi, what), dtype=np.float64)
+
+
+def pose_degrees(value: Any, where: str) -> np.ndarray:
+    """(x, y, z, rx, ry, rz) in metres and degrees -> metres and radians."""
+    what = "numbers (x, y, z in m, rx, ry, rz in degrees)"
+    p = numbers(value, 6, where, what, -MAX_ANGLE_DEG, MAX_ANGLE_DEG)
+    if np.any(np.abs(p[:3]) > MAX_LENGTH_M):
+        raise ProblemError(f"{where}: x, y, z must lie within +-{MAX_LENGTH_M:g} m, got {short(value)}")
+    return np.concatenate([p[:3], np.radians(p[3:])])
+
+
+def unknown_keys(data: Mapping, allowed: set[str]) -> list[str]:
+    """The keys of ``data`` not in ``allowed``, as short strings (keys may be numbers in YAML)."""
+    return sorted(clip(k, 40) for k in data if not isinstance(k, str) or k not in allowed)
+
+
+
+@dataclass(frozen=True)
+class Shape:
+    """An object or obstacle.
+
+    Attributes:
+        kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
+        size: box (x, y, z); cylinder (radius, height) along its z; sphere (radius,); mesh: ().
+        pose: (6,) frame of the shape in the world (m, rad); the shape is centred on it (a mesh:
+            its file's origin is there).
+        mesh: path of a mesh file (kind 'mesh'): STL, OBJ, PLY, GLB, what trimesh reads.
+        scale: a mesh's uniform scale (its file's units to metres, e.g. 0.001 for millimetres).
+    """
+
+    kind: str
+    size: tuple[float, ...]
+    pose: np.ndarray
+    mesh: Path | None = None
+    scale: float = 1.0
+
+    @classmethod
+    def from_mapping(cls, data: Any, where: str, folder: Path | None = None,
+                     allow_outside_paths: bool = False) -> Shape:
+        """Validate a shape; a mesh path is looked up in ``folder`` (the problem file's), then the
+        repository, and must stay within those or an installed package unless ``allow_outside_paths``."""
+        if not isinstance(data, Mapping):
+            raise ProblemError(f"{where}: expected a mapping with shape, size and pose")
+        unknown = unknown_keys(data, {"shape", "size", "pose", "name", "scale"})
+        if unknown:
+            raise ProblemError(f"{where}: unknown key(s) {', '.join(unknown)}")
+        if data.get("scale") is not None and data.get("shape") != "mesh":
+            raise ProblemError(f"{where}.scale: only a mesh takes a scale (give a {short(data.get('shape'))}'s size "
+                               f"in metres)")
+        kind = data.get("shape")
+        if kind not in (*SHAPES, "mesh"):
+            raise ProblemError(f"{where}.shape: expected box, cylinder, sphere or mesh, got {short(kind)}")
+        pose = pose_degrees(data.get("pose", [0, 0, 0, 0, 0, 0]), f"{where}.pose")
+        if kind == "mesh":
+            size = data.get("size")
+            paths = size if isinstance(size, list) else [size]
+            if len(paths) != 1 or not isinstance(paths[0], str):
+                raise ProblemError(f"{where}.size: a mesh's size is the path of its file")
+            bases = (folder, repo_root()) if folder is not None else (repo_root(),)
+            path = confined_file(paths[0], f"{where}.size", bases, ProblemError, allow_outside_paths)
+            scale = data.get("scale", 1.0)
+            if isinstance(scale, bool) or not isinstance(scale, int | float) or not math.isfinite(scale) \
+                    or not 0 < scale <= MAX_SCALE:
+                raise ProblemError(f"{where}.scale: expected a number in (0, {MAX_SCALE:g}] (the mesh file's unit in "
+                                   f"metres, e.g. 0.001 for millimetres), got {short(scale)}")
+            scale = float(scale)
+            check_mesh(path, f"{where}.size", scale)
+            return cls(kind, (), pose, path, scale)
+        size = numbers(data.get("size"), SHAPES[kind], f"{where}.size")
+        if np.any(size <= 0):
+            raise ProblemError(f"{where}.size: dimensions must be positive, got {short(data.get('size'))}")
+        return cls(kind, tuple(float(s) for s in size), pose)
+
+    def to_mapping(self) -> dict:
+        pose = [*self.pose[:3].tolist(), *np.degrees(self.pose[3:]).tolist()]
+        size = [str(self.mesh)] if self.kind == "mesh" else list(self.size)
+        out = {"shape": self.kind, "size": size, "pose": pose}
+        if self.kind == "mesh" and self.scale != 1.0:
+            out["scale"] = self.scale
+        return out
+
+    def moved(self, transform: np.ndarray) -> Shape:
+        """The shape moved and turned by a rigid transform (4, 4) of the world."""
+        return replace(self, pose=matrix_pose(transform @ pose_matrix(self.pose)))
+
+    def trimesh(self):
+        """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
+        import trimesh
+
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        if self.kind == "box":
+            mesh = trimesh.creation.box(extents=self.size)
+        elif self.kind == "cylinder":
+            mesh = trimesh.creation.cylinder(radius=self.size[0], height=self.size[1], sections=48)
+        elif self.kind == "sphere":
+            mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
+        else:
+            from graspnet_torch.collision.mesh import load_mesh
+
+            mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
+        T = np.eye(4)
+        T[:3, :3] = rpy_matrix_np(self.pose[3:])
+        T[:3, 3] = self.pose[:3]
+        return mesh.apply_transform(T)
+
+
+def check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
+    """The file must load as a triangle mesh with finite vertices within +-10 m once scaled."""
+    from graspnet_torch.collision.mesh import load_mesh
+
+    try:
+        mesh = load_mesh(Path(path).resolve(), scale)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = len(mesh.faces)
+    except Exception as exc:  # trimesh raises assorted errors on files it cannot read
+        raise ProblemError(f"{where}: {clip(path.name, 80)} is not a mesh trimesh can read "
+                           f"({type(exc).__name__})") from None
+    if faces == 0 or vertices.size == 0:
+        raise ProblemError(f"{where}: {clip(path.name, 80)} holds no triangles")
+    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > MAX_LENGTH_M:
+        raise ProblemError(f"{where}: {clip(path.name, 80)} has vertices that are not finite or beyond "
+                           f"+-{MAX_LENGTH_M:g} m at scale {scale:g} (metres expected: give scale, e.g. 0.001 for mm)")
+
+
+def obstacles_of(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:
+    """The problem's ``obstacles``: a list of at most :data:`MAX_OBSTACLES` shapes."""
+    obstacles = data.get("obstacles")
+    obstacles = [] if obstacles is None else obstacles
+    if not isinstance(obstacles, list):
+        raise ProblemError(f"{source}: 'obstacles' must be a list of shapes")
+    if len(obstacles) > MAX_OBSTACLES:
+        raise ProblemError(f"{source}: obstacles: {len(obstacles)} shapes, at most {MAX_OBSTACLES} allowed")
+    return tuple(Shape.from_mapping(o, f"{source}: obstacles[{k}]", **shape) for k, o in enumerate(obstacles))
+
+
+def inside(shape: Shape, points: np.ndarray) -> np.ndarray:
+    """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    if shape.kind == "mesh":
+        return np.asarray(shape.trimesh().contains(points), dtype=bool)
+    p = (points - shape.pose[:3]) @ rpy_matrix_np(shape.pose[3:])  # into the shape's frame
+    if shape.kind == "box":
+        return np.all(np.abs(p) < np.asarray(shape.size) / 2, axis=1)
+    if shape.kind == "cylinder":
+        return (np.linalg.norm(p[:, :2], axis=1) < shape.size[0]) & (np.abs(p[:, 2]) < shape.size[1] / 2)
+    return np.linalg.norm(p, axis=1) < shape.size[0]
+
+
+def check_free_contacts(obstacles: Sequence[Shape], fingers: Sequence[str], positions: np.ndarray,
+                        obj: Shape | None, source: str) -> None:
+    """Refuse an obstacle that swallows a contact (``positions``: (F, 3) in the object frame, one
+    per finger of ``fingers``): no fingertip could touch it collision-free."""
+    points = np.asarray(positions, dtype=np.float64)
+    if obj is not None:
+        from graspnet_torch.robot.chain import rpy_matrix_np
+
+        points = points @ rpy_matrix_np(obj.pose[3:]).T + obj.pose[:3]
+    for k, shape in enumerate(obstacles):
+        hit = inside(shape, points)
+        if hit.any():
+            names = ", ".join(fingers[i] for i in np.nonzero(hit)[0])
+            raise ProblemError(f"{source}: obstacles[{k}] ({shape.kind}) contains the {names} contact: no "
+                               f"fingertip can reach it without a collision")
+
+
+def pose_matrix(pose: np.ndarray) -> np.ndarray:
+    """(6,) pose (m, rad) -> (4, 4)."""
+    from graspnet_torch.robot.chain import rpy_matrix_np
+
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_matrix_np(pose[3:]), pose[:3]
+    return T
+
+
+def matrix_pose(T: np.ndarray) -> np.ndarray:
+    """(4, 4) -> (6,) pose (m, rad), R = Rz Ry Rx."""
+    import torch
+
+    from graspnet_torch.robot.transforms import matrix_to_pose
+
+    return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
+
