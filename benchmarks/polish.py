@@ -6,7 +6,8 @@
 
 ``step``: the whole polish's model (the shipped ``hand``: palm pose + the contact fingers' joints,
 ``HandEnvironment.whole_tips``) on the same problems and the same random starts, at three batch
-sizes (one problem x 20 trials, as ``gt.solve``; 64 and 250 problems x 4 trials, as ``gt.solve_many``):
+sizes (one problem x 20 trials, as ``gt.solve``; 64 and 250 problems x 4 trials, as ``gt.solve_many``),
+2-5 fingers, and the whole hand (every problem with 5 fingers: m = 6 + 20 = 26) at two of them:
 the time per evaluated Levenberg-Marquardt step (the fastest of 5 interleaved rounds; rows
 refused at the largest damping are not evaluated again) with the analytic
 Jacobian (one model evaluation per step) and with forward differences (m + 1 evaluations of the
@@ -52,8 +53,9 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
     robot = gt.load_robot("hand")
     ik = gt.load_finger_ik(robot)
     checks, lines = [], []
-    for P, runs in ((1, 20), (64, 4), (250, 4)):
-        problems = [gt.random_reachable_problem(robot, 20_000 + k) for k in range(P)]
+    for P, runs, fingers in ((1, 20, None), (64, 4, None), (250, 4, None), (1, 20, 5), (64, 4, 5)):
+        problems = [gt.random_reachable_problem(robot, 20_000 + k, fingers) for k in range(P)]
+        what = f"{P} x {runs} rows{', whole hand (5 fingers)' if fingers else ''}"
         env = build_environment(robot, problems if P > 1 else problems[0], ik, SolverCfg(), runs=runs)
         F, j = len(env.fingers), robot.joints_per_finger
         kernel = FingerKernel([robot.fingers[f].chain for f in env.fingers], width=j)
@@ -81,7 +83,7 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
         models = {"analytic": env.whole_tips, "forward differences": forward_differences}
         for name, model in models.items():  # the same answer: the Jacobians differ by ~1e-7
             out = levenberg_marquardt(model, goal, x0, lo, hi, iterations)
-            lines.append(f"{P} x {runs} rows, {name:20s}: {float((out.err < 1e-3).float().mean()) * 100:5.1f} % of "
+            lines.append(f"{what}, {name:20s}: {float((out.err < 1e-3).float().mean()) * 100:5.1f} % of "
                          f"rows < 1 mm after {iterations} steps")
         calls = {}
         for name, model in models.items():  # the steps each run evaluates (rows stalled at lam_max are not)
@@ -99,10 +101,10 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
         best = {name: t / calls[name] for name, t in zip(models, walls, strict=True)}
         ratio = best["forward differences"] / best["analytic"]
         m = x0.shape[1]
-        lines.append(f"{P} x {runs} rows (m = {m}, {calls['analytic']} steps): per step analytic "
+        lines.append(f"{what} (m = {m}, {calls['analytic']} steps): per step analytic "
                      f"{best['analytic'] * 1e3:.2f} ms, forward differences "
                      f"{best['forward differences'] * 1e3:.2f} ms: {ratio:.2f}x faster")
-        checks.append((f"LM step {P} x {runs} rows: analytic {ratio:.2f}x faster than forward differences >= "
+        checks.append((f"LM step {what}: analytic {ratio:.2f}x faster than forward differences >= "
                        f"{STEP_TARGET:g}x", ratio >= STEP_TARGET))
     return checks, lines
 
