@@ -100,7 +100,8 @@ class ConfigurationNetwork(nn.Module):
 
     def select(self, rows: Tensor) -> ConfigurationNetwork:
         """The networks of the trials ``rows`` (B,), copied: what a loop whose other trials have
-        stopped still runs (each trial's network is independent, so its steps are unchanged)."""
+        stopped still runs (each trial's network is independent: its steps are unchanged, up to the
+        last unit of float32 where an elementwise op takes its scalar path on the shorter tensor)."""
         if self.autograd:
             raise ValueError("select() needs the fused updates (autograd=False)")
         out = ConfigurationNetwork.__new__(ConfigurationNetwork)

@@ -181,3 +181,40 @@ def test_stop_clear_waits_for_a_clear_configuration(rule, stop_clear, stops_at):
 def test_stop_clear_must_be_a_boolean():
     with pytest.raises(gt.ConfigError, match=r"solver\.stop_clear='yes': expected true or false"):
         SolverCfg.from_mapping({"stop_clear": "yes"})
+
+
+@pytest.mark.slow
+def test_restarts_free_a_stuck_learner(hand):
+    """Random problem 10_046 x 4 learners: without restarts none of them lands within the 2000
+    iterations; restarting the ones still searching every 200 iterations lands it (and the batch
+    ends sooner)."""
+    problems = [gt.random_reachable_problem(hand, 10_000 + k) for k in (46, 58, 269, 284)]
+    plain = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=None))
+    restarted = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=200))
+    assert not plain[0].success and plain[0].best.iterations == 2000
+    assert all(r.success for r in restarted)
+    assert restarted[0].outcome.wall_time_s < plain[0].outcome.wall_time_s
+
+
+def test_selected_networks_step_as_in_the_whole_batch():
+    """The loop runs only the networks of the trials still searching (ConfigurationNetwork.select):
+    their steps and updates are those of the whole batch, to the last unit of float32 (an
+    elementwise op's vectorised and scalar paths, which a tensor's length picks, may differ by one
+    unit in the last place)."""
+    from graspnet_torch.srv.network import ConfigurationNetwork
+
+    g = torch.Generator().manual_seed(3)
+    net = ConfigurationNetwork(4, 9, generator=g)
+    rows = torch.tensor([1, 4, 8])
+    part = net.select(rows)
+    x, noise = torch.rand(9, 8, generator=g), torch.randn(9, 4, generator=g)
+    r = torch.rand(9, generator=g)
+    with torch.inference_mode():
+        for _ in range(3):
+            whole, some = net(x, noise), part(x[rows], noise[rows])
+            assert torch.allclose(some.o, whole.o[rows], rtol=0, atol=1e-6)
+            assert torch.allclose(some.r_hat, whole.r_hat[rows], rtol=0, atol=1e-6)
+            net.reinforce(r)
+            part.reinforce(r[rows])
+    assert torch.allclose(part.W1, net.W1[rows], rtol=0, atol=1e-6)
+    assert torch.allclose(part.theta, net.theta[rows], rtol=0, atol=1e-6)
