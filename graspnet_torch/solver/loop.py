@@ -34,6 +34,11 @@ from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
 __all__ = ["LoopOutcome", "enough_succeeded", "run_loop"]
 
+# In a batch of at least DEFER_FROM trials (gt.solve_many), trials that come near a solution are
+# polished together: once DEFER_ROWS are waiting, or every DEFER_EVERY iterations (a polish of a
+# few rows costs about what one of a hundred does).
+DEFER_FROM, DEFER_ROWS, DEFER_EVERY = 256, 32, 8
+
 
 @dataclass
 class LoopOutcome:
@@ -148,6 +153,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
         polish_from = solver.polish.from_r
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
+    pending = torch.zeros(T, dtype=torch.bool, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     tolerance = solver.tolerance_mm / 1000
     live = None  # the trials whose networks still run, once most have stopped (None: all)
@@ -179,8 +185,12 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
         if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
             near = best.active & (observed > polish_from) & (observed > polished_at)
+            polished_at = torch.where(near, observed, polished_at)
+            if T >= DEFER_FROM:  # a large batch: a few near trials wait for others (or a few iterations)
+                pending = (pending | near) & best.active
+                near = pending if int(pending.sum()) >= DEFER_ROWS or (k + 1) % DEFER_EVERY == 0 else near & False
             if bool(near.any()):
-                polished_at = torch.where(near, observed, polished_at)
+                pending = pending & ~near
                 landed = _polish_near(env, near, best, reward, k + 1, threshold, solver,
                                       tolerance if grasp_rule else None)
                 observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
