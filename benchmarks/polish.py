@@ -7,7 +7,7 @@
 ``step``: the whole polish's model (the shipped ``hand``: palm pose + the contact fingers' joints,
 ``HandEnvironment.whole_tips``) on the same problems and the same random starts, at three batch
 sizes (one problem x 20 trials, as ``gt.solve``; 64 and 250 problems x 4 trials, as ``gt.solve_many``),
-2-5 fingers, and the whole hand (every problem with 5 fingers: m = 6 + 20 = 26) at two of them:
+2-5 fingers, and the whole hand (every problem with 5 fingers: m = 6 + 20 = 26) at each:
 the time per evaluated Levenberg-Marquardt step (the fastest of 5 interleaved rounds; rows
 refused at the largest damping are not evaluated again) with the analytic
 Jacobian (one model evaluation per step) and with forward differences (m + 1 evaluations of the
@@ -53,7 +53,7 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
     robot = gt.load_robot("hand")
     ik = gt.load_finger_ik(robot)
     checks, lines = [], []
-    for P, runs, fingers in ((1, 20, None), (64, 4, None), (250, 4, None), (1, 20, 5), (64, 4, 5)):
+    for P, runs, fingers in ((1, 20, None), (64, 4, None), (250, 4, None), (1, 20, 5), (64, 4, 5), (250, 4, 5)):
         problems = [gt.random_reachable_problem(robot, 20_000 + k, fingers) for k in range(P)]
         what = f"{P} x {runs} rows{', whole hand (5 fingers)' if fingers else ''}"
         env = build_environment(robot, problems if P > 1 else problems[0], ik, SolverCfg(), runs=runs)
