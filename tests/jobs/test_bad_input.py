@@ -109,6 +109,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["solver.stop=0"], "solver.stop=0: expected an integer in [1, 1000000]"),
     (["solver.gripper.approach_deg=-5"], "solver.gripper.approach_deg=-5: expected a number in (0, 360]"),
     (["solver.gripper.approach_m=abc"], "solver.gripper.approach_m='abc': expected a number"),
+    (["solver.restart_every=0"], "solver.restart_every=0: expected an integer in [1, 10000000] or null"),
     (["solver.polish_iterations=5"], "unknown setting 'solver.polish_iterations' (now solver.polish.iterations)"),
     (["reward=r5"], "unknown reward 'r5': expected one of default, r1, r2, r3, r4"),
     (["srv.lr_bp=null"], "srv.lr_bp=None: expected a number in [0, 100]"),
