@@ -22,7 +22,11 @@ import yaml
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.settings import clip
+from graspnet_torch.solver.environments import ENVIRONMENTS
 from graspnet_torch.table import markdown_table
+
+ERROR_KEYS = tuple(dict.fromkeys(env.error_key for env in ENVIRONMENTS.values()))
+"""The result JSON keys of the ranked error, one per kind of environment."""
 
 __all__ = ["collect_sweep", "summarize_sweep"]
 
@@ -51,8 +55,13 @@ def collect_sweep(sweep: str | Path) -> tuple[list[str], list[dict]]:
             key, sep, value = str(item).partition("=")
             if sep and not key.startswith(("hydra", "~")):
                 settings[key.lstrip("+")] = _value(value)
-        data = json.loads(result_path.read_text())
-        error = data.get("total_error_mm", data.get("distance_mm"))
+        try:
+            data = json.loads(result_path.read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            data = None
+        error = next((data[key] for key in ERROR_KEYS if key in data), None) if isinstance(data, dict) else None
+        if not isinstance(error, int | float):
+            raise ConfigError(f"{clip(str(result_path), 200)}: not a grasp result (no {' or '.join(ERROR_KEYS)})")
         rows.append({"job": str(job.relative_to(root)), "settings": settings,
                      "success": bool(data.get("success")), "error_mm": float(error),
                      "iterations": int(data.get("iterations", 0)), "wall_time_s": float(data.get("wall_time_s", 0.0)),

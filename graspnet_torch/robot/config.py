@@ -76,6 +76,39 @@ class PoseBounds:
 
 
 @dataclass(frozen=True)
+class ProblemSchema:
+    """What a problem file gives for a robot, by the robot's structure (its ``kind``).
+
+    Attributes:
+        targets: ``contacts`` (one point per finger) or ``points`` (a gripper's two object points).
+        bounds: the key of the search bounds a problem may give: ``palm_bounds`` (a free hand's
+            palm box), ``bounds`` (an arm's joint ranges), or None.
+        reference: the key that places a reference posture's palm: ``palm_pose`` (a free hand) or
+            ``arm_joints`` (an arm), or None (no reference posture).
+        extra: other keys this kind takes (a gripper's ``approach`` configuration).
+    """
+
+    targets: str
+    bounds: str | None
+    reference: str | None
+    extra: tuple[str, ...] = ()
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The kind-specific keys this robot's problems may give."""
+        own = (self.targets, self.bounds, "reference" if self.reference else None, *self.extra)
+        return tuple(k for k in own if k is not None)
+
+
+PROBLEM_SCHEMAS = {
+    "hand": ProblemSchema("contacts", "palm_bounds", "palm_pose"),
+    "arm_hand": ProblemSchema("contacts", "bounds", "arm_joints"),
+    "gripper": ProblemSchema("points", None, None, ("approach",)),
+}
+"""Robot kind -> the kind-specific keys of its problems (the rest: object, obstacles, texts)."""
+
+
+@dataclass(frozen=True)
 class RobotCfg:
     """A robot: its URDF and the named links that give it its structure.
 
@@ -119,6 +152,19 @@ class RobotCfg:
     self_collision: bool = False
     solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
+
+    @property
+    def kind(self) -> str:
+        """'hand' (a free palm with fingers), 'arm_hand' (fingers on an arm) or 'gripper' (a body
+        chain with two marked gripper points, no fingers)."""
+        if not self.fingers:
+            return "gripper"
+        return "arm_hand" if self.arm is not None else "hand"
+
+    @property
+    def problem_schema(self) -> ProblemSchema:
+        """The kind-specific keys of this robot's problem files (:data:`PROBLEM_SCHEMAS`)."""
+        return PROBLEM_SCHEMAS[self.kind]
 
     @property
     def cli_name(self) -> str:

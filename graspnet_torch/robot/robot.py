@@ -204,10 +204,9 @@ class Robot:
     @property
     def kind(self) -> str:
         """'hand' (a free palm with fingers), 'arm_hand' (fingers on a body chain) or 'gripper' (a
-        body chain with two marked gripper points, no fingers): which environment solves it."""
-        if not self.fingers:
-            return "gripper"
-        return "arm_hand" if self.has_body else "hand"
+        body chain with two marked gripper points, no fingers): which environment solves it
+        (:attr:`RobotCfg.kind <graspnet_torch.robot.config.RobotCfg.kind>`)."""
+        return self.cfg.kind
 
     @property
     def dof(self) -> int:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 import torch
@@ -129,8 +129,10 @@ class Environment(ABC):
         subsets: ``evaluate(config[idx], idx)`` allowed: once most trials have stopped, the loop
             evaluates the others only.
         polishes: the environment has an in-loop polish (:meth:`polish`).
+        error_key: the result field (JSON key) of the error a trial is ranked by.
     """
 
+    error_key: ClassVar[str] = "total_error_mm"
     n: int
     lower: Tensor
     upper: Tensor

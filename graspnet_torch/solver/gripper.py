@@ -76,6 +76,7 @@ class GripperEnvironment(Environment):
         subsets: True: once most trials have stopped, the loop evaluates only the others.
     """
 
+    error_key = "distance_mm"
     subsets = True
     polishes = False  # its finish always polishes every joint (final_refine); SolverCfg.polish does not apply
 

@@ -30,6 +30,12 @@ KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds"
               "description", "reference",
               "notes"}
 
+KIND_KEYS = {"contacts": "one point per finger", "points": "a gripper's two object points",
+             "approach": "a gripper's approach configuration", "palm_bounds": "a free hand's palm box",
+             "bounds": "an arm's joint ranges", "reference": "a reference posture"}
+"""The problem keys that only some kinds of robot take (``RobotCfg.problem_schema``), with what they are."""
+REFERENCE_PLACEMENT = {"palm_pose": "[x, y, z, rx, ry, rz]", "arm_joints": "{joint: deg}"}
+
 
 def _check_texts(data: Mapping, source: str) -> None:
     for key in ("name", "description"):
@@ -129,12 +135,14 @@ class GraspProblem:
             robot = robot_cfg.name
         elif robot_cfg.name != robot:
             raise ProblemError(f"{source}: the problem is for robot '{robot}', but robot={robot_cfg.name} was given")
-        fingers = list(robot_cfg.fingers)
-        if not fingers:  # a gripper with two marked points (MANUS): points instead of contacts
+        schema = robot_cfg.problem_schema
+        for key in KIND_KEYS:  # the keys of another kind of robot
+            if data.get(key) is not None and key not in schema.keys:
+                raise ProblemError(f"{source}: '{key}' ({KIND_KEYS[key]}) does not apply to robot '{robot}' "
+                                   f"({robot_cfg.kind}), whose problems give {', '.join(schema.keys)}")
+        if schema.targets == "points":  # a gripper with two marked points (MANUS): points instead of contacts
             return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)
-        if data.get("points") is not None or data.get("approach") is not None:
-            key = "points" if data.get("points") is not None else "approach"
-            raise ProblemError(f"{source}: '{key}' is for a gripper robot (manus); robot '{robot}' takes contacts")
+        fingers = list(robot_cfg.fingers)
         raw = data.get("contacts")
         if not isinstance(raw, Sequence) or isinstance(raw, str):
             raise ProblemError(f"{source}: 'contacts' must be a list of {{finger, position}}")
@@ -168,18 +176,12 @@ class GraspProblem:
                                    f"follows the contacts)")
             bounds = "robot"
         elif data.get("palm_bounds") is not None:
-            if robot_cfg.arm is not None:
-                raise ProblemError(f"{source}: 'palm_bounds' are a free hand's; robot '{robot}' has an arm "
-                                   f"(use bounds)")
             try:
                 bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
             except ConfigError as exc:
                 raise ProblemError(str(exc)) from None
         joint_bounds = None
         if data.get("bounds") is not None:
-            if robot_cfg.arm is None:
-                raise ProblemError(f"{source}: 'bounds' are an arm's joint ranges; robot '{robot}' has no arm "
-                                   f"(use palm_bounds)")
             raw_b = data["bounds"]
             if not isinstance(raw_b, Mapping) or unknown_keys(raw_b, {"min", "max"}) or len(raw_b) != 2:
                 raise ProblemError(f"{source}: bounds: expected {{min: [...], max: [...]}} (arm joints in chain "
@@ -208,12 +210,6 @@ class GraspProblem:
                          allow_outside_paths: bool) -> GraspProblem:
         """A MANUS problem (INTERFACE.md): two object points, an object, an optional approach
         configuration and obstacles; no contacts."""
-        if data.get("contacts") is not None:
-            raise ProblemError(f"{source}: robot '{robot}' has no fingers: give 'points' (the two object points "
-                               f"its gripper points meet), not 'contacts'")
-        for key in ("palm_bounds", "bounds", "reference"):
-            if data.get(key) is not None:
-                raise ProblemError(f"{source}: '{key}' does not apply to robot '{robot}' (use 'approach')")
         raw = data.get("points")
         if not isinstance(raw, Sequence) or isinstance(raw, str) or len(raw) != 2:
             n = len(raw) if isinstance(raw, Sequence) and not isinstance(raw, str) else "none"
@@ -254,10 +250,8 @@ class GraspProblem:
         if data is None:
             return None
         where = f"{source}: reference"
-        arm = robot_cfg.arm is not None
-        expected = "{arm_joints: {joint: deg}, joints: {finger: [...]}}" if arm else \
-            "{palm_pose: [...], joints: {finger: [...]}}"
-        first = "arm_joints" if arm else "palm_pose"
+        first = robot_cfg.problem_schema.reference  # what places the palm: palm_pose or arm_joints
+        expected = f"{{{first}: {REFERENCE_PLACEMENT[first]}, joints: {{finger: [...]}}}}"
         if not isinstance(data, Mapping) or unknown_keys(data, {first, "joints"}) or len(data) != 2:
             raise ProblemError(f"{where}: expected {expected}")
         if not isinstance(data["joints"], Mapping):
@@ -275,7 +269,7 @@ class GraspProblem:
         missing = [c.finger for c in contacts if c.finger not in joints]
         if missing:
             raise ProblemError(f"{where}.joints: missing finger(s) {', '.join(missing)}")
-        if arm:
+        if first == "arm_joints":
             raw = data["arm_joints"]
             if not isinstance(raw, Mapping) or not all(isinstance(k, str) for k in raw):
                 raise ProblemError(f"{where}.arm_joints: expected a mapping joint name -> degrees")

@@ -340,7 +340,7 @@ CUBE = (Path(__file__).resolve().parents[2] / "configs" / "task" / "cube.yaml").
      "points: robot 'manus' needs exactly 2 object points"),
     (CUBE.replace("points: [[0.0, 0.035, 0.0], [0.0, -0.035, 0.0]]", "points: [[0, 0, 0], [0, 0, 0]]"),
      "the two points are at the same place"),
-    (CUBE + "contacts: [{finger: thumb, position: [0, 0, 0]}]\n", "robot 'manus' has no fingers: give 'points'"),
+    (CUBE + "contacts: [{finger: thumb, position: [0, 0, 0]}]\n", "'contacts' (one point per finger) does not apply"),
     (CUBE + "approach: {base_z: 0.1}\n", "approach: unknown joint(s) base_z"),
     (CUBE + "approach: {elbow_pitch: 170}\n", "approach.elbow_pitch: 170 lies outside its limits [-150, 150] degrees"),
 ])

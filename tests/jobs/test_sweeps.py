@@ -53,6 +53,23 @@ def test_a_folder_without_results_is_refused_and_nothing_written(tmp_path):
     assert res.returncode == 2 and res.stderr.startswith("error: ") and not list(tmp_path.iterdir())
 
 
+def test_a_gripper_result_is_read_by_its_distance_and_a_foreign_file_refused(tmp_path):
+    """Each environment names its ranked error's key: a MANUS job's distance_mm is its error; a
+    result.json without one is refused with one line naming it, and no summary is written."""
+    _fake_sweep(tmp_path, [(["seed=0"], 2.0, True)])
+    job = tmp_path / "1"
+    (job / ".hydra").mkdir(parents=True)
+    (job / ".hydra" / "overrides.yaml").write_text("- seed=1\n")
+    (job / "result.json").write_text(json.dumps({"robot": "manus", "success": True, "distance_mm": 0.25}))
+    _, jobs = collect_sweep(tmp_path)
+    assert [j["error_mm"] for j in jobs] == [2.0, 0.25]
+    (job / "result.json").write_text(json.dumps({"robot": "manus", "success": True}))
+    before = sorted(tmp_path.rglob("*"))
+    with pytest.raises(ConfigError, match=r"1/result.json: not a grasp result \(no total_error_mm or distance_mm\)"):
+        summarize_sweep(tmp_path)
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def test_hparams_are_the_overrides_over_the_settings():
     trial = TrialResult(success=True, iterations=7, reinforcement=0.99, wall_time_s=0.2, total_error_mm=0.5)
     result = GraspResult(robot="hand", trials=[trial], seed=3, settings={"solver": "srv", "noise_sigma": 0.2,

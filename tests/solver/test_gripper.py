@@ -60,12 +60,12 @@ def test_approach_bounds_the_search_within_the_limits(manus):
 
 
 @pytest.mark.parametrize(("change", "message"), [
-    ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}]}, "has no fingers: give 'points'"),
+    ({"contacts": [{"finger": "thumb", "position": [0, 0, 0]}]}, "'contacts' (one point per finger) does not apply"),
     ({"points": [[0, 0, 0]]}, "needs exactly 2 object points"),
     ({"points": [[0, 0, 0], [0, 0, 0], [0, 0, 1]]}, "needs exactly 2 object points"),
     ({"points": [[0, 0, 0], [0, 0, 0.00001]]}, "the two points are at the same place"),
     ({"points": [[0, 0, "x"], [0, 0, 1]]}, "points[0][2]: expected a number"),
-    ({"bounds": {"min": [0] * 9, "max": [1] * 9}}, "'bounds' does not apply to robot 'manus'"),
+    ({"bounds": {"min": [0] * 9, "max": [1] * 9}}, "'bounds' (an arm's joint ranges) does not apply to robot 'manus'"),
 ])
 def test_bad_gripper_problems_are_refused(change, message):
     with pytest.raises(gt.ProblemError) as info:

@@ -183,3 +183,26 @@ def test_an_arm_reference_with_an_unknown_joint_is_refused(robots):
     problem = gt.GraspProblem.from_mapping(data, source="env1")
     with pytest.raises(gt.ProblemError, match=r"reference.arm_joints: unknown joint\(s\) knee of robot 'arm_hand'"):
         reference_posture(robots["arm_hand"], problem)
+
+
+KIND_VALUES = {"contacts": [{"finger": "thumb", "position": [0, 0, 0.2]}], "points": [[0, 0, 0], [0, 0, 0.1]],
+               "approach": {"x": 0.0}, "palm_bounds": {"min": [0] * 6, "max": [1] * 6},
+               "bounds": {"min": [0], "max": [1]}, "reference": {"palm_pose": [0] * 6, "joints": {}}}
+
+
+@pytest.mark.parametrize("robot", ["hand", "arm_hand", "manus"])
+def test_a_key_of_another_kind_of_robot_is_refused_by_its_schema(robot):
+    """Every kind-specific key a robot's schema lacks is refused with one line naming it and what
+    the robot's problems give; the schema's own target key is the one problems need."""
+    from graspnet_torch.robot.config import load_robot_cfg
+
+    cfg = load_robot_cfg(robot)
+    schema = cfg.problem_schema
+    assert schema.targets == ("points" if cfg.kind == "gripper" else "contacts")
+    foreign = [k for k in KIND_VALUES if k not in schema.keys]
+    assert foreign  # every kind lacks some
+    for key in foreign:
+        data = {"robot": robot, schema.targets: KIND_VALUES[schema.targets], key: KIND_VALUES[key]}
+        with pytest.raises(gt.ProblemError, match=rf"'{key}' \(.+\) does not apply to robot '{robot}' "
+                                                  rf"\({cfg.kind}\), whose problems give {schema.targets}"):
+            gt.GraspProblem.from_mapping(data)
