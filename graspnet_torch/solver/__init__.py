@@ -5,6 +5,7 @@ from graspnet_torch.solver.config import CmaesCfg, FingersCfg, GripperCfg, Noise
 from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.solver.loop import LoopOutcome, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
+from graspnet_torch.solver.session import Solver
 
 __all__ = ["CmaesCfg", "FingersCfg", "GraspResult", "GripperCfg", "HandEnvironment", "LoopOutcome", "NoiseCfg",
-           "PolishCfg", "RewardCfg", "SolverCfg", "TrialResult", "run_loop", "solve", "solve_many"]
+           "PolishCfg", "RewardCfg", "Solver", "SolverCfg", "TrialResult", "run_loop", "solve", "solve_many"]

@@ -25,8 +25,9 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "failure_reason", "reference_posture", "robot_and_ik", "search", "solve", "solve_many",
-           "trial_posture"]  # build_environment, reference_posture, trial_posture: from their modules, for callers here
+__all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
+           "search", "settings_of", "solve", "solve_many", "trial_posture"]
+# build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -60,14 +61,33 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
 
 
-def _as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
+def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
+    """A problem, a problem file or a shipped task's name -> the problem (a file read once while
+    its size and modification time stay the same)."""
     if isinstance(problem, GraspProblem):
         return problem
     p = Path(str(problem))
-    return GraspProblem.from_file(p) if p.suffix or p.exists() else GraspProblem.from_task(str(problem))
+    if not (p.suffix or p.exists()):
+        from graspnet_torch.paths import configs_dir
+
+        p, task = configs_dir() / "task" / f"{problem}.yaml", str(problem)
+        if not p.is_file():
+            return GraspProblem.from_task(task)  # its refusal
+    else:
+        task = None
+    try:
+        stat = p.stat()
+    except OSError:
+        return GraspProblem.from_file(p)  # its refusal
+    return _read_problem(str(p), task, stat.st_size, stat.st_mtime_ns)
 
 
-def _settings(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, reward: RewardCfg | None,
+@lru_cache(maxsize=64)
+def _read_problem(path: str, task: str | None, size: int, mtime_ns: int) -> GraspProblem:
+    return GraspProblem.from_task(task) if task is not None else GraspProblem.from_file(path)
+
+
+def settings_of(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, reward: RewardCfg | None,
               max_iterations: int | None) -> tuple[SolverCfg, SRVNetCfg, RewardCfg]:
     """The settings of a solve: the given ones, else the robot's ``solver_defaults``, else the paper's."""
     defaults = robot.cfg.solver_defaults
@@ -88,7 +108,7 @@ def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: Rewar
             "noise_sigma": noise.sigma, "sigma_scale": srv.sigma.scale}
 
 
-def _result(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
+def result_of(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
     report = env.report(outcome.config, outcome.evaluation)
     results, failure = _trials(robot, problem, env, report, outcome, reward, solver)
@@ -112,16 +132,16 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
             paper's defaults; ``noise`` may be sigma_n.
         robot, finger_ik: override the shipped robot and its trained FCNN.
     """
-    problem = _as_problem(problem)
+    problem = as_problem(problem)
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
     if robot is None or finger_ik is None:
         shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
-    solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
+    solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = search(env, trials, seed, solver, srv, reward, noise)
-    return _result(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
+    return result_of(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
 
 
 def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg,
@@ -167,7 +187,7 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     problem's result differs from its single solve with the same seed. Each result's
     ``wall_time_s`` is the batch's time divided by P.
     """
-    batch = [_as_problem(p) for p in problems]
+    batch = [as_problem(p) for p in problems]
     if not batch:
         return []
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
@@ -181,7 +201,7 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     if len(batch) == 1:
         return [solve(batch[0], trials=trials, seed=seed, max_iterations=max_iterations, solver=solver, srv=srv,
                       reward=reward, noise=noise, device=device)]
-    solver, srv, reward = _settings(robot, solver, srv, reward, max_iterations)
+    solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
     report = env.report(outcome.config, outcome.evaluation)
@@ -210,9 +230,9 @@ def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Repor
 
     reports = None
     if has_environment(robot, problem):
-        from graspnet_torch.collision import CollisionScene
+        from graspnet_torch.collision.cache import scene_for
 
-        scene = CollisionScene(robot, problem)
+        scene = scene_for(robot, problem)
         reports = [scene.check(trial_posture(robot, f)) for f in report.fields]
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
     evaluation = replace(report.evaluation, collisions=collisions)

@@ -17,7 +17,7 @@ from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
-from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
@@ -92,6 +92,10 @@ class ArmHandEnvironment(FingerEnvironment):
 
     def body(self, config: Tensor) -> Tensor:
         return config
+
+    def config_of(self, posture: Posture) -> Tensor:
+        """The posture's arm joints (1, n)."""
+        return posture.body.to(torch.float64).reshape(1, -1)
 
     def add_fields(self, fields: list[dict], config: Tensor) -> None:
         """``arm_joints`` by URDF joint name in chain order (degrees; metres for prismatic joints)."""

@@ -31,9 +31,12 @@ __all__ = ["run_dls"]
 
 
 def run_dls(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None,
-            reward: RewardCfg | None = None, noise: NoiseCfg | None = None) -> LoopOutcome:
+            reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Tensor | None = None
+            ) -> LoopOutcome:
     """``trials`` Levenberg-Marquardt restarts on one environment (a batch of problems:
-    ``env.problem_index``). The history holds each restart's error (and reinforcement) per step."""
+    ``env.problem_index``). The history holds each restart's error (and reinforcement) per step.
+    ``start``: (trials, m) the whole configurations to start from (a warm start,
+    :meth:`~graspnet_torch.solver.environment.Environment.whole_of`), instead of random ones."""
     solver = solver or SolverCfg(method="dls")
     if noise is not None and noise.sigma > 0:
         raise ConfigError("solver=dls minimises the model's fingertip error and never sees the reinforcement, so "
@@ -49,7 +52,7 @@ def run_dls(env: Environment, trials: int, seed: int, solver: SolverCfg | None =
     trace: list[Tensor] | None = [] if solver.history else None
     t0 = time.perf_counter()
     with torch.inference_mode():
-        x0 = env.random_whole(trials, gen)
+        x0 = env.random_whole(trials, gen) if start is None else start
         solved = env.local_solve(x0, solver.max_iterations, solver.polish.tolerance_mm / 1000, done, trace)
         config, evaluation = env.whole_result(solved, like)
         steps = solved.steps.clamp(min=1).to(like.device)

@@ -29,7 +29,7 @@ import torch
 from torch import Tensor
 
 if TYPE_CHECKING:
-    from graspnet_torch.robot.robot import Robot
+    from graspnet_torch.robot.robot import Posture, Robot
     from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.least_squares import LMResult
     from graspnet_torch.solver.result import TrialResult
@@ -179,6 +179,11 @@ class Environment(ABC):
     @abstractmethod
     def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
         """x (T, m) uniform within the bounds (and joint limits), float64 on the CPU."""
+
+    @abstractmethod
+    def whole_of(self, posture: Posture) -> Tensor:
+        """x (1, m) of a posture of the robot (a previous result's: a warm start) in this
+        environment's search space, within the bounds and joint limits, float64 on the CPU."""
 
     @abstractmethod
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,

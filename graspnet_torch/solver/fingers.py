@@ -11,6 +11,7 @@ from torch import Tensor
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 
 if TYPE_CHECKING:
+    from graspnet_torch.robot.robot import Posture
     from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.least_squares import LMResult
     from graspnet_torch.solver.result import TrialResult
@@ -89,10 +90,9 @@ class FingerEnvironment(Environment):
         from graspnet_torch.collision.scene import has_environment
 
         if collisions and has_environment(robot, self.problem):
-            from graspnet_torch.collision.proxy import CollisionProxy
+            from graspnet_torch.collision.cache import proxy_for
 
-            self.proxy = CollisionProxy(robot, problems if len(problems) > 1 else self.problem, dtype=dtype,
-                                        device=device)
+            self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device)
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)
 
@@ -217,6 +217,15 @@ class FingerEnvironment(Environment):
         B = config.shape[0]
         x = torch.cat([self.clamp(config, rows), joints.detach().to(torch.float64).cpu().reshape(B, -1)], 1)
         return torch.minimum(torch.maximum(x, lo), hi)
+
+    def whole_of(self, posture: Posture) -> Tensor:
+        """x (1, m) of a posture: :meth:`config_of` its palm (or body), its contact fingers' joints."""
+        joints = posture.fingers[self.idx].to(torch.float64).unsqueeze(0)
+        return self.whole_start(self.config_of(posture), joints, None if self.mask is None else torch.zeros(1).long())
+
+    def config_of(self, posture: Posture) -> Tensor:
+        """(1, n) the configuration that places the palm (or the body) where ``posture`` has it."""
+        raise NotImplementedError
 
     def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
         """x (T, m) uniform within the bounds and joint limits (``solver=dls``'s restarts)."""

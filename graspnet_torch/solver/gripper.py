@@ -23,7 +23,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.ik import damped_pinv_step
-from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 from graspnet_torch.tasks.problem import GraspProblem
@@ -120,9 +120,9 @@ class GripperEnvironment(Environment):
                                                        robot.cfg.gripper_points], axis=1), **kw)  # (4, 2)
         self.proxy = None
         if collisions and has_environment(robot, self.problem):
-            from graspnet_torch.collision.proxy import CollisionProxy
+            from graspnet_torch.collision.cache import proxy_for
 
-            self.proxy = CollisionProxy(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
+            self.proxy = proxy_for(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
 
     def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
@@ -274,6 +274,11 @@ class GripperEnvironment(Environment):
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
         u = torch.rand(trials, self.n, generator=gen, dtype=torch.float64, device=gen.device).cpu()
         return lo + (hi - lo) * u
+
+    def whole_of(self, posture: Posture) -> Tensor:
+        """The posture's body joints (1, n), within the (first) trial's bounds."""
+        lo, hi = (torch.as_tensor(a, dtype=torch.float64).reshape(-1, self.n)[0] for a in self._bounds)
+        return torch.minimum(torch.maximum(posture.body.to(torch.float64).reshape(1, -1), lo), hi)
 
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
                     trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:

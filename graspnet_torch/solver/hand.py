@@ -15,7 +15,7 @@ from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
-from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_jacobian, pose_to_rt
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
@@ -77,6 +77,21 @@ class HandEnvironment(FingerEnvironment):
 
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
+
+    def config_of(self, posture: Posture) -> Tensor:
+        """The posture's palm pose in the (first) search frame G: G^-1 o pose (1, 6); each angle
+        taken within 2 pi of the middle of its bounds."""
+        import math
+
+        from graspnet_torch.robot.transforms import rt_to_pose
+
+        R, t = pose_to_rt(posture.palm_pose.to(torch.float64).reshape(1, 6))
+        G_R, G_t = (f[:1] for f in self.frame64)
+        pose = rt_to_pose(G_R.transpose(-1, -2) @ R, ((t - G_t).unsqueeze(1) @ G_R).squeeze(1))
+        lo, hi = (b.reshape(-1, 6)[0] for b in self._bounds64)
+        middle = (lo[3:] + hi[3:]) / 2
+        pose[:, 3:] += 2 * math.pi * torch.round((middle - pose[:, 3:]) / (2 * math.pi))
+        return pose
 
     @classmethod
     def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:

@@ -143,6 +143,9 @@ class _Colliding(Environment):
     def random_whole(self, trials, gen):
         raise NotImplementedError
 
+    def whole_of(self, posture):
+        raise NotImplementedError
+
     def local_solve(self, x, iterations, tol=0.0, done=None, trace=None, rows=None):
         raise NotImplementedError
 

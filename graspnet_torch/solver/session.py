@@ -1,0 +1,142 @@
+"""``gt.Solver``: a solver built once per robot and settings, for programs that call it many times,
+and for sequences (tracking).
+
+    solver = gt.Solver("hand")                    # the robot, its FCNN, its settings: once
+    result = solver.solve(problem)                # the search only
+    result = solver.solve(problem, start=result)  # warm: from a previous result's posture
+    results = solver.track(frames)                # a sequence, each frame from the last
+
+A warm start runs Levenberg-Marquardt over the whole configuration (the palm pose or the arm's
+joints with the contact fingers' joints: the local solver of ``solver=dls``) from the given
+posture; when it lands (every contact within ``solver.tolerance_mm``, no collision) that is the
+result, one trial, and the joints stay near the start's (the least-squares step is the smallest
+that closes the error). Otherwise the frame gets the full search (``solver.method``, ``trials``
+trials), with the warm trial kept among its trials.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import torch
+
+from graspnet_torch.fcnn.ik import FingerIK
+from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.robot.postures import trial_posture
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.solver import api
+from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.environments import build_environment
+from graspnet_torch.solver.result import GraspResult, TrialResult
+from graspnet_torch.srv.network import SRVNetCfg
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["Solver", "Start"]
+
+Start = GraspResult | TrialResult | Posture
+"""What a warm start starts from: a result (its best trial), a trial, or a posture."""
+
+
+class Solver:
+    """A robot, its trained finger IK (FCNN) and solver settings, resolved once.
+
+    Args:
+        robot: a shipped robot's name, a robot config (or its YAML path), or a built robot.
+        trials, seed, max_iterations, solver, srv, reward, noise, device: as :func:`gt.solve`
+            (None: the robot's ``solver_defaults`` over the paper's).
+        finger_ik: the FCNN to use instead of the robot's trained one.
+
+    Collision models of a problem's scene are built once per distinct geometry
+    (:mod:`graspnet_torch.collision.cache`), problem files once per file version.
+    """
+
+    def __init__(self, robot: str | Path | RobotCfg | Robot = "hand", *, trials: int = 20, seed: int = 0,
+                 max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
+                 reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
+                 finger_ik: FingerIK | None = None, device: str | torch.device = "cpu"):
+        if isinstance(robot, Robot):
+            self.robot, ik = robot, finger_ik
+            if ik is None:
+                from graspnet_torch.fcnn.checkpoint import finger_ik_of
+
+                ik = finger_ik_of(robot)
+        else:
+            built, ik = api.robot_and_ik(str(robot) if isinstance(robot, Path) else robot)
+            self.robot, ik = built, finger_ik or ik
+        self.finger_ik = ik
+        self.trials, self.seed, self.device = int(trials), int(seed), device
+        self.noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
+        self.solver_cfg, self.srv, self.reward = api.settings_of(self.robot, solver, srv, reward, max_iterations)
+
+    def __repr__(self) -> str:
+        return f"Solver({self.robot.name!r}, trials={self.trials}, method={self.solver_cfg.method!r})"
+
+    def problem(self, problem: GraspProblem | str | Path) -> GraspProblem:
+        """A problem, a problem file or a shipped task's name -> the problem, checked to be this robot's."""
+        from graspnet_torch.errors import ProblemError
+
+        p = api.as_problem(problem)
+        if p.robot != self.robot.name:
+            raise ProblemError(f"{p.source}: the problem is for robot '{p.robot}', this solver's is "
+                               f"'{self.robot.name}'")
+        return p
+
+    def solve(self, problem: GraspProblem | str | Path, *, start: Start | None = None, seed: int | None = None
+              ) -> GraspResult:
+        """One problem: the search (``trials`` trials), or first a warm start from ``start`` (see
+        the module's docstring)."""
+        problem = self.problem(problem)
+        seed = self.seed if seed is None else int(seed)
+        warm = None
+        if start is not None:
+            warm = self._warm(problem, self._posture(start), seed)
+            if warm.success:
+                return warm
+        cold = api.solve(problem, trials=self.trials, seed=seed, solver=self.solver_cfg, srv=self.srv,
+                         reward=self.reward, noise=self.noise, robot=self.robot, finger_ik=self.finger_ik,
+                         device=self.device)
+        if warm is None:
+            return cold
+        cold.trials = warm.trials + cold.trials  # the warm trial, then the search's
+        return cold
+
+    def solve_many(self, problems: Sequence[GraspProblem | str | Path], *, seed: int | None = None
+                   ) -> list[GraspResult]:
+        """P problems of this robot as one batch (:func:`gt.solve_many`)."""
+        return api.solve_many([self.problem(p) for p in problems], trials=self.trials,
+                              seed=self.seed if seed is None else int(seed), solver=self.solver_cfg, srv=self.srv,
+                              reward=self.reward, noise=self.noise, device=self.device)
+
+    def track(self, problems: Sequence[GraspProblem | str | Path], *, start: Start | None = None
+              ) -> list[GraspResult]:
+        """A sequence of frames in order, each warm-started from the previous frame's result (the
+        first from ``start``, else searched), falling back to a full search where the warm start
+        does not land. Frame k searches with seed ``seed + k``."""
+        results: list[GraspResult] = []
+        previous = start
+        for k, problem in enumerate(problems):
+            result = self.solve(problem, start=previous, seed=self.seed + k)
+            results.append(result)
+            previous = result if result.success or previous is None else previous
+        return results
+
+    # -- the warm start --------------------------------------------------------------------------
+
+    def _posture(self, start: Start) -> Posture:
+        if isinstance(start, Posture):
+            return start
+        return trial_posture(self.robot, start.best if isinstance(start, GraspResult) else start)
+
+    def _warm(self, problem: GraspProblem, posture: Posture, seed: int) -> GraspResult:
+        """Levenberg-Marquardt from the posture (``solver.polish.iterations`` steps, to
+        ``solver.polish.tolerance_mm``): a result of one trial."""
+        from graspnet_torch.solver.dls import run_dls
+
+        cfg = self.solver_cfg
+        env = build_environment(self.robot, problem, self.finger_ik, cfg, api.DTYPES[cfg.dtype], self.device,
+                                self.reward)
+        local = replace(cfg, method="dls", max_iterations=cfg.polish.iterations)
+        outcome = run_dls(env, 1, seed, local, self.reward, None, start=env.whole_of(posture))
+        return api.result_of(self.robot, problem, env, outcome, 1, seed, cfg, self.srv, self.reward, self.noise)

@@ -1,0 +1,78 @@
+"""gt.Solver: built once, the same answers as gt.solve; warm starts and tracking stay near the
+previous posture and land; a frame the warm start cannot land gets the full search."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+import torch
+
+import graspnet_torch as gt
+from graspnet_torch.robot.postures import trial_posture
+
+
+@pytest.fixture(scope="module")
+def hand_solver():
+    return gt.Solver("hand", trials=8)
+
+
+def _frames(robot: gt.Robot, n: int, seed: int = 0) -> list[gt.GraspProblem]:
+    """A smooth walk of a random posture (about 2 mm / 2 degrees per frame), four contact fingers."""
+    g = torch.Generator().manual_seed(seed)
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    plo, phi = torch.as_tensor(robot.palm_bounds.lower), torch.as_tensor(robot.palm_bounds.upper)
+    pose = (plo + phi) / 2
+    q = lo + (hi - lo) * (0.3 + 0.4 * torch.rand(lo.shape, generator=g, dtype=torch.float64))
+    out = []
+    for _ in range(n):
+        step = torch.randn(6, generator=g, dtype=torch.float64) * torch.tensor([0.002] * 3 + [0.02] * 3)
+        pose = torch.clamp(pose + step, plo, phi)
+        q = torch.clamp(q + 0.02 * torch.randn(q.shape, generator=g, dtype=torch.float64), lo, hi)
+        tips = robot.fingertips_world(pose, q)
+        out.append(gt.GraspProblem.from_mapping({"robot": robot.name, "contacts": [
+            {"finger": f, "position": tips[i].tolist()} for i, f in enumerate(robot.finger_names[:4])]}))
+    return out
+
+
+def test_a_built_solver_gives_what_gt_solve_gives(hand_solver):
+    problem = gt.random_reachable_problem(hand_solver.robot, 7)
+    ours = hand_solver.solve(problem, seed=3)
+    theirs = gt.solve(problem, trials=8, seed=3)
+    assert [t.to_dict() | {"wall_time_s": 0} for t in ours.trials] == \
+        [t.to_dict() | {"wall_time_s": 0} for t in theirs.trials]
+
+
+def test_tracking_lands_every_frame_warm_and_without_jumps(hand_solver):
+    robot = hand_solver.robot
+    frames = _frames(robot, 25)
+    results = hand_solver.track(frames)
+    assert all(r.success and r.best.total_error_mm < 1 for r in results)
+    warm = sum(len(r.trials) == 1 for r in results[1:])
+    assert warm >= 22  # the warm start lands (one trial) on nearly every frame after the first
+    for a, b in itertools.pairwise(results):
+        qa, qb = (trial_posture(robot, r.best).fingers for r in (a, b))
+        assert float((qa - qb).abs().max()) < math.radians(20)
+    for problem, r in zip(frames, results, strict=True):  # independently: forward kinematics of what it reports
+        posture = trial_posture(robot, r.best)
+        tips = robot.fingertips_world(posture.palm_pose, posture.fingers)
+        for c in problem.contacts:
+            err = float(torch.linalg.vector_norm(tips[robot.finger_index(c.finger)] - torch.as_tensor(c.position)))
+            assert err * 1000 == pytest.approx(r.best.fingertip_error_mm[c.finger], abs=1e-6)
+
+
+def test_a_warm_start_far_from_the_frame_falls_back_to_the_search(hand_solver):
+    robot = hand_solver.robot
+    far = hand_solver.solve(gt.random_reachable_problem(robot, 1, 4))
+    problem = gt.random_reachable_problem(robot, 2, 5)
+    result = hand_solver.solve(problem, start=far)
+    assert result.success
+    assert len(result.trials) in (1, 1 + hand_solver.trials)  # landed warm, or the warm trial then the search
+    near = hand_solver.solve(problem, start=result)  # from its own answer: lands at once, one trial
+    assert near.success and len(near.trials) == 1 and near.best.total_error_mm <= result.best.total_error_mm + 1e-6
+
+
+def test_a_problem_of_another_robot_is_refused(hand_solver):
+    with pytest.raises(gt.ProblemError, match="this solver's is 'hand'"):
+        hand_solver.solve("cube")
