@@ -10,7 +10,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.fcnn.checkpoint import finger_ik_of
+from graspnet_torch.fcnn.checkpoint import finger_ik_of, robot_checkpoint
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
@@ -45,7 +45,7 @@ def _shipped_cfg(robot_name: str) -> RobotCfg:
 
 def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
     """A robot and its trained FCNN (None for a robot without fingers, the MANUS): a shipped
-    robot by name (cached per process), or a robot config; a config that differs from the shipped
+    robot by name, or a robot config (each built once per process); a config that differs from the shipped
     one of its name only in its search space, home posture or description reuses the shipped
     kinematics and FCNN."""
     if isinstance(robot, str):
@@ -54,8 +54,25 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
         shipped = _shipped_cfg(robot.name)
         if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
             return _shipped_robot_and_ik(robot.name)
-    built = Robot(robot)
-    return built, finger_ik_of(built)
+    key = (repr(robot), _stamp(robot.urdf), _stamp(robot_checkpoint(robot)))  # once per config and file versions
+    if key not in _BUILT:
+        built = Robot(robot)
+        _BUILT[key] = (built, finger_ik_of(built))
+        while len(_BUILT) > 8:
+            _BUILT.pop(next(iter(_BUILT)))
+    return _BUILT[key]
+
+
+_BUILT: dict[tuple, tuple[Robot, FingerIK | None]] = {}
+
+
+def _stamp(path: Path | None) -> tuple[int, int] | None:
+    """A file's size and modification time (None: no such file)."""
+    try:
+        stat = Path(path).stat() if path is not None else None
+    except OSError:
+        return None
+    return None if stat is None else (stat.st_size, stat.st_mtime_ns)
 
 
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
