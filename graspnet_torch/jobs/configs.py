@@ -51,6 +51,7 @@ class SolveGraspJobCfg:
     pictures: bool = True
     allow_outside_paths: bool = False
     batch: int = setting(1000, lo=1, hi=1_000_000)  # problem=DIR / .jsonl: problems per vectorised search
+    sequence: bool = False  # problem=DIR / .jsonl: frames in order, each warm-started from the last (gt.Solver.track)
 
 
 @dataclass(frozen=True)

@@ -207,6 +207,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         ``max_iterations`` applied).
     """
     job, groups, robot = job_settings(cfg)
+    if job.sequence:
+        raise ConfigError("sequence=true solves the frames of a sequence: give problem=FOLDER or problem=FRAMES.jsonl")
     device = check_device(job.device)
     problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
     job, solver = with_robot_defaults(job, groups, problem.robot_cfg)

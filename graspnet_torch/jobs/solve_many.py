@@ -6,8 +6,13 @@ skipped), is read and checked before any work; then :func:`graspnet_torch.solve_
 ``batch`` problems at a time (P x T trials as one vectorised search), with a progress bar, and
 writes one result JSON per problem into the folder ``out`` (default ``<run dir>/results``):
 ``<file stem>.json`` for a folder, ``<name>.json`` (the problem's ``name``, else ``line<k>``)
-for a JSON-lines file, each written atomically, plus ``summary.csv`` (one row per problem).
+for a JSON-lines file, each written atomically, plus ``summary.csv`` (one row per problem: its
+success, error, collisions, iterations, trials reported and wall time).
 No pictures or TensorBoard curves: those are for one problem.
+
+With ``sequence=true`` the problems are the frames of a sequence (a hand following moving
+contacts): solved in order by :meth:`graspnet_torch.Solver.iter_track`, each frame warm-started
+from the previous frame's result and searched in full only where that does not land.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from graspnet_torch.settings import clip
 from graspnet_torch.solver.api import solve_many
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.result import GraspResult
+from graspnet_torch.solver.session import Solver
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["is_many", "load_problems", "prepare_job", "prepare_many", "run_job", "solve_grasps"]
@@ -131,6 +137,12 @@ def prepare_many(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     return job, named, device, out, solver
 
 
+def problems_robot(named: Sequence[tuple[str, GraspProblem]]) -> RobotCfg | str:
+    """The robot of a list of problems: the first's config (a robot by path), else its name."""
+    first = named[0][1]
+    return first.robot_cfg or first.robot
+
+
 def _check_out_folder(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder (many problems write one result "
@@ -163,8 +175,15 @@ def solve_grasps(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path)
     out.mkdir(parents=True, exist_ok=True)
     results: list[GraspResult] = []
     t0 = time.perf_counter()
-    with tqdm(total=len(named), unit="problem", desc="solving", disable=None) as bar:
-        for start in range(0, len(named), job.batch):
+    with tqdm(total=len(named), unit="frame" if job.sequence else "problem", desc="solving", disable=None) as bar:
+        if job.sequence:  # frames in order, each from the last
+            tracker = Solver(problems_robot(named), trials=job.trials, seed=job.seed, solver=solver, srv=job.srv,
+                             reward=job.reward, noise=job.noise, device=device)
+            for (name, _), result in zip(named, tracker.iter_track(p for _, p in named), strict=True):
+                result.save(out / f"{name}.json")
+                results.append(result)
+                bar.update(1)
+        for start in range(0, len(named) if not job.sequence else 0, job.batch):
             chunk = named[start:start + job.batch]
             batch = solve_many([p for _, p in chunk], trials=job.trials, seed=job.seed + start, solver=solver,
                                srv=job.srv, reward=job.reward, noise=job.noise, device=device)
@@ -173,15 +192,17 @@ def solve_grasps(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path)
             results.extend(batch)
             bar.update(len(chunk))
     wall = time.perf_counter() - t0
-    rows = ["name,problem,success,error_mm,collisions,iterations,failure"]
+    rows = ["name,problem,success,error_mm,collisions,iterations,trials,wall_time_s,failure"]
     rows += [f"{name},{_csv(r.problem)},{int(r.success)},{r.best.error_mm:.6g},{r.best.collisions},{r.best.iterations},"
-             f"{_csv(r.failure)}" for (name, _), r in zip(named, results, strict=True)]
+             f"{len(r.trials)},{r.best.wall_time_s:.6g},{_csv(r.failure)}" for (name, _), r in zip(named, results,
+                                                                                                  strict=True)]
     atomic_write_text(out / "summary.csv", "\n".join(rows) + "\n")
     errors = np.array([r.best.error_mm for r in results])
     solved = sum(r.success for r in results)
-    print(f"{len(results)} problems (solver={solver.method}, {job.trials} trials each, batches of "
-          f"{min(job.batch, len(results))}): {solved} succeeded (within {solver.tolerance_mm:g} mm, collision-free); "
-          f"best error < 1 mm: {int((errors < 1).sum())}; "
+    how = (f"frames in order, {sum(len(r.trials) == 1 for r in results)} landed warm" if job.sequence else
+           f"{job.trials} trials each, batches of {min(job.batch, len(results))}")
+    print(f"{len(results)} problems (solver={solver.method}, {how}): {solved} succeeded "
+          f"(within {solver.tolerance_mm:g} mm, collision-free); best error < 1 mm: {int((errors < 1).sum())}; "
           f"median {np.median(errors):.3g} mm; {wall:.1f} s ({len(results) / wall:.1f} problems/s)")
     print(f"results: {out}/ (one JSON per problem, summary.csv)")
     return results

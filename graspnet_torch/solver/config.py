@@ -69,12 +69,15 @@ class PolishCfg:
             configuration polished inside the loop; where the polish lands, the trial has
             succeeded, else it learns on (``None``: the polish only after the loop). 0.9 with a = 1:
             E < 100 mm, measured on random reachable hand problems (README, "Which solver?").
+        min_gain: a polished (or ``dls``) trial whose kept step lowers its error by less than this
+            fraction has settled in a local minimum and stops (0: it runs its ``iterations``).
     """
 
     mode: str = setting("whole", choices=("fingers", "whole"))
     iterations: int = setting(30, lo=0, hi=10_000)
     tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
     from_r: float | None = setting(0.9, lo=-1.0, hi=1.0)
+    min_gain: float = setting(1e-3, lo=0.0, hi=1.0)
 
 
 @dataclass(frozen=True)

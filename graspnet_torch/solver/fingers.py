@@ -57,6 +57,7 @@ class FingerEnvironment(Environment):
         fingers, polish = solver.fingers, solver.polish
         self.refine, self.candidates, self.final_refine = fingers.refine, fingers.candidates, fingers.final_refine
         self.polish_iterations, self.polish_tol = polish.iterations, polish.tolerance_mm / 1000
+        self.min_gain = polish.min_gain
         self.polishes = polish.mode == "whole" and polish.iterations > 0
         self.tolerance_mm = solver.tolerance_mm
         kw = {"dtype": dtype, "device": device}
@@ -291,7 +292,8 @@ class FingerEnvironment(Environment):
 
         lo, hi = self.whole_bounds(trials)
         return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
-                                   trace=trace, count=count if self.proxy is not None else None)
+                                   trace=trace, count=count if self.proxy is not None else None,
+                                   min_gain=self.min_gain)
 
     def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
         """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""

@@ -10,8 +10,9 @@ For B rows at once, each with its own goal, bounds and damping, minimise |g - f(
 Joints at a bound that the step pushes outward leave the Jacobian and the step is solved again
 (an active set). A step is kept only where it lowers |e| and, with a collision count, does not
 raise it: never worse. Kept: lambda / 3, else lambda * 4, within [lam_min, lam_max]. A row stops
-once |e| < ``tol`` or once ``done`` says so (e.g. enough rows of its problem have converged), and
-then costs nothing more. A row whose step was refused at lambda = lam_max would take the very same
+once |e| < ``tol``, once ``done`` says so (e.g. enough rows of its problem have converged), or
+once a kept step gains less than ``min_gain`` of |e| (settled in a local minimum), and then costs
+nothing more. A row whose step was refused at lambda = lam_max would take the very same
 step again (same x, Jacobian and damping) and be refused again: it is not evaluated any more (its
 steps still count, as if it ran them), and once every running row is such, the call ends.
 
@@ -66,7 +67,8 @@ def numerical_jacobian(f: Callable[[Tensor], Tensor], x: Tensor, h: float = 1e-7
 
 def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
                         lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
-                        tol: float = 0.0, count: Callable[[Tensor, Tensor], Tensor] | None = None,
+                        tol: float = 0.0, min_gain: float = 0.0,
+                        count: Callable[[Tensor, Tensor], Tensor] | None = None,
                         done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
                         ) -> LMResult:
     """Levenberg-Marquardt on B rows (float64, the device of ``x``).
@@ -82,6 +84,8 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         lam, lam_min, lam_max: the damping's start and range.
         edge: a value within this of a bound counts as at it.
         tol: a row stops once |e| < tol.
+        min_gain: a row whose kept step lowered |e| by less than this fraction of it has settled
+            (a local minimum above ``tol``) and stops: its last steps gain nothing worth their cost.
         count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
         done: ``done(converged (B,) bool)`` -> (B,) bool, the rows that stop (at least the
             converged ones; e.g. every row of a problem with enough converged rows).
@@ -99,10 +103,12 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     counts = count(x, all_rows) if count is not None else None
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
     stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
+    settled = torch.zeros(B, dtype=torch.bool, device=x.device)
     for it in range(iterations):
         stopped = err < tol
         if done is not None:
             stopped = stopped | done(stopped)
+        stopped = stopped | settled
         if bool(stopped.all()):
             break
         running = ~stopped
@@ -132,6 +138,8 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         x[rows] = torch.where(better.unsqueeze(1), new, xr)
         value[rows] = torch.where(better.unsqueeze(1), new_value, vr)
         jac[rows] = torch.where(better.view(-1, 1, 1), new_jac, Jr)
+        if min_gain > 0:
+            settled[rows] = better & (new_err > err[rows] * (1 - min_gain))
         err[rows] = torch.where(better, new_err, err[rows])
         stalled[rows] = ~better & (damping >= lam_max)  # the same step again next time: rejected again
         lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)

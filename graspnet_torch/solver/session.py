@@ -16,7 +16,7 @@ trials), with the warm trial kept among its trials.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -109,18 +109,22 @@ class Solver:
                               seed=self.seed if seed is None else int(seed), solver=self.solver_cfg, srv=self.srv,
                               reward=self.reward, noise=self.noise, device=self.device)
 
-    def track(self, problems: Sequence[GraspProblem | str | Path], *, start: Start | None = None
+    def track(self, problems: Iterable[GraspProblem | str | Path], *, start: Start | None = None
               ) -> list[GraspResult]:
         """A sequence of frames in order, each warm-started from the previous frame's result (the
         first from ``start``, else searched), falling back to a full search where the warm start
         does not land. Frame k searches with seed ``seed + k``."""
-        results: list[GraspResult] = []
+        return list(self.iter_track(problems, start=start))
+
+    def iter_track(self, problems: Iterable[GraspProblem | str | Path], *, start: Start | None = None
+                   ) -> Iterator[GraspResult]:
+        """:meth:`track`, one frame's result at a time (frames may arrive while it runs). A
+        frame that fails leaves the start of the next one where the last success was."""
         previous = start
         for k, problem in enumerate(problems):
             result = self.solve(problem, start=previous, seed=self.seed + k)
-            results.append(result)
             previous = result if result.success or previous is None else previous
-        return results
+            yield result
 
     # -- the warm start --------------------------------------------------------------------------
 

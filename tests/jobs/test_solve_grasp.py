@@ -273,6 +273,36 @@ def test_a_bad_line_of_a_jsonl_file_is_refused_before_any_work(hand, tmp_path):
     assert not out.exists() and not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
+def test_a_sequence_of_frames_is_tracked_in_order_from_a_jsonl_file(hand, tmp_path):
+    """problem=FRAMES.jsonl sequence=true: the lines in order, one result each; frames after the
+    first land warm from the previous frame (one trial) and stay near it; summary.csv gives each
+    frame's wall time."""
+    import graspnet_torch as gt
+
+    robot = gt.load_robot("hand")
+    frames = gt.random_sequence(robot, 3, 6, n_fingers=4)
+    path = tmp_path / "frames.jsonl"
+    path.write_text("".join(json.dumps(f.to_mapping()) + "\n" for f in frames))
+    out = tmp_path / "results"
+    res = _run(f"problem={path}", "sequence=true", "trials=4", f"out={out}", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 0, res.stderr
+    names = [f"line{k}" for k in range(1, 7)]
+    assert sorted(p.stem for p in out.glob("*.json")) == sorted(names)
+    data = [json.loads((out / f"{n}.json").read_text()) for n in names]
+    assert all(d["total_error_mm"] < 1.0 for d in data)
+    assert all(len(d["trials"]) == 1 for d in data[1:])  # warm: the previous frame's posture landed
+    rows = (out / "summary.csv").read_text().splitlines()
+    assert rows[0].split(",")[7] == "wall_time_s" and len(rows) == 7
+    assert "landed warm" in res.stdout
+
+
+def test_sequence_needs_frames(hand, tmp_path):
+    res = _run("task=glass3", "sequence=true", f"hydra.run.dir={tmp_path / 'run'}")
+    assert res.returncode == 2 and "sequence=true solves the frames of a sequence" in res.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_many_problems_refuse_a_file_as_out_and_a_zero_batch(hand, tmp_path):
     """problem=DIR writes into a folder: out naming a file, or batch=0, is refused before any work."""
     folder = tmp_path / "problems"
