@@ -36,7 +36,14 @@ from graspnet_torch.solver import (
     solve_many,
 )
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
-from graspnet_torch.tasks import Contact, GraspProblem, Shape, available_tasks, random_reachable_problem
+from graspnet_torch.tasks import (
+    Contact,
+    GraspProblem,
+    Shape,
+    available_tasks,
+    random_reachable_problem,
+    random_sequence,
+)
 
 __version__ = "0.1.0"
 
@@ -80,6 +87,7 @@ __all__ = [
     "load_robot",
     "load_robot_cfg",
     "random_reachable_problem",
+    "random_sequence",
     "solve",
     "solve_many",
 ]

@@ -8,6 +8,7 @@ known to exist.
 :func:`random_reachable_problem`  either of the two, by ``robot.kind`` (``gt.random_reachable_problem``)
 :func:`random_gripper_problems`   a two-point gripper (MANUS): its gripper points as object points
 :func:`random_obstacle_problems`  a hand on an arm among random obstacles that clear the posture
+:func:`random_sequence`         frames of a smooth random walk of a posture (tracking, retargeting)
 ==============================  ==================================================================
 
 Each is deterministic in its seed.
@@ -15,7 +16,9 @@ Each is deterministic in its seed.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -23,8 +26,8 @@ from torch import Tensor
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CONTACT_GENERATORS", "random_arm_problem", "random_gripper_problems", "random_hand_problem",
-           "random_obstacle_problems", "random_reachable_problem"]
+__all__ = ["CONTACT_GENERATORS", "SEQUENCE_SPACES", "random_arm_problem", "random_gripper_problems",
+           "random_hand_problem", "random_obstacle_problems", "random_reachable_problem", "random_sequence"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -32,15 +35,21 @@ def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
     return lo + (hi - lo) * torch.rand(lo.shape, generator=g, dtype=torch.float64)
 
 
-def _fingers_problem(robot: Robot, tips: Tensor, g: torch.Generator, seed: int,
-                     n_fingers: int | Sequence[int] | None) -> GraspProblem:
-    """``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2 to all)
-    chosen at random touch their fingertips ``tips`` (F, 3)."""
+def _choose_fingers(robot: Robot, g: torch.Generator, n_fingers: int | Sequence[int] | None) -> list[int]:
+    """Indices of ``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2
+    to all) chosen at random, in finger order."""
     lo_k, hi_k = (2, robot.n_fingers) if n_fingers is None else \
         (n_fingers, n_fingers) if isinstance(n_fingers, int) else tuple(n_fingers)
     k = int(torch.randint(lo_k, min(hi_k, robot.n_fingers) + 1, (1,), generator=g))
-    chosen = sorted(torch.randperm(robot.n_fingers, generator=g)[:k].tolist())
-    contacts = [{"finger": robot.finger_names[i], "position": tips[i].tolist()} for i in chosen]
+    return sorted(torch.randperm(robot.n_fingers, generator=g)[:k].tolist())
+
+
+def _fingers_problem(robot: Robot, tips: Tensor, g: torch.Generator, seed: int,
+                     n_fingers: int | Sequence[int] | None) -> GraspProblem:
+    """``n_fingers`` fingers (see :func:`_choose_fingers`) chosen at random touch their fingertips
+    ``tips`` (F, 3)."""
+    contacts = [{"finger": robot.finger_names[i], "position": tips[i].tolist()}
+                for i in _choose_fingers(robot, g, n_fingers)]
     return GraspProblem.from_mapping({"robot": robot.name, "contacts": contacts}, robot_cfg=robot.cfg,
                                      source=f"random problem {seed} of {robot.name}")
 
@@ -104,6 +113,129 @@ def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[
     if generator is None:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
     return generator(robot, seed, n_fingers)
+
+
+@dataclass(frozen=True)
+class WalkSpace:
+    """The box a posture walks in for :func:`random_sequence`: a posture is a flat vector ``x`` (d,).
+
+    Attributes:
+        lower, upper: (d,) float64 bounds (equal for a coordinate that never moves: finger padding).
+        place: ``x`` (d,) -> the palm's rotation in the world (3, 3) and every fingertip (F, 3).
+        reference: ``x`` (d,) -> the posture as a problem file's ``reference`` mapping (degrees).
+    """
+
+    lower: Tensor
+    upper: Tensor
+    place: Callable[[Tensor], tuple[Tensor, Tensor]]
+    reference: Callable[[Tensor], dict]
+
+
+def _finger_box(robot: Robot) -> tuple[Tensor, Tensor]:
+    lo, hi = (torch.as_tensor(a, dtype=torch.float64).reshape(-1) for a in robot.finger_limits)
+    return lo, hi
+
+
+def _hand_space(robot: Robot) -> WalkSpace:
+    """A free hand: ``x`` = palm pose (6: m, rad) within ``palm_bounds`` (without them: at the
+    origin, any orientation), then the finger joints (F * n) within their limits."""
+    from graspnet_torch.robot.transforms import pose_to_degrees, pose_to_rt
+
+    shape = (robot.n_fingers, robot.joints_per_finger)
+    if robot.palm_bounds is not None:
+        plo, phi = (torch.as_tensor(a, dtype=torch.float64) for a in (robot.palm_bounds.lower, robot.palm_bounds.upper))
+    else:
+        phi = torch.tensor([0, 0, 0, math.pi, math.pi / 2, math.pi], dtype=torch.float64)
+        plo = -phi
+    flo, fhi = _finger_box(robot)
+
+    def place(x: Tensor) -> tuple[Tensor, Tensor]:
+        return pose_to_rt(x[:6])[0], robot.fingertips_world(x[:6], x[6:].reshape(shape))
+
+    def reference(x: Tensor) -> dict:
+        return {"palm_pose": pose_to_degrees(x[:6]).tolist(),
+                "joints": robot.finger_joints_to_file(x[6:].reshape(shape))}
+
+    return WalkSpace(torch.cat([plo, flo]), torch.cat([phi, fhi]), place, reference)
+
+
+def _arm_space(robot: Robot) -> WalkSpace:
+    """A hand on an arm: ``x`` = the arm's joints (m) within their limits, then the finger joints."""
+    m, shape = len(robot.body_joint_names), (robot.n_fingers, robot.joints_per_finger)
+    blo, bhi = (torch.as_tensor(a, dtype=torch.float64) for a in robot.body_limits)
+    flo, fhi = _finger_box(robot)
+
+    def place(x: Tensor) -> tuple[Tensor, Tensor]:
+        return robot.palm_frame(x[:m])[0], robot.fingertips_world_from_body(x[:m], x[m:].reshape(shape))
+
+    def reference(x: Tensor) -> dict:
+        return {"arm_joints": robot.body_joints_to_file(x[:m]),
+                "joints": robot.finger_joints_to_file(x[m:].reshape(shape))}
+
+    return WalkSpace(torch.cat([blo, flo]), torch.cat([bhi, fhi]), place, reference)
+
+
+SEQUENCE_SPACES: dict[str, Callable[[Robot], WalkSpace]] = {"hand": _hand_space, "arm_hand": _arm_space}
+"""``robot.kind`` -> the space its posture walks in for :func:`random_sequence`."""
+
+
+def _turn_deg(R0: Tensor, R1: Tensor) -> float:
+    """The angle (degrees) of the rotation from ``R0`` (3, 3) to ``R1`` (3, 3)."""
+    c = (float(torch.trace(R0.T @ R1)) - 1) / 2
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def random_sequence(robot: Robot, seed: int, frames: int, n_fingers: int | Sequence[int] | None = None,
+                    step_m: float = 0.01, step_deg: float = 5.0) -> list[GraspProblem]:
+    """``frames`` problems along a smooth random walk of a posture (tracking, retargeting).
+
+    The posture starts uniform in the robot's search space (:data:`SEQUENCE_SPACES`, by
+    ``robot.kind``: a free hand's palm pose within ``palm_bounds`` and its finger joints within their
+    limits; a hand on an arm: its arm and finger joints) and moves with some persistence of
+    direction, reflected at the bounds. Every step is halved until each contact fingertip moves at
+    most ``step_m`` (m) and the palm turns at most ``step_deg`` (degrees). The same ``n_fingers``
+    fingers (see :func:`random_reachable_problem`) touch their fingertips in every frame; each
+    problem carries the posture that made it as its ``reference``. Deterministic in ``seed``.
+    """
+    make_space = SEQUENCE_SPACES.get(robot.kind)
+    if make_space is None:
+        raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
+    if frames < 1 or step_m <= 0 or step_deg <= 0:
+        raise ValueError(f"random_sequence needs frames >= 1 and positive steps, got frames={frames}, "
+                         f"step_m={step_m}, step_deg={step_deg}")
+    space = make_space(robot)
+    span = space.upper - space.lower
+    g = torch.Generator().manual_seed(seed)
+    u = torch.rand(span.shape, generator=g, dtype=torch.float64)  # the posture, 0..1 within the box
+    chosen = _choose_fingers(robot, g, n_fingers)
+    names = [robot.finger_names[i] for i in chosen]
+    velocity = torch.zeros_like(u)
+    R, tips = space.place(space.lower + span * u)
+    problems = []
+    for t in range(frames):
+        if t:
+            noise = torch.randn(u.shape, generator=g, dtype=torch.float64) * (span > 0)
+            velocity = 0.8 * velocity + 0.6 * noise / noise.abs().max().clamp_min(1e-12)
+            velocity = velocity / velocity.abs().max().clamp_min(1e-12)
+            step = 0.1
+            for _ in range(60):  # halved until both limits hold (2^-60: no move at all)
+                moved = u + step * velocity
+                folded = torch.remainder(moved, 2.0)
+                new_u = torch.where(folded > 1, 2 - folded, folded)  # reflected at 0 and 1
+                R1, tips1 = space.place(space.lower + span * new_u)
+                far = float(torch.linalg.vector_norm(tips1[chosen] - tips[chosen], dim=-1).max())
+                if far <= step_m and _turn_deg(R, R1) <= step_deg:
+                    break
+                step /= 2
+            else:
+                new_u, R1, tips1 = u, R, tips
+            velocity = torch.where(torch.remainder(torch.floor(moved), 2) == 1, -velocity, velocity)
+            u, R, tips = new_u, R1, tips1
+        contacts = [{"finger": n, "position": tips[i].tolist()} for n, i in zip(names, chosen, strict=True)]
+        data = {"robot": robot.name, "contacts": contacts, "reference": space.reference(space.lower + span * u)}
+        problems.append(GraspProblem.from_mapping(data, robot_cfg=robot.cfg,
+                                                  source=f"random sequence {seed} of {robot.name}, frame {t}"))
+    return problems
 
 
 def random_gripper_problems(robot: Robot, n: int, seed: int = 11) -> list[GraspProblem]:
