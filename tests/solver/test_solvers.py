@@ -57,6 +57,29 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     assert never.steps.tolist() == [0, 0]
 
 
+def test_levenberg_marquardt_stops_a_row_settled_in_a_local_minimum():
+    """Rosenbrock's residuals (10 (y - x^2), 1 - x) plus a third the model cannot move: toward a
+    third goal of 1 the error cannot fall below 1 and the row creeps there; with ``min_gain`` it
+    stops once a step gains less than that fraction, within that fraction of where the whole
+    budget ends. Toward 0 the row converges to (1, 1), not cut short."""
+    def f(p, rows):
+        x, y = p[:, 0], p[:, 1]
+        value = torch.stack([10 * (y - x * x), 1 - x, torch.zeros_like(x)], -1)
+        J = torch.zeros(p.shape[0], 3, 2, dtype=p.dtype)
+        J[:, 0, 0], J[:, 0, 1], J[:, 1, 0] = -20 * x, 10.0, -1.0
+        return value, J
+
+    goal = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]], dtype=torch.float64)
+    lo, hi = torch.full((2,), -5.0, dtype=torch.float64), torch.full((2,), 5.0, dtype=torch.float64)
+    x0 = torch.tensor([[-1.2, 1.0], [-1.2, 1.0]], dtype=torch.float64)
+    full = levenberg_marquardt(f, goal, x0, lo, hi, 200, tol=1e-12, lam_max=1e4)
+    cut = levenberg_marquardt(f, goal, x0, lo, hi, 200, tol=1e-12, lam_max=1e4, min_gain=1e-3)
+    assert int(cut.steps[0]) < 40 and int(full.steps[0]) == 200
+    assert float(cut.err[0]) == pytest.approx(float(full.err[0]), rel=2e-3) and float(full.err[0]) >= 1.0
+    assert float(cut.err[1]) < 1e-9 and cut.x[1].tolist() == pytest.approx([1.0, 1.0])
+    assert int(cut.steps[1]) == int(full.steps[1])
+
+
 def test_levenberg_marquardt_stops_evaluating_a_row_refused_at_the_largest_damping():
     """A row whose goal lies outside the box ends at the bound; once its step is refused at
     lam_max (the same step would come again) the model no longer sees it, yet its steps and the
