@@ -20,6 +20,7 @@ narrow phase (FCL's primitive-primitive tests; penetration depth by GJK/EPA).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -222,16 +223,29 @@ class CollisionScene:
 
     def place(self, posture: Posture) -> None:
         """Move every link's geometry to the posture (forward kinematics in float64)."""
-        frames = self.robot.link_frames(posture)
+        self._place(self.robot.link_frames(posture))
+
+    def _place(self, frames: dict[str, np.ndarray]) -> None:
         for obj, shape in zip(self.link_objects, self.shapes, strict=True):
             obj.setTransform(_transform(frames[shape.link] @ shape.origin))
         self.links.update()
 
     def check(self, posture: Posture) -> CollisionReport:
         """The collision count of a posture and what makes it up."""
+        return self.check_many([posture])[0]
+
+    def check_many(self, postures: Sequence[Posture]) -> list[CollisionReport]:
+        """:meth:`check` of several postures (their forward kinematics in one pass)."""
+        out = []
+        for frames in self.robot.link_frames_many(postures):
+            self._place(frames)
+            out.append(self._check_placed())
+        return out
+
+    def _check_placed(self) -> CollisionReport:
+        """The collision count of the posture :meth:`_place` put the links at."""
         import fcl
 
-        self.place(posture)
         pairs: set[tuple[str, int]] = set()
         if self.obstacles:
             data = fcl.CollisionData(request=fcl.CollisionRequest(num_max_contacts=100000, enable_contact=True))

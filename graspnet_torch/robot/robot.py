@@ -464,22 +464,25 @@ class Robot:
         return out
 
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
-        """(4, 4) float64 world pose of every link, from pytorch-kinematics (for pictures and
-        collision scenes; not a hot path)."""
+        """(4, 4) float64 world pose of every link (pytorch-kinematics; pictures, collision scenes)."""
+        return self.link_frames_many([posture])[0]
+
+    def link_frames_many(self, postures: Sequence[Posture]) -> list[dict[str, np.ndarray]]:
+        """:meth:`link_frames` of several postures, in one pass of forward kinematics."""
         chain = self.urdf.chain64
-        values = self.joint_values(posture)
         names = chain.get_joint_parameter_names()
-        th = torch.tensor([[values.get(n, 0.0) for n in names]], dtype=torch.float64)
-        frames = chain.forward_kinematics(th)
+        rows = [self.joint_values(p) for p in postures]
+        th = torch.tensor([[values.get(n, 0.0) for n in names] for values in rows], dtype=torch.float64)
+        frames = {name: T.get_matrix().numpy() for name, T in chain.forward_kinematics(th).items()}
         if self.body is None:
             from graspnet_torch.robot.transforms import pose_to_matrix
 
-            world = pose_to_matrix(posture.palm_pose.to(torch.float64)).numpy()
+            poses = torch.stack([p.palm_pose.to(torch.float64) for p in postures])
             root_to_palm = self.urdf.fixed_transform(self.urdf.root_link, self.cfg.palm_link)
-            world = world @ np.linalg.inv(root_to_palm)
+            world = pose_to_matrix(poses).numpy() @ np.linalg.inv(root_to_palm)
         else:
-            world = np.eye(4)
-        return {name: world @ T.get_matrix()[0].numpy() for name, T in frames.items()}
+            world = np.broadcast_to(np.eye(4), (len(postures), 4, 4))
+        return [{name: world[k] @ T[k] for name, T in frames.items()} for k in range(len(postures))]
 
     def __repr__(self) -> str:
         return (f"Robot('{self.name}': {len(self.urdf.links)} links, {len(self.urdf.movable_joint_names)} "

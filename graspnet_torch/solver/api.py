@@ -250,7 +250,7 @@ def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Repor
         from graspnet_torch.collision.cache import scene_for
 
         scene = scene_for(robot, problem)
-        reports = [scene.check(trial_posture(robot, f)) for f in report.fields]
+        reports = scene.check_many([trial_posture(robot, f) for f in report.fields])
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
     evaluation = replace(report.evaluation, collisions=collisions)
     r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())

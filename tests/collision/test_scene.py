@@ -104,3 +104,22 @@ def test_every_primitive_kind_collides_as_an_obstacle(hand, kind):
     data = {**problem.to_mapping(), "obstacles": [{"shape": kind, "size": size, "pose": [*palm, 0, 0, 0]}]}
     report = CollisionScene(hand, gt.GraspProblem.from_mapping(data, source=kind)).check(posture)
     assert ("palm", 0) in report.obstacle_pairs
+
+
+def test_checking_many_postures_at_once_agrees_with_one_at_a_time():
+    """CollisionScene.check_many (one pass of forward kinematics) gives each posture the report
+    check gives it alone: an arm among the obstacles of env1, random postures, some colliding."""
+    robot = gt.load_robot("arm_hand")
+    problem = gt.GraspProblem.from_task("env1")
+    scene = CollisionScene(robot, problem)
+    g = torch.Generator().manual_seed(3)
+    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    postures = [Posture(palm_pose=torch.zeros(6, dtype=torch.float64),
+                        fingers=flo + (fhi - flo) * torch.rand(flo.shape, generator=g, dtype=torch.float64),
+                        body=lo + (hi - lo) * torch.rand(lo.shape, generator=g, dtype=torch.float64))
+                for _ in range(12)]
+    many = scene.check_many(postures)
+    alone = [CollisionScene(robot, problem).check(p) for p in postures]
+    assert many == alone
+    assert any(r.count > 0 for r in many) and any(r.count == 0 for r in many)
