@@ -69,6 +69,12 @@ class PolishCfg:
             configuration polished inside the loop; where the polish lands, the trial has
             succeeded, else it learns on (``None``: the polish only after the loop). 0.9 with a = 1:
             E < 100 mm, measured on random reachable hand problems (README, "Which solver?").
+        from_r_free: ``from_r`` where the search counts no collision (nothing to collide with, or
+            a reward that ignores collisions): -1 polishes every trial from the first iteration
+            on (the learner proposes, the polish lands), which on random reachable problems is
+            about 3x faster than 0.9 at the same success (README, "Many calls"). None: ``from_r``.
+            Near an object a polish from far lands against it, within tolerance but less exact:
+            there ``from_r`` applies. With ``from_r: null`` (the polish after the loop only) neither.
         min_gain: a polished (or ``dls``) trial whose kept step lowers its error by less than this
             fraction has settled in a local minimum and stops (0: it runs its ``iterations``).
     """
@@ -77,6 +83,7 @@ class PolishCfg:
     iterations: int = setting(30, lo=0, hi=10_000)
     tolerance_mm: float = setting(0.001, lo=0.0, hi=1000.0)
     from_r: float | None = setting(0.9, lo=-1.0, hi=1.0)
+    from_r_free: float | None = setting(-1.0, lo=-1.0, hi=1.0)
     min_gain: float = setting(1e-3, lo=0.0, hi=1.0)
 
 

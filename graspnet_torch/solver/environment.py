@@ -129,6 +129,8 @@ class Environment(ABC):
         subsets: ``evaluate(config[idx], idx)`` allowed: once most trials have stopped, the loop
             evaluates the others only.
         polishes: the environment has an in-loop polish (:meth:`polish`).
+        counts_collisions: its evaluations count collisions (the reward shapes them and the
+            problem has something to collide with).
         error_key: the result field (JSON key) of the error a trial is ranked by.
     """
 
@@ -139,6 +141,7 @@ class Environment(ABC):
     problem_index: Tensor | None = None
     subsets: bool = False
     polishes: bool = False
+    counts_collisions: bool = False
 
     # -- the search ---------------------------------------------------------------------------
 

@@ -96,6 +96,7 @@ class FingerEnvironment(Environment):
             self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device)
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)
+        self.counts_collisions = self.proxy is not None
 
     def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
         """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""

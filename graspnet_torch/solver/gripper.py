@@ -124,6 +124,7 @@ class GripperEnvironment(Environment):
 
             self.proxy = proxy_for(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
+        self.counts_collisions = self.proxy is not None
 
     def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
         """config: (T, n) -> the ``solver.gripper.settle`` settling steps, then d (T,) of eq. 26 as

@@ -149,9 +149,12 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     span = env.upper - env.lower
     o_prev2 = o_prev
     best = Tracker(T, reward, solver.max_iterations, env.problem_index, solver.stop, device)
-    polish_from = None  # the polish inside the loop (SolverCfg.polish_from; never with sensor noise)
+    polish_from = None  # the polish inside the loop (solver.polish.from_r; never with sensor noise)
+    first_from = None  # the first iteration's (solver.polish.from_r_free: nothing to collide with)
     if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
-        polish_from = solver.polish.from_r
+        polish_from = first_from = solver.polish.from_r
+        if solver.polish.from_r_free is not None and not env.counts_collisions:
+            first_from = solver.polish.from_r_free
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     pending = torch.zeros(T, dtype=torch.bool, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
@@ -184,7 +187,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         best.rescore(k + 1)
         best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
         if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
-            near = best.active & (observed > polish_from) & (observed > polished_at)
+            near = best.active & (observed > (first_from if k == 0 else polish_from)) & (observed > polished_at)
             polished_at = torch.where(near, observed, polished_at)
             if T >= DEFER_FROM:  # a large batch: a few near trials wait for others (or a few iterations)
                 pending = (pending | near) & best.active
@@ -192,7 +195,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             if bool(near.any()):
                 pending = pending & ~near
                 landed = _polish_near(env, near, best, reward, k + 1, threshold, solver,
-                                      tolerance if grasp_rule else None)
+                                      tolerance if grasp_rule else None,
+                                      landed_only=k == 0 and first_from != polish_from)
                 observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
                 r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
                 ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
@@ -236,11 +240,13 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
 
 
 def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, iteration: int, threshold: float,
-                 solver: SolverCfg, tolerance: float | None = None) -> Tensor:
+                 solver: SolverCfg, tolerance: float | None = None, landed_only: bool = False) -> Tensor:
     """Polish the best configurations of the trials ``near`` (T,) (the environment's
     :meth:`~graspnet_torch.solver.environment.Environment.polish`) and keep each where it is
-    better; returns (T,) which polished trials have now landed: are a grasp within ``tolerance``
-    (metres; None: exceed the threshold)."""
+    better (``landed_only``: and has landed, so that a trial's best never becomes a local minimum
+    the polish found far from a solution, which later polishes would start from again); returns
+    (T,) which polished trials have now landed: are a grasp within ``tolerance`` (metres; None:
+    exceed the threshold)."""
     config, ev, r = best.config, best.evaluation, best.r
     idx = near.nonzero().squeeze(1)
     part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
@@ -253,6 +259,8 @@ def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, 
     new_config, new_ev = env.polish(config[idx], part, idx, done)
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
+    if landed_only:
+        better &= new_r > threshold if tolerance is None else env.grasped(new_ev, tolerance)
     take = torch.zeros_like(near).index_fill(0, idx[better], True)
     best.config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
     best.evaluation = ev.put(idx, new_ev.where(better, part), best.config)
