@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from graspnet_torch.solver.result import TrialResult
     from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["reference_posture", "trial_posture"]
+__all__ = ["build_home_posture", "reference_posture", "trial_posture"]
 
 
 def trial_posture(robot: Robot, trial: TrialResult | Mapping[str, Any]) -> Posture:
@@ -55,3 +55,36 @@ def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
 
         return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=q, body=body)
     return Posture(palm_pose=torch.as_tensor(ref.palm_pose, dtype=torch.float64), fingers=q, body=home.body)
+
+
+def build_home_posture(robot: Robot, dtype: torch.dtype = torch.float64) -> Posture:
+    """The config's ``home`` joints (degrees/metres in the file), clipped to the joint limits; a
+    free hand's palm at the world origin (:meth:`Robot.home_posture`, which keeps one per dtype)."""
+    from graspnet_torch.errors import ConfigError
+
+    home = robot.cfg.home
+    unknown = sorted(set(home) - set(robot.urdf.movable_joint_names))
+    if unknown:
+        raise ConfigError(f"{robot.cfg.source}: home names unknown joint(s) {', '.join(unknown)}")
+
+    def values(spec_names, lower, upper, types):
+        out = []
+        for name, lo, hi, kind in zip(spec_names, lower, upper, types, strict=True):
+            v = home.get(name, 0.0)
+            out.append(min(max(math.radians(v) if kind == "revolute" else v, lo), hi))
+        return out
+
+    finger_q = torch.zeros(robot.n_fingers, robot.joints_per_finger, dtype=dtype)
+    for k, f in enumerate(robot.fingers.values()):
+        finger_q[k, : f.n_joints] = torch.tensor(values(f.joint_names, f.chain.lower, f.chain.upper,
+                                                        f.chain.joint_types), dtype=dtype)
+    if robot.body is not None:
+        from graspnet_torch.robot.transforms import rt_to_pose
+
+        body_q = torch.tensor(values(robot.body.joint_names, robot.body.lower, robot.body.upper,
+                                     robot.body.joint_types), dtype=dtype)
+        palm = rt_to_pose(*robot.palm_frame(body_q))
+    else:
+        body_q = torch.zeros(0, dtype=dtype)
+        palm = torch.zeros(6, dtype=dtype)
+    return Posture(palm_pose=palm, fingers=finger_q, body=body_q)

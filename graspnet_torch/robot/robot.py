@@ -373,35 +373,13 @@ class Robot:
     # ------------------------------------------------------------------ postures
     def home_posture(self, dtype: torch.dtype = torch.float64) -> Posture:
         """The config's ``home`` joints (degrees/metres in the file), clipped to the joint limits;
-        a free hand's palm sits at the world origin."""
-        home = self.cfg.home
-        names = set(self.urdf.movable_joint_names)
-        unknown = sorted(set(home) - names)
-        if unknown:
-            raise ConfigError(f"{self.cfg.source}: home names unknown joint(s) {', '.join(unknown)}")
+        a free hand's palm sits at the world origin. Built once per dtype; each call a fresh copy."""
+        cached = self.__dict__.setdefault("_homes", {}).get(dtype)
+        if cached is None:
+            from graspnet_torch.robot.postures import build_home_posture
 
-        def values(spec_names, lower, upper, types):
-            out = []
-            for name, lo, hi, kind in zip(spec_names, lower, upper, types, strict=True):
-                v = home.get(name, 0.0)
-                out.append(min(max(math.radians(v) if kind == "revolute" else v, lo), hi))
-            return out
-
-        finger_q = torch.zeros(self.n_fingers, self.joints_per_finger, dtype=dtype)
-        for k, f in enumerate(self.fingers.values()):
-            finger_q[k, : f.n_joints] = torch.tensor(values(f.joint_names, f.chain.lower, f.chain.upper,
-                                                            f.chain.joint_types), dtype=dtype)
-        if self.body is not None:
-            body_q = torch.tensor(values(self.body.joint_names, self.body.lower, self.body.upper,
-                                         self.body.joint_types), dtype=dtype)
-            R, t = self.palm_frame(body_q)
-            from graspnet_torch.robot.transforms import rt_to_pose
-
-            palm = rt_to_pose(R, t)
-        else:
-            body_q = torch.zeros(0, dtype=dtype)
-            palm = torch.zeros(6, dtype=dtype)
-        return Posture(palm_pose=palm, fingers=finger_q, body=body_q)
+            cached = self._homes[dtype] = build_home_posture(self, dtype)
+        return Posture(cached.palm_pose.clone(), cached.fingers.clone(), cached.body.clone())
 
     def finger_joint_values(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
         """Every movable joint of each finger, mimic joints at their coupled values, in chain order.

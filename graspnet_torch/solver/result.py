@@ -74,11 +74,15 @@ class GraspResult:
 
     outcome: object | None = field(default=None, repr=False, compare=False)  # the loop's tensors and curves
     failure: str | None = None  # why no trial succeeded (one line), or None
+    chosen: int | None = None  # the reported trial's index, when a solver chose it (tracking: the nearest)
 
     @property
     def best(self) -> TrialResult:
-        """The successful trial with the smallest total error, collision-free ones first (else the
-        smallest error, collision-free first)."""
+        """The reported trial: the one the solver ``chosen`` (a tracked frame's successful trial
+        nearest the previous frame), else the successful trial with the smallest total error,
+        collision-free ones first (else the smallest error, collision-free first)."""
+        if self.chosen is not None:
+            return self.trials[self.chosen]
         return min(self.trials, key=lambda t: (not t.success, t.collisions > 0, t.error_mm))
 
     @property

@@ -76,9 +76,8 @@ def contact_frame(points: np.ndarray, reference: np.ndarray | None = None) -> np
     if np.linalg.norm(x) < 1e-9:  # the thumb at the others' centroid: any direction through the points
         x = p[1] - p[0]
     x = x / np.linalg.norm(x)
-    normal = np.zeros(3)  # Newell: the polygon's area-weighted normal, oriented by the finger order
-    for a, b in zip(p, np.roll(p, -1, axis=0), strict=True):
-        normal += np.cross(a - centre, b - centre)
+    d = p - centre  # Newell: the polygon's area-weighted normal, oriented by the finger order
+    normal = np.cross(d, np.roll(d, -1, axis=0)).sum(0)
     z = normal - (normal @ x) * x
     if np.linalg.norm(z) < 1e-6 * max(1.0, float(np.abs(p - centre).max()) ** 2):  # on a line
         for ref in ([] if reference is None else [np.asarray(reference, dtype=np.float64)]) + [np.eye(3)[2],
@@ -114,12 +113,15 @@ def finger_reach(robot: Robot) -> np.ndarray:
     return _reach_and_mid(robot)[0]
 
 
+@lru_cache(maxsize=256)
 def hand_frame(robot: Robot, fingers: tuple[str, ...]) -> np.ndarray:
     """(4, 4) :func:`contact_frame` of the robot's own fingertips of ``fingers`` (robot order) at
     mid-range joints, in the palm frame."""
     mid = _reach_and_mid(robot)[1]
     order = [robot.finger_index(f) for f in robot.finger_names if f in fingers]
-    return contact_frame(mid[order], np.array([0.0, 0.0, 1.0]))
+    frame = contact_frame(mid[order], np.array([0.0, 0.0, 1.0]))
+    frame.setflags(write=False)  # kept per robot and fingers (lru_cache): shared, so read-only
+    return frame
 
 
 def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:

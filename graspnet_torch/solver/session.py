@@ -100,6 +100,7 @@ class Solver:
         if warm is None:
             return cold
         cold.trials = warm.trials + cold.trials  # the warm trial, then the search's
+        cold.chosen = self._nearest(cold, self._posture(start))
         return cold
 
     def solve_many(self, problems: Sequence[GraspProblem | str | Path], *, seed: int | None = None
@@ -127,6 +128,22 @@ class Solver:
             yield result
 
     # -- the warm start --------------------------------------------------------------------------
+
+    def _nearest(self, result: GraspResult, posture: Posture) -> int | None:
+        """Among the successful collision-free trials, the one whose joints (fingers, and an arm's)
+        move least from ``posture`` (the largest change of any joint): no jump between frames where
+        the search found a nearby solution. None: no such trial (the usual best stands)."""
+        ok = [k for k, t in enumerate(result.trials) if t.success and t.collisions == 0]
+        if not ok:
+            return None
+
+        def moved(trial: TrialResult) -> float:
+            other = trial_posture(self.robot, trial)
+            change = [(other.fingers - posture.fingers).abs().max(), (other.body - posture.body).abs().amax(0)
+                      if other.body.numel() else torch.zeros(())]
+            return float(torch.stack(change).max())
+
+        return min(ok, key=lambda k: moved(result.trials[k]))
 
     def _posture(self, start: Start) -> Posture:
         if isinstance(start, Posture):
