@@ -62,13 +62,28 @@ def test_tracking_lands_every_frame_warm_and_without_jumps(hand_solver):
             assert err * 1000 == pytest.approx(r.best.fingertip_error_mm[c.finger], abs=1e-6)
 
 
-def test_a_warm_start_far_from_the_frame_falls_back_to_the_search(hand_solver):
+def test_a_warm_start_that_cannot_land_falls_back_to_the_search_and_reports_the_nearest(hand_solver):
+    """Two polish steps cannot bring a far posture onto a new frame: the search runs, the warm
+    trial is listed first, and the reported trial is, of the successful ones, the one whose joints
+    moved least from the start (recomputed here)."""
+    import dataclasses
+
     robot = hand_solver.robot
+    cfg = hand_solver.solver_cfg
+    short = gt.Solver(robot, trials=8, solver=dataclasses.replace(cfg, polish=dataclasses.replace(cfg.polish,
+                                                                                                 iterations=2)))
     far = hand_solver.solve(gt.random_reachable_problem(robot, 1, 4))
-    problem = gt.random_reachable_problem(robot, 2, 5)
-    result = hand_solver.solve(problem, start=far)
-    assert result.success
-    assert len(result.trials) in (1, 1 + hand_solver.trials)  # landed warm, or the warm trial then the search
+    result = short.solve(gt.random_reachable_problem(robot, 4, 5), start=far)
+    assert result.success and len(result.trials) == 1 + short.trials and not result.trials[0].success
+    start = trial_posture(robot, far.best)
+    moved = {k: float((trial_posture(robot, t).fingers - start.fingers).abs().max())
+             for k, t in enumerate(result.trials) if t.success and t.collisions == 0}
+    assert result.chosen == min(moved, key=moved.get) and result.best is result.trials[result.chosen]
+
+
+def test_a_warm_start_from_its_own_answer_lands_at_once(hand_solver):
+    problem = gt.random_reachable_problem(hand_solver.robot, 2, 5)
+    result = hand_solver.solve(problem)
     near = hand_solver.solve(problem, start=result)  # from its own answer: lands at once, one trial
     assert near.success and len(near.trials) == 1 and near.best.total_error_mm <= result.best.total_error_mm + 1e-6
 
