@@ -403,11 +403,16 @@ class Robot:
 
     def finger_joints_to_file(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
         """:meth:`finger_joint_values` in file units: degrees (revolute), metres (prismatic)."""
-        out = {}
-        for name, values in self.finger_joint_values(q).items():
-            types = self.fingers[name].chain.spec.joint_types
-            out[name] = [math.degrees(v) if t == "revolute" else v for v, t in zip(values, types, strict=True)]
-        return out
+        return self.finger_joints_to_file_many(q[None])[0]
+
+    def finger_joints_to_file_many(self, q: Tensor | np.ndarray) -> list[dict[str, list[float]]]:
+        """:meth:`finger_joints_to_file` of T postures at once. q: (T, F, n) free joints (padded)."""
+        q = np.asarray(q.detach().cpu() if isinstance(q, Tensor) else q, dtype=np.float64)
+        columns = {}
+        for k, f in enumerate(self.fingers.values()):
+            to_file = np.array([180.0 / math.pi if t == "revolute" else 1.0 for t in f.chain.spec.joint_types])
+            columns[f.name] = (f.chain.expand(q[:, k, : f.n_joints]) * to_file).tolist()  # as math.degrees
+        return [{name: rows[t] for name, rows in columns.items()} for t in range(q.shape[0])]
 
     def finger_joints_from_file(self, values: dict[str, Sequence[float]], dtype: torch.dtype = torch.float64) -> Tensor:
         """The inverse of :meth:`finger_joints_to_file`: (F, n) free joints (rad or m), padded."""

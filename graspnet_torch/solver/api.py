@@ -26,7 +26,7 @@ from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
-           "search", "settings_of", "solve", "solve_many", "trial_posture"]
+           "search", "settings_of", "solve", "solve_many", "solve_with", "trial_posture"]
 # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -156,6 +156,14 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         robot = robot or shipped_robot
         finger_ik = finger_ik or shipped_ik
     solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
+    return solve_with(robot, finger_ik, problem, trials, seed, solver, srv, reward, noise, device)
+
+
+def solve_with(robot: Robot, finger_ik: FingerIK | None, problem: GraspProblem, trials: int, seed: int,
+               solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg,
+               device: str | torch.device = "cpu") -> GraspResult:
+    """:func:`solve` with everything resolved (:func:`settings_of`): the environment, the search,
+    the result. ``gt.Solver`` calls this: its settings are resolved once."""
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = search(env, trials, seed, solver, srv, reward, noise)
     return result_of(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)

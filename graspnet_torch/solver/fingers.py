@@ -349,18 +349,21 @@ class FingerEnvironment(Environment):
             contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
         tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
         err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
-        palm = rt_to_pose(R, t)
+        palm = rt_to_pose(R, t).tolist()
         deg = 180.0 / math.pi
         column = {f: k for k, f in enumerate(self.fingers)}
+        err_rows = err.tolist()
+        joints = robot.finger_joints_to_file_many(q)  # every joint, mimic joints at their coupled values
+        pid = None if self.problem_index is None else self.problem_index.tolist()
         out, total = [], []
         for k in range(T):
-            pose = palm[k].tolist()
-            problem = self.problems[0 if self.problem_index is None else int(self.problem_index[k])]
-            errors = {f: float(err[k, column[f]]) for f in problem.fingers}
+            pose = palm[k]
+            problem = self.problems[0 if pid is None else pid[k]]
+            errors = {f: err_rows[k][column[f]] for f in problem.fingers}
             total.append(sum(errors.values()))
             out.append({
                 "palm_pose": pose[:3] + [a * deg for a in pose[3:]],
-                "joints": robot.finger_joints_to_file(q[k]),  # every joint, mimic joints at their coupled values
+                "joints": joints[k],
                 "fingertip_error_mm": {f: e * 1000 for f, e in errors.items()},
                 "total_error_mm": total[-1] * 1000,
             })

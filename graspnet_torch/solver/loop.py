@@ -243,8 +243,9 @@ def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, 
                  solver: SolverCfg, tolerance: float | None = None, landed_only: bool = False) -> Tensor:
     """Polish the best configurations of the trials ``near`` (T,) (the environment's
     :meth:`~graspnet_torch.solver.environment.Environment.polish`) and keep each where it is
-    better (``landed_only``: and has landed, so that a trial's best never becomes a local minimum
-    the polish found far from a solution, which later polishes would start from again); returns
+    better (``landed_only``: and has landed with its summed error within ``tolerance`` too, so that
+    a trial's best never becomes a local minimum the polish found far from a solution, which later
+    polishes would start from again); returns
     (T,) which polished trials have now landed: are a grasp within ``tolerance`` (metres; None:
     exceed the threshold)."""
     config, ev, r = best.config, best.evaluation, best.r
@@ -259,8 +260,9 @@ def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, 
     new_config, new_ev = env.polish(config[idx], part, idx, done)
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
-    if landed_only:
-        better &= new_r > threshold if tolerance is None else env.grasped(new_ev, tolerance)
+    if landed_only:  # landed, and (grasp rule) with the summed error within tolerance too: not a near miss
+        better &= new_r > threshold if tolerance is None else \
+            env.grasped(new_ev, tolerance) & (new_ev.error.to(new_r.device) <= tolerance)
     take = torch.zeros_like(near).index_fill(0, idx[better], True)
     best.config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
     best.evaluation = ev.put(idx, new_ev.where(better, part), best.config)

@@ -94,9 +94,8 @@ class Solver:
             warm = self._warm(problem, self._posture(start), seed)
             if warm.success:
                 return warm
-        cold = api.solve(problem, trials=self.trials, seed=seed, solver=self.solver_cfg, srv=self.srv,
-                         reward=self.reward, noise=self.noise, robot=self.robot, finger_ik=self.finger_ik,
-                         device=self.device)
+        cold = api.solve_with(self.robot, self.finger_ik, problem, self.trials, seed, self.solver_cfg, self.srv,
+                              self.reward, self.noise, self.device)
         if warm is None:
             return cold
         cold.trials = warm.trials + cold.trials  # the warm trial, then the search's

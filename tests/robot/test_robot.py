@@ -147,3 +147,21 @@ def test_thumb_can_oppose_index_and_middle(hand):
         assert gap < 1e-4, finger
         lo, hi = hand.finger_limits
         assert (posture.fingers.numpy() >= lo - 1e-12).all() and (posture.fingers.numpy() <= hi + 1e-12).all()
+
+
+def test_joints_to_file_for_many_postures_equal_each_alone_in_degrees():
+    """The batched conversion to file units gives, bit for bit, what converting each posture's
+    joint values alone with math.degrees gives (mimic joints included)."""
+    import math
+
+    import graspnet_torch as gt
+
+    robot = gt.load_robot("hand")
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = lo + (hi - lo) * torch.rand(50, *lo.shape, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    many = robot.finger_joints_to_file_many(q)
+    for k in range(50):
+        alone = {name: [math.degrees(v) if t == "revolute" else v
+                        for v, t in zip(values, robot.fingers[name].chain.spec.joint_types, strict=True)]
+                 for name, values in robot.finger_joint_values(q[k]).items()}
+        assert many[k] == alone
