@@ -91,3 +91,15 @@ def test_a_warm_start_from_its_own_answer_lands_at_once(hand_solver):
 def test_a_problem_of_another_robot_is_refused(hand_solver):
     with pytest.raises(gt.ProblemError, match="this solver's is 'hand'"):
         hand_solver.solve("cube")
+
+
+@pytest.mark.parametrize("name", ["arm_hand", "manus"])
+def test_every_kind_of_robot_warm_starts_from_its_own_answer(name):
+    """The contract's whole_of for an arm (its joints) and a gripper (its body): a warm start
+    from a result lands at once, one trial, no worse."""
+    solver = gt.Solver(name, trials=8)
+    problem = gt.GraspProblem.from_task("env1" if name == "arm_hand" else "cube")
+    first = solver.solve(problem)
+    again = solver.solve(problem, start=first)
+    assert first.success and again.success and len(again.trials) == 1
+    assert again.best.error_mm <= first.best.error_mm + 1e-6
