@@ -117,7 +117,11 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
             if trace is not None:
                 trace.extend(err.clone() for _ in range(iterations - it))
             break
-        rows = (running & ~stalled).nonzero().squeeze(1)
+        moving = running & ~stalled
+        if bool(moving.all()):  # every row: views of the whole tensors, no gather and scatter
+            rows, ids = slice(None), all_rows
+        else:
+            rows = ids = moving.nonzero().squeeze(1)
         xr, vr, Jr, gr, lr, hr = x[rows], value[rows], jac[rows], goal[rows], lo[rows], hi[rows]
         e = gr - vr
         damping = lams[rows]
@@ -128,11 +132,11 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
             dx = dx.index_copy(0, again, damped_pinv_step(Jr[again] * (~blocked[again]).unsqueeze(1), e[again],
                                                           damping[again]))
         new = torch.minimum(torch.maximum(xr + dx, lr), hr)
-        new_value, new_jac = f(new, rows)
+        new_value, new_jac = f(new, ids)
         new_err = (gr - new_value).norm(dim=-1)
         better = new_err < err[rows]
         if counts is not None:  # never into a collision: a step may not raise the count
-            new_count = count(new, rows)
+            new_count = count(new, ids)
             better &= new_count <= counts[rows]
             counts[rows] = torch.where(better, new_count, counts[rows])
         x[rows] = torch.where(better.unsqueeze(1), new, xr)
