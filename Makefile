@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-solvers report-arm report-manus fcnn urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -75,6 +75,13 @@ bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): tr
 bench-meshes: $(STAMP)  ## mesh objects: the loop's speed vs the primitive (>= 0.5x); the experiment proxy: verdicts vs FCL (>= 99 %)
 	$(PY) benchmarks/mesh_objects.py --check
 	$(call EXPERIMENT_RUN,proxy)
+
+bench-calls: $(STAMP)  ## many calls: per-call overhead and single-problem wall time, gt.Solver beside gt.solve (targets 2 ms, 15 ms)
+	$(PY) benchmarks/calls.py --check
+
+bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the same frames (installs the retarget extra; ~2 min)
+	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
+	$(PY) benchmarks/retarget.py --check
 
 bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cmaes, dls) on the same problems, targets (~11 min)
 	$(call EXPERIMENT_RUN,solvers)
