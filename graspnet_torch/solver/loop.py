@@ -245,9 +245,8 @@ def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, 
     :meth:`~graspnet_torch.solver.environment.Environment.polish`) and keep each where it is
     better (``landed_only``: and has landed with its summed error within ``tolerance`` too, so that
     a trial's best never becomes a local minimum the polish found far from a solution, which later
-    polishes would start from again); returns
-    (T,) which polished trials have now landed: are a grasp within ``tolerance`` (metres; None:
-    exceed the threshold)."""
+    polishes would start from again); returns (T,) which polished trials have now landed: are a
+    grasp within ``tolerance`` (metres; None: exceed the threshold)."""
     config, ev, r = best.config, best.evaluation, best.r
     idx = near.nonzero().squeeze(1)
     part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
