@@ -201,6 +201,7 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,
                max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
+               robot: Robot | None = None, finger_ik: FingerIK | None = None,
                device: str | torch.device = "cpu") -> list[GraspResult]:
     """Solve P problems of one robot, ``trials`` learners each: one result per problem, in order.
 
@@ -216,7 +217,9 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     if not batch:
         return []
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
-    robot, finger_ik = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
+    if robot is None or finger_ik is None:
+        shipped_robot, shipped_ik = robot_and_ik(batch[0].robot_cfg or batch[0].robot)
+        robot, finger_ik = robot or shipped_robot, finger_ik or shipped_ik
     first = batch[0]
     for p in batch[1:]:
         if p.robot != first.robot or (p.robot_cfg is not first.robot_cfg and p.robot_cfg is not None
@@ -225,7 +228,7 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
                                f"(one batch, one robot)")
     if len(batch) == 1:
         return [solve(batch[0], trials=trials, seed=seed, max_iterations=max_iterations, solver=solver, srv=srv,
-                      reward=reward, noise=noise, device=device)]
+                      reward=reward, noise=noise, robot=robot, finger_ik=finger_ik, device=device)]
     solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)

@@ -107,7 +107,8 @@ class Solver:
         """P problems of this robot as one batch (:func:`gt.solve_many`)."""
         return api.solve_many([self.problem(p) for p in problems], trials=self.trials,
                               seed=self.seed if seed is None else int(seed), solver=self.solver_cfg, srv=self.srv,
-                              reward=self.reward, noise=self.noise, device=self.device)
+                              reward=self.reward, noise=self.noise, robot=self.robot, finger_ik=self.finger_ik,
+                              device=self.device)
 
     def track(self, problems: Iterable[GraspProblem | str | Path], *, start: Start | None = None
               ) -> list[GraspResult]:

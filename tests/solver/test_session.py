@@ -103,3 +103,14 @@ def test_every_kind_of_robot_warm_starts_from_its_own_answer(name):
     again = solver.solve(problem, start=first)
     assert first.success and again.success and len(again.trials) == 1
     assert again.best.error_mm <= first.best.error_mm + 1e-6
+
+
+def test_solve_many_of_a_solver_built_from_a_robot_uses_that_robot_and_fcnn(hand_solver):
+    """A Solver given a Robot and an FCNN hands both to the batch: the same results as
+    gt.solve_many given them explicitly."""
+    problems = [gt.random_reachable_problem(hand_solver.robot, 900 + k) for k in range(3)]
+    solver = gt.Solver(hand_solver.robot, trials=4, finger_ik=hand_solver.finger_ik)
+    ours = solver.solve_many(problems)
+    theirs = gt.solve_many(problems, trials=4, robot=hand_solver.robot, finger_ik=hand_solver.finger_ik)
+    assert [[t.to_dict() | {"wall_time_s": 0} for t in r.trials] for r in ours] == \
+        [[t.to_dict() | {"wall_time_s": 0} for t in r.trials] for r in theirs]
