@@ -77,6 +77,16 @@ class PolishCfg:
             there ``from_r`` applies. With ``from_r: null`` (the polish after the loop only) neither.
         min_gain: a polished (or ``dls``) trial whose kept step lowers its error by less than this
             fraction has settled in a local minimum and stops (0: it runs its ``iterations``).
+        warm_step_deg: a warm start (``gt.Solver.solve(problem, start=...)``, each frame of a
+            sequence) moves no contact finger's joint more than this from the start's (degrees; a
+            prismatic joint: mm): the polish from the start stays on its branch, so a frame's
+            joints do not jump from the previous frame's (where it does not land within this,
+            the full search runs). None: within the joint limits only.
+        centre: a frame of a sequence that the full search solved (the first, or one where the
+            warm start did not land) is moved, its contacts held, toward the middle of its
+X
+            ``CENTRE_STEPS`` iterations), so the frames after it start away from the limits,
+            where a warm start gets stuck. None: not moved.
     """
 
     mode: str = setting("whole", choices=("fingers", "whole"))
@@ -85,6 +95,8 @@ class PolishCfg:
     from_r: float | None = setting(0.9, lo=-1.0, hi=1.0)
     from_r_free: float | None = setting(-1.0, lo=-1.0, hi=1.0)
     min_gain: float = setting(1e-3, lo=0.0, hi=1.0)
+    warm_step_deg: float | None = setting(19.5, lo=0.0, lo_open=True, hi=360.0)
+    centre: float | None = setting(0.3, lo=0.0, lo_open=True, hi=1000.0)
 
 
 @dataclass(frozen=True)

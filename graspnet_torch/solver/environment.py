@@ -29,6 +29,7 @@ import torch
 from torch import Tensor
 
 if TYPE_CHECKING:
+    from graspnet_torch.fcnn.ik import FingerIK
     from graspnet_torch.robot.robot import Posture, Robot
     from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.least_squares import LMResult
@@ -177,6 +178,15 @@ class Environment(ABC):
         ``trials`` (B,), never worse."""
         raise NotImplementedError(f"{type(self).__name__} has no in-loop polish")
 
+    @classmethod
+    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK | None,
+               dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False
+               ) -> Environment:
+        """The environment of one problem for a warm start from ``posture``: where the
+        configuration is searched in a frame (a free palm), that frame at the posture; otherwise
+        the usual environment."""
+        return cls(robot, problem, solver, ik, dtype, device, collisions)
+
     # -- the whole configuration x: what solver=dls and the polishes move ------------------------
 
     @abstractmethod
@@ -194,6 +204,13 @@ class Environment(ABC):
         """Levenberg-Marquardt on x (B, m) of the trials ``rows`` (None: all, in order), within
         bounds, never into a collision the proxy sees; a row stops below ``tol`` or when ``done``
         says so; ``trace`` receives the error (B,) after every step."""
+
+    def centre(self, x: Tensor, weight: float, iterations: int) -> Tensor:
+        """x (B, m) moved, the contacts held, toward the middle of the joint ranges where the
+        robot has joints to spare (a sequence's posture away from its limits), with a prior of
+        ``weight`` per joint range faded out over steps of ``iterations``. Default: x as it is
+        (a gripper has none to spare)."""
+        return x
 
     @abstractmethod
     def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None

@@ -11,10 +11,12 @@ from torch import Tensor
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 
 if TYPE_CHECKING:
-    from graspnet_torch.robot.robot import Posture
+    from graspnet_torch.fcnn.ik import FingerIK
+    from graspnet_torch.robot.robot import Posture, Robot
     from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.least_squares import LMResult
     from graspnet_torch.solver.result import TrialResult
+    from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FingerEnvironment"]
 
@@ -39,6 +41,7 @@ class FingerEnvironment(Environment):
     lower: Tensor
     upper: Tensor
     frame64: tuple[Tensor, Tensor] | None = None  # the search frame in the world (R, t), per trial or one
+    joint_box: tuple[Tensor, Tensor] | None = None  # (F, j) contact fingers' joint bounds narrower than the limits
     subsets = False  # every trial evaluated every iteration: fixed-seed results stay bit-for-bit what they were
 
     def __init__(self, robot, problem, solver: SolverCfg, ik, dtype: torch.dtype = torch.float32,
@@ -204,10 +207,37 @@ class FingerEnvironment(Environment):
     # The whole configuration x = [configuration (n), the contact fingers' joints (F * j)], float64 on
     # the CPU: what the whole polish and solver=dls move together (padding slots have limits [0, 0]).
 
+    @classmethod
+    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK,
+               dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False
+               ) -> FingerEnvironment:
+        """The usual environment, with the contact fingers' joints kept within
+        ``solver.polish.warm_step_deg`` of the posture's (:meth:`near`)."""
+        return cls(robot, problem, solver, ik, dtype, device, collisions).near(posture, solver.polish.warm_step_deg)
+
+    def near(self, posture: Posture, step_deg: float | None) -> FingerEnvironment:
+        """Keep the contact fingers' joints within ``step_deg`` degrees (a prismatic joint: that
+        many mm) of the posture's, within their limits (None: the limits only): a warm start
+        from the previous frame of a sequence moves no finger joint by more. Returns self."""
+        if step_deg is not None:
+            import math
+
+            spec = [self.robot.fingers[self.robot.finger_names[i]].chain.spec for i in self.idx]
+            unit = torch.tensor([[math.radians(step_deg) if t != "prismatic" else step_deg / 1000
+                                  for t in s.joint_types] + [0.0] * (self.robot.joints_per_finger - len(s.joint_types))
+                                 for s in spec], dtype=torch.float64)
+            q = posture.fingers[self.idx].to(torch.float64)
+            flo, fhi = (torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
+            lo, hi = torch.maximum(flo, q - unit), torch.minimum(fhi, q + unit)
+            self.joint_box = (torch.minimum(lo, fhi), torch.maximum(hi, flo))  # a posture beyond a limit: the limit
+        return self
+
     def whole_bounds(self, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """Lower and upper bounds of x, (m,) or (B, m) for a batch: the configuration's bounds,
-        then the joint limits."""
-        flo, fhi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        then the joint limits (or :attr:`joint_box`)."""
+        box = self.joint_box if self.joint_box is not None else \
+            tuple(torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
+        flo, fhi = (b.reshape(-1) for b in box)
         lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
         if lo.dim() == 2:
             flo, fhi = flo.expand(lo.shape[0], -1), fhi.expand(lo.shape[0], -1)
@@ -276,11 +306,12 @@ class FingerEnvironment(Environment):
                                 self._pid(rows)).cpu()
 
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
-                    trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:
+                    trace: list[Tensor] | None = None, rows: Tensor | None = None,
+                    prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
         """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
         on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
         their contacts, within bounds and limits, never into a collision the proxy sees (when
-        there is one)."""
+        there is one); ``prior``: its (centre, weight), see there."""
         from graspnet_torch.solver.least_squares import levenberg_marquardt
 
         trials = None if rows is None else rows.cpu()
@@ -294,7 +325,23 @@ class FingerEnvironment(Environment):
         lo, hi = self.whole_bounds(trials)
         return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
                                    trace=trace, count=count if self.proxy is not None else None,
-                                   min_gain=self.min_gain)
+                                   min_gain=self.min_gain, prior=prior)
+
+    def centre(self, x: Tensor, weight: float, iterations: int) -> Tensor:
+        """x (B, m) moved toward the middle of the contact fingers' joint ranges while their
+        fingertips stay on the contacts: Levenberg-Marquardt with a prior pulling each joint to
+        the middle of its range (weight ``weight`` per range), the weight lowered to 0 in six
+        steps of ``iterations`` each (the fit tightens as the pull fades). The result fits
+        roughly; a plain :meth:`local_solve` lands it."""
+        lo, hi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        span = hi - lo
+        w = torch.zeros(x.shape[1], dtype=torch.float64)
+        w[self.n:] = torch.where(span > 1e-9, weight / span.clamp_min(1e-9), 0.0)
+        middle = torch.zeros_like(w)
+        middle[self.n:] = (lo + hi) / 2
+        for k in range(6):
+            x = self.local_solve(x, iterations, prior=(middle, w / 3 ** k)).x
+        return x
 
     def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
         """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""

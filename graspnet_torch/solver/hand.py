@@ -19,6 +19,7 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_jacobian, pose_to_rt
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
+from graspnet_torch.solver.search_space import PalmSearchSpace
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["HandEnvironment", "finger_reach_bound"]
@@ -32,6 +33,9 @@ class HandEnvironment(FingerEnvironment):
     (contacts, object, obstacles), the configuration is the palm pose in that frame, and
     :meth:`report` gives the palm pose in the world (G o pose).
 
+    ``spaces`` (one per problem) replace the problems' own search spaces (:meth:`around`: a warm
+    start's).
+
     Attributes:
         n: size of the configuration (6: x, y, z, rx, ry, rz).
         lower, upper: (6,) search bounds (m, rad), in the search frame.
@@ -43,13 +47,13 @@ class HandEnvironment(FingerEnvironment):
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
                  dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
-                 runs: int = 1):
+                 runs: int = 1, spaces: Sequence[PalmSearchSpace] | None = None):
         from graspnet_torch.solver.search_space import palm_search_space
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         if robot.has_body:
             raise ProblemError(f"{problems[0].source}: robot '{robot.name}' has an arm; the HCNN solves free hands")
-        self.spaces = [palm_search_space(robot, p) for p in problems]
+        self.spaces = list(spaces) if spaces is not None else [palm_search_space(robot, p) for p in problems]
         local = [p.moved(np.linalg.inv(s.frame)) for p, s in zip(problems, self.spaces, strict=True)]
         super().__init__(robot, local if len(local) > 1 else local[0], solver, ik, dtype, device, collisions, runs)
         self.world_problems = problems
@@ -66,6 +70,25 @@ class HandEnvironment(FingerEnvironment):
         self._bounds64 = (torch.as_tensor(lo, dtype=torch.float64), torch.as_tensor(hi, dtype=torch.float64))
         self.lower = torch.as_tensor(lo, dtype=dtype, device=device)
         self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
+
+    @classmethod
+    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK,
+               dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False
+               ) -> HandEnvironment:
+        """The palm searched in the frame of the posture's palm
+        (:func:`~graspnet_torch.solver.search_space.palm_space_around`): a warm start from it is
+        the zero pose, far from the angles' bounds (the problem's own frame may put it at rx = pi,
+        where a bound stops it) and from the Euler angles' singularity; the contact fingers'
+        joints within ``solver.polish.warm_step_deg`` of the posture's (:meth:`near`)."""
+        from graspnet_torch.robot.transforms import pose_to_rt
+        from graspnet_torch.solver.search_space import palm_space_around
+
+        R, t = pose_to_rt(posture.palm_pose.to(torch.float64))
+        palm = np.eye(4)
+        palm[:3, :3], palm[:3, 3] = R.numpy(), t.numpy()
+        space = palm_space_around(robot, problem, palm)
+        return cls(robot, problem, solver, ik, dtype, device, collisions, spaces=[space]).near(
+            posture, solver.polish.warm_step_deg)
 
     def palm_frame(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
         """The configuration is the palm pose. (T, 6) -> R (T, 3, 3), t (T, 3)."""

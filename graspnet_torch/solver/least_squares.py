@@ -69,8 +69,8 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
                         lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
                         tol: float = 0.0, min_gain: float = 0.0,
                         count: Callable[[Tensor, Tensor], Tensor] | None = None,
-                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
-                        ) -> LMResult:
+                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
+                        prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
     """Levenberg-Marquardt on B rows (float64, the device of ``x``).
 
     Args:
@@ -90,9 +90,23 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         done: ``done(converged (B,) bool)`` -> (B,) bool, the rows that stop (at least the
             converged ones; e.g. every row of a problem with enough converged rows).
         trace: a list that receives |e| (B,) after every step (curves for TensorBoard).
+        prior: (centre (m,) or (B, m), weight (m,)): also minimise |weight * (x - centre)|, m
+            residuals appended to the model's (the result's ``err`` and ``value`` are the model's
+            alone): among the x that fit the goal, one nearer the centre.
     """
     B, m = x.shape
     goal = goal.expand(B, -1) if goal.dim() == 1 else goal
+    if prior is not None:
+        k, model = goal.shape[1], f
+        centre, weight = prior[0].expand(B, m), prior[1]
+        tikhonov = torch.diag(weight)
+
+        def f(xx: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+            v, J = model(xx, rows)
+            return (torch.cat([v, weight * (xx - centre[rows])], 1),
+                    torch.cat([J, tikhonov.expand(xx.shape[0], m, m)], 1))
+
+        goal = torch.cat([goal, goal.new_zeros(B, m)], 1)
     lo, hi = (b.expand(B, m) if b.dim() == 1 else b for b in (lo, hi))
     x = torch.minimum(torch.maximum(x, lo), hi).clone()
     all_rows = torch.arange(B, device=x.device)
@@ -150,4 +164,7 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         steps += running.long()  # a stalled row counts the steps it would repeat
         if trace is not None:
             trace.append(err.clone())
+    if prior is not None:  # the model's residuals alone
+        value = value[:, :k]
+        err = (goal[:, :k] - value).norm(dim=-1)
     return LMResult(x=x, err=err, value=value, count=counts, steps=steps)

@@ -36,7 +36,7 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space",
-           "sample_hand_configurations"]
+           "palm_space_around", "sample_hand_configurations"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -50,8 +50,8 @@ class PalmSearchSpace:
     Attributes:
         frame: (4, 4) float64, the search frame in the world (identity for a box in the world).
         lower, upper: (6,) float64, the palm pose bounds in that frame (m, rad).
-        kind: 'contacts' (built from the contacts), 'problem' (the problem's box) or 'robot'
-            (the robot config's box).
+        kind: 'contacts' (built from the contacts), 'problem' (the problem's box), 'robot'
+            (the robot config's box) or 'start' (around a given palm pose: a warm start).
     """
 
     frame: np.ndarray
@@ -131,9 +131,7 @@ def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
     if box is not None:
         return PalmSearchSpace(np.eye(4), box.lower.copy(), box.upper.copy(),
                                "robot" if problem.palm_bounds == "robot" else "problem")
-    order = [k for f in robot.finger_names for k, c in enumerate(problem.contacts) if c.finger == f]
-    fingers = tuple(problem.contacts[k].finger for k in order)
-    world = problem.contacts_world()[order]
+    fingers, world = _ordered_contacts(robot, problem)
     reference = None
     if problem.object is not None:
         from graspnet_torch.robot.chain import rpy_matrix_np
@@ -141,7 +139,37 @@ def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
         reference = rpy_matrix_np(problem.object.pose[3:])[:, 2]
     C = contact_frame(world, reference)
     G = C @ np.linalg.inv(hand_frame(robot, fingers))
-    local = (world - G[:3, 3]) @ G[:3, :3]  # the contacts in the search frame
+    lo, hi = _reach_box(robot, problem, fingers, world, G)
+    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
+                           "contacts")
+
+
+def palm_space_around(robot: Robot, problem: GraspProblem, palm: np.ndarray) -> PalmSearchSpace:
+    """The palm search space of a warm start from a palm pose ``palm`` (4, 4) in the world: that
+    pose is the frame (the start is the zero pose, far from the angles' bounds and from the
+    Euler angles' singularity at ry = +-pi/2), any orientation, the positions from which every
+    contact finger reaches its contact (a box in that frame, as :func:`palm_search_space`'s).
+    A problem's explicit ``palm_bounds`` stay its space."""
+    if problem.bounds() is not None:
+        return palm_search_space(robot, problem)
+    fingers, world = _ordered_contacts(robot, problem)
+    G = np.asarray(palm, dtype=np.float64)
+    lo, hi = _reach_box(robot, problem, fingers, world, G)
+    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]), "start")
+
+
+def _ordered_contacts(robot: Robot, problem: GraspProblem) -> tuple[tuple[str, ...], np.ndarray]:
+    """The contact fingers in robot order and their contacts in the world (K, 3)."""
+    order = [k for f in robot.finger_names for k, c in enumerate(problem.contacts) if c.finger == f]
+    return tuple(problem.contacts[k].finger for k in order), problem.contacts_world()[order]
+
+
+def _reach_box(robot: Robot, problem: GraspProblem, fingers: tuple[str, ...], world: np.ndarray, G: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lower, upper (3,)) in the frame G of the palm positions from which each finger
+    reaches its contact ``world`` (K, 3): the intersection of one box per contact. Refuses
+    (ProblemError) contacts that no palm position reaches together."""
+    local = (world - G[:3, 3]) @ G[:3, :3]  # the contacts in the frame G
     reach = finger_reach(robot)[[robot.finger_index(f) for f in fingers]]
     lo = (local - reach[:, None]).max(0)
     hi = (local + reach[:, None]).min(0)
@@ -151,8 +179,7 @@ def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
         raise ProblemError(f"{problem.source}: the {fingers[i]} and {fingers[j]} contacts lie {far[i, j]:.3f} m apart "
                            f"but those fingertips reach at most {reach[i] + reach[j]:.3f} m apart (no palm position "
                            f"reaches both)")
-    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
-                           "contacts")
+    return lo, hi
 
 
 def sample_hand_configurations(robot: Robot, space: PalmSearchSpace, n: int,

@@ -21,6 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import torch
+from torch import Tensor
 
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.config import RobotCfg
@@ -28,12 +29,15 @@ from graspnet_torch.robot.postures import trial_posture
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver import api
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.environment import Environment
 from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["Solver", "Start"]
+
+CENTRE_STEPS = 20  # Levenberg-Marquardt iterations of each of the six steps of a centring (solver.polish.centre)
 
 Start = GraspResult | TrialResult | Posture
 """What a warm start starts from: a result (its best trial), a trial, or a posture."""
@@ -94,13 +98,16 @@ class Solver:
             warm = self._warm(problem, self._posture(start), seed)
             if warm.success:
                 return warm
+            rescue = self._warm(problem, self._posture(start), seed, centre=True)
+            if rescue.success:
+                return rescue
         cold = api.solve_with(self.robot, self.finger_ik, problem, self.trials, seed, self.solver_cfg, self.srv,
                               self.reward, self.noise, self.device)
         if warm is None:
             return cold
         cold.trials = warm.trials + cold.trials  # the warm trial, then the search's
         cold.chosen = self._nearest(cold, self._posture(start))
-        return cold
+        return self._centred(problem, cold, seed)
 
     def solve_many(self, problems: Sequence[GraspProblem | str | Path], *, seed: int | None = None
                    ) -> list[GraspResult]:
@@ -124,6 +131,8 @@ class Solver:
         previous = start
         for k, problem in enumerate(problems):
             result = self.solve(problem, start=previous, seed=self.seed + k)
+            if previous is None:  # the search's posture, moved away from the limits for the frames after it
+                result = self._centred(self.problem(problem), result, self.seed + k)
             previous = result if result.success or previous is None else previous
             yield result
 
@@ -145,19 +154,48 @@ class Solver:
 
         return min(ok, key=lambda k: moved(result.trials[k]))
 
+    def _centred(self, problem: GraspProblem, result: GraspResult, seed: int) -> GraspResult:
+        """A searched frame of a sequence: its reported trial moved toward the middle of the
+        fingers' joint ranges, contacts held (``solver.polish.centre``), then landed as a warm
+        start is; where that lands, it is added as the last trial and reported (else the result
+        stands)."""
+        weight = self.solver_cfg.polish.centre
+        if weight is None or not result.success:
+            return result
+        posture = self._posture(result)
+        env = self._around(problem, posture)
+        x = env.centre(env.whole_of(posture), weight, CENTRE_STEPS)
+        centred = self._land(problem, env, x, seed)
+        if centred.success:
+            result.trials = result.trials + centred.trials
+            result.chosen = len(result.trials) - 1
+        return result
+
     def _posture(self, start: Start) -> Posture:
         if isinstance(start, Posture):
             return start
         return trial_posture(self.robot, start.best if isinstance(start, GraspResult) else start)
 
-    def _warm(self, problem: GraspProblem, posture: Posture, seed: int) -> GraspResult:
+    def _warm(self, problem: GraspProblem, posture: Posture, seed: int, centre: bool = False) -> GraspResult:
         """Levenberg-Marquardt from the posture (``solver.polish.iterations`` steps, to
-        ``solver.polish.tolerance_mm``): a result of one trial."""
+        ``solver.polish.tolerance_mm``), its fingers' joints within ``solver.polish.warm_step_deg``
+        of the posture's: a result of one trial."""
+        env = self._around(problem, posture)
+        x = env.whole_of(posture)
+        if centre and self.solver_cfg.polish.centre is not None:
+            x = env.centre(x, self.solver_cfg.polish.centre, CENTRE_STEPS)
+        return self._land(problem, env, x, seed)
+
+    def _around(self, problem: GraspProblem, posture: Posture) -> Environment:
+        cfg = self.solver_cfg
+        return build_environment(self.robot, problem, self.finger_ik, cfg, api.DTYPES[cfg.dtype], self.device,
+                                 self.reward, around=posture)
+
+    def _land(self, problem: GraspProblem, env: Environment, x: Tensor, seed: int) -> GraspResult:
+        """Levenberg-Marquardt from x (1, m) in ``env``: a result of one trial."""
         from graspnet_torch.solver.dls import run_dls
 
         cfg = self.solver_cfg
-        env = build_environment(self.robot, problem, self.finger_ik, cfg, api.DTYPES[cfg.dtype], self.device,
-                                self.reward)
         local = replace(cfg, method="dls", max_iterations=cfg.polish.iterations)
-        outcome = run_dls(env, 1, seed, local, self.reward, None, start=env.whole_of(posture))
+        outcome = run_dls(env, 1, seed, local, self.reward, None, start=x)
         return api.result_of(self.robot, problem, env, outcome, 1, seed, cfg, self.srv, self.reward, self.noise)

@@ -12,7 +12,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.solver.hand import HandEnvironment
-from graspnet_torch.solver.search_space import contact_frame, palm_search_space
+from graspnet_torch.solver.search_space import contact_frame, palm_search_space, palm_space_around
 from graspnet_torch.tasks.objects import random_pose
 
 PAPER_NO_REFINE = gt.SolverCfg.paper(fingers=gt.FingersCfg(final_refine=0))  # the palm pose and fingers as found
@@ -51,6 +51,27 @@ def test_the_search_space_holds_the_known_grasp_wherever_the_object_is(hand):
         assert space.kind == "contacts"
         local = matrix_to_pose(torch.as_tensor(np.linalg.inv(space.frame) @ M @ palm)).numpy()
         assert bool(np.all(local >= space.lower - 1e-9) and np.all(local <= space.upper + 1e-9)), local
+
+
+def test_a_warm_start_searches_around_its_palm(hand):
+    """The space around a palm pose (a warm start's) has that pose as its frame, so the start is
+    the zero pose, inside the box (its fingertips reach the contacts), far from the angles'
+    bounds, whatever the pose; a problem's explicit box stays its space."""
+    from graspnet_torch.robot.transforms import pose_to_matrix
+
+    base = gt.GraspProblem.from_task("glass3")
+    palm = pose_to_matrix(torch.as_tensor(base.reference.palm_pose)).numpy()
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        M = random_pose(rng)
+        moved = base.moved(M)
+        space = palm_space_around(hand, replace(moved, palm_bounds=None), M @ palm)
+        assert space.kind == "start"
+        np.testing.assert_allclose(space.frame, M @ palm, atol=1e-12)
+        assert bool(np.all(space.lower < 0) and np.all(space.upper > 0))
+        np.testing.assert_array_equal(space.lower[3:], -space.upper[3:])
+        assert space.upper[3:].tolist() == pytest.approx([math.pi, math.pi / 2, math.pi])
+    assert palm_space_around(hand, base, palm).kind == "robot"  # glass3 says palm_bounds: robot
 
 
 def test_the_robot_box_and_a_given_box_stay_in_the_world(hand):

@@ -65,13 +65,13 @@ def test_tracking_lands_every_frame_warm_and_without_jumps(hand_solver):
 def test_a_warm_start_that_cannot_land_falls_back_to_the_search_and_reports_the_nearest(hand_solver):
     """Two polish steps cannot bring a far posture onto a new frame: the search runs, the warm
     trial is listed first, and the reported trial is, of the successful ones, the one whose joints
-    moved least from the start (recomputed here)."""
+    moved least from the start (recomputed here; no centring, ``polish.centre: null``)."""
     import dataclasses
 
     robot = hand_solver.robot
     cfg = hand_solver.solver_cfg
-    short = gt.Solver(robot, trials=8, solver=dataclasses.replace(cfg, polish=dataclasses.replace(cfg.polish,
-                                                                                                 iterations=2)))
+    short = gt.Solver(robot, trials=8, solver=dataclasses.replace(cfg, polish=dataclasses.replace(
+        cfg.polish, iterations=2, centre=None)))
     far = hand_solver.solve(gt.random_reachable_problem(robot, 1, 4))
     result = short.solve(gt.random_reachable_problem(robot, 4, 5), start=far)
     assert result.success and len(result.trials) == 1 + short.trials and not result.trials[0].success
@@ -114,3 +114,55 @@ def test_solve_many_of_a_solver_built_from_a_robot_uses_that_robot_and_fcnn(hand
     theirs = gt.solve_many(problems, trials=4, robot=hand_solver.robot, finger_ik=hand_solver.finger_ik)
     assert [[t.to_dict() | {"wall_time_s": 0} for t in r.trials] for r in ours] == \
         [[t.to_dict() | {"wall_time_s": 0} for t in r.trials] for r in theirs]
+
+
+def _spread(robot: gt.Robot, posture, fingers) -> float:
+    """The mean distance of the contact fingers' joints from the middle of their ranges, in ranges."""
+    idx = [robot.finger_index(f) for f in fingers]
+    lo, hi = (torch.as_tensor(a)[idx] for a in robot.finger_limits)
+    span = hi - lo
+    u = (posture.fingers[idx] - lo) / span.clamp_min(1e-12)
+    return float((u - 0.5).abs()[span > 0].mean())
+
+
+def test_a_searched_frame_of_a_sequence_is_centred_contacts_held(hand_solver):
+    """The first frame of a track is searched, then moved toward the middle of its joint ranges
+    with the contacts held (polish.centre): reported as an added last trial that is still a
+    grasp, its joints nearer the middle than the search's (recomputed here), none moved more
+    than polish.warm_step_deg."""
+    robot = hand_solver.robot
+    problem = gt.random_reachable_problem(robot, 11, 4)
+    searched = hand_solver.solve(problem)
+    first = hand_solver.track([problem])[0]
+    assert first.chosen == len(first.trials) - 1 == len(searched.trials)
+    assert first.success and first.best.total_error_mm < 1
+    before, after = trial_posture(robot, searched.best), trial_posture(robot, first.best)
+    assert _spread(robot, after, problem.fingers) < _spread(robot, before, problem.fingers)
+    step = math.radians(hand_solver.solver_cfg.polish.warm_step_deg)
+    assert float((after.fingers - before.fingers).abs().max()) <= step + 1e-6  # float32 results: ~1e-8 rad
+
+
+def test_a_warm_start_moves_no_finger_joint_more_than_its_step(hand_solver):
+    """From a solution with every finger joint moved 30 degrees toward the middle of its range,
+    the warm start's own trial moves no finger joint more than polish.warm_step_deg (5); with the
+    step unbounded (null) it moves them back further."""
+    import dataclasses
+
+    robot = hand_solver.robot
+    problem = gt.random_reachable_problem(robot, 21, 4)
+    start = trial_posture(robot, hand_solver.solve(problem).best)
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    toward = torch.sign((lo + hi) / 2 - start.fingers) * math.radians(30)
+    moved = gt.Posture(palm_pose=start.palm_pose, fingers=torch.clamp(start.fingers + toward, lo, hi), body=start.body)
+    cfg = hand_solver.solver_cfg
+    for step in (5.0, None):
+        solver = gt.Solver(robot, trials=8, solver=dataclasses.replace(cfg, polish=dataclasses.replace(
+            cfg.polish, warm_step_deg=step, centre=None)))
+        warm = solver.solve(problem, start=moved).trials[0]
+        idx = [robot.finger_index(f) for f in problem.fingers]  # the other fingers are reported at home
+        change = math.degrees(float((trial_posture(robot, warm).fingers - moved.fingers)[idx].abs().max()))
+        if step is not None:
+            assert change <= step + 1e-4  # results pass through float32: ~1e-6 degrees
+        else:
+            unbounded = change
+    assert unbounded > 5.0

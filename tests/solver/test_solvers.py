@@ -80,6 +80,32 @@ def test_levenberg_marquardt_stops_a_row_settled_in_a_local_minimum():
     assert int(cut.steps[1]) == int(full.steps[1])
 
 
+def test_levenberg_marquardt_with_a_prior_lands_nearest_the_centre():
+    """A linear model with more unknowns than equations (x in R^3, A x = g in R^1): the solutions
+    form a plane. With a prior toward c whose weight fades (the continuation of
+    FingerEnvironment.centre), the row lands on the solution nearest c (recomputed in closed
+    form: c + A^T (A A^T)^-1 (g - A c)); without one, on the nearest to its start. The result's
+    error is the model's alone."""
+    A = torch.tensor([[1.0, 2.0, -1.0]], dtype=torch.float64)
+
+    def f(x, rows):
+        return x @ A.T, A.expand(x.shape[0], 1, 3)
+
+    goal, c = torch.tensor([1.0], dtype=torch.float64), torch.tensor([0.5, -0.5, 2.0], dtype=torch.float64)
+    lo, hi = torch.full((3,), -10.0, dtype=torch.float64), torch.full((3,), 10.0, dtype=torch.float64)
+    x = x0 = torch.zeros(1, 3, dtype=torch.float64)
+    for k in range(6):
+        weight = torch.full((3,), 1.0 / 3 ** k, dtype=torch.float64)
+        out = levenberg_marquardt(f, goal, x, lo, hi, 50, prior=(c, weight))
+        assert out.value.shape == (1, 1) and float(out.err[0]) == pytest.approx(float((goal - out.x @ A.T).abs()[0]))
+        x = out.x
+    x = levenberg_marquardt(f, goal, x, lo, hi, 50, tol=1e-12).x
+    nearest_c = c + A[0] * (goal - A @ c) / (A @ A.T)[0]
+    assert x[0].tolist() == pytest.approx(nearest_c.tolist(), abs=1e-9)
+    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-12).x
+    assert plain[0].tolist() == pytest.approx((A[0] * goal / (A @ A.T)[0]).tolist(), abs=1e-6)
+
+
 def test_levenberg_marquardt_stops_evaluating_a_row_refused_at_the_largest_damping():
     """A row whose goal lies outside the box ends at the bound; once its step is refused at
     lam_max (the same step would come again) the model no longer sees it, yet its steps and the
