@@ -84,9 +84,9 @@ class PolishCfg:
             the full search runs). None: within the joint limits only.
         centre: a frame of a sequence that the full search solved (the first, or one where the
             warm start did not land) is moved, its contacts held, toward the middle of its
-X
-            ``CENTRE_STEPS`` iterations), so the frames after it start away from the limits,
-            where a warm start gets stuck. None: not moved.
+            fingers' joint ranges (a prior of this weight per range, faded out in six steps of five
+            iterations), so the frames after it start away from the limits, where a warm start
+            gets stuck (README, "Sequences", measures both settings). None: not moved.
     """
 
     mode: str = setting("whole", choices=("fingers", "whole"))

@@ -37,7 +37,7 @@ from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["Solver", "Start"]
 
-CENTRE_STEPS = 20  # Levenberg-Marquardt iterations of each of the six steps of a centring (solver.polish.centre)
+CENTRE_STEPS = 5  # Levenberg-Marquardt iterations of each of the six steps of a centring (solver.polish.centre)
 
 Start = GraspResult | TrialResult | Posture
 """What a warm start starts from: a result (its best trial), a trial, or a posture."""
