@@ -15,7 +15,9 @@ posture uniform in the search space, as ``gt.random_reachable_problem`` draws it
 the true palm pose), each with ``--fingers`` contact fingers. Methods:
 
 * ours, cold: ``gt.Solver(robot).solve(problem)`` on every frame on its own;
-* ours, track: ``gt.Solver(robot).track(frames)`` over each sequence (warm starts);
+* ours, track: ``gt.Solver(robot).track(frames)`` over each sequence (warm starts); and the same
+  without centring the searched frames (``solver.polish.centre: null``) and also without the
+  bound on a warm start's joint steps (``warm_step_deg: null``);
 * dex-retargeting: its ``position`` optimizer (SLSQP, nlopt) on a free-floating hand
   (``add_dummy_free_joint``; target links: the fingertips, a fixed link added where the config
   gives the tip an offset; low-pass filter off), one retargeter per contact-finger set. On a
@@ -181,8 +183,15 @@ def run_ours_cold(robot: gt.Robot, sequences: list[list[gt.GraspProblem]]) -> Ru
     return Run(postures, seconds)
 
 
-def run_ours_track(robot: gt.Robot, sequences: list[list[gt.GraspProblem]]) -> Run:
+def run_ours_track(robot: gt.Robot, sequences: list[list[gt.GraspProblem]], **polish) -> Run:
+    """``gt.Solver(robot).track`` over each sequence; ``polish``: settings of ``solver.polish``
+    changed (the ablations of ``warm_step_deg`` and ``centre``)."""
+    from dataclasses import replace
+
     solver = gt.Solver(robot)
+    if polish:
+        cfg = solver.solver_cfg
+        solver = gt.Solver(robot, solver=replace(cfg, polish=replace(cfg.polish, **polish)))
     solver.track(sequences[0][:2])  # warm-up
     postures, seconds = [], []
     for frames in sequences:
@@ -276,6 +285,9 @@ def main() -> int:
     methods: dict[str, Callable[[list[list[gt.GraspProblem]]], Run]] = {
         "ours, cold (Solver.solve)": lambda s: run_ours_cold(robot, s),
         "ours, track (Solver.track)": lambda s: run_ours_track(robot, s),
+        "ours, track, centre: null": lambda s: run_ours_track(robot, s, centre=None),
+        "ours, track, centre: null, warm_step_deg: null": lambda s: run_ours_track(robot, s, centre=None,
+                                                                                   warm_step_deg=None),
         "dex-retargeting": lambda s: run_dex(robot, s, true_wrist=False, tuned=False),
         "dex-retargeting, true wrist at the start": lambda s: run_dex(robot, s, true_wrist=True, tuned=False),
         "dex-retargeting tuned": lambda s: run_dex(robot, s, true_wrist=False, tuned=True),
