@@ -18,11 +18,12 @@ from dataclasses import dataclass
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.fcnn.train import FCNNTrainCfg
+from graspnet_torch.proposal.model import ProposalCfg
 from graspnet_torch.settings import Free, clip, setting
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.srv.network import SRVNetCfg
 
-__all__ = ["InspectRobotsJobCfg", "ReferencePostureJobCfg", "SolveGraspJobCfg", "TrainFCNNJobCfg",
+__all__ = ["InspectRobotsJobCfg", "ReferencePostureJobCfg", "SolveGraspJobCfg", "TrainFCNNJobCfg", "TrainPostureJobCfg",
            "available_memory", "check_device", "check_solve_memory", "check_train_memory", "estimate_solve_memory",
            "estimate_train_memory"]
 
@@ -68,6 +69,21 @@ class TrainFCNNJobCfg:
     progress: bool = True
     threads: int = setting(1, lo=1, hi=1024)
     eval_targets: int = setting(10_000, lo=1, hi=1_000_000)
+
+
+@dataclass(frozen=True)
+class TrainPostureJobCfg:
+    """``scripts/train_posture.py`` (configs/train_posture.yaml)."""
+
+    robot: Free = None
+    posture: ProposalCfg = setting(factory=ProposalCfg)
+    seed: int = setting(0, lo=0, hi=2**31 - 1)
+    resume: bool = False
+    export: bool | str = True  # true: the robot's checkpoint (what the solver reads); false; or a path
+    checkpoint_every: int = setting(1000, lo=1, hi=10_000_000)
+    progress: bool = True
+    threads: int = setting(1, lo=1, hi=1024)
+    eval_problems: int = setting(200, lo=1, hi=1_000_000)
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -186,7 +187,7 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
             outcome = run_cmaes(env, trials, seed, solver, reward, noise)
         else:
-            outcome = run_loop(env, trials, seed, solver, srv, reward, noise)
+            outcome = run_loop(env, trials, seed, solver, srv, reward, noise, start=_starts(env, trials, solver))
         done = None
         if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
             pid = None if env.problem_index is None else env.problem_index.cpu()
@@ -196,6 +197,27 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
         outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, done)
     outcome.wall_time_s = time.perf_counter() - t0
     return outcome
+
+
+_SAID_NO_MODEL: set[str] = set()
+
+
+def _starts(env: Environment, trials: int, solver: SolverCfg) -> Tensor | None:
+    """The trials' starts of ``solver.start: proposal`` (None: random). A robot without a trained
+    posture proposal model starts at random, and the first such search says so."""
+    if solver.start != "proposal":
+        return None
+    from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
+
+    model = proposal_of(env.robot)
+    if model is None:
+        if env.robot.name not in _SAID_NO_MODEL:
+            _SAID_NO_MODEL.add(env.robot.name)
+            warnings.warn(f"solver.start=proposal: robot '{env.robot.name}' has no posture proposal model "
+                          f"({posture_checkpoint(env.robot)}); its trials start at random (train one with "
+                          f"`python scripts/train_posture.py robot={env.robot.cfg.cli_name}`)", stacklevel=3)
+        return None
+    return proposal_starts(model, env, trials)
 
 
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,

@@ -187,6 +187,12 @@ class Environment(ABC):
         the usual environment."""
         return cls(robot, problem, solver, ik, dtype, device, collisions)
 
+    @abstractmethod
+    def proposal_input(self) -> tuple[Tensor, Tensor]:
+        """What a posture proposal model (:mod:`graspnet_torch.proposal`) sees: each row's
+        targets in this environment's frame (R, S, 3) and their mask (R, S), R = 1 for one
+        problem or T (one row per trial) for a batch."""
+
     # -- the whole configuration x: what solver=dls and the polishes move ------------------------
 
     @abstractmethod

@@ -101,6 +101,19 @@ class FingerEnvironment(Environment):
             self._idx = torch.as_tensor(self.idx, device=device)
         self.counts_collisions = self.proxy is not None
 
+    def proposal_input(self) -> tuple[Tensor, Tensor]:
+        """One slot per robot finger: the contacts in this environment's frame (a free hand's
+        search frame, an arm's world), zero where a row has no contact for that finger: (R, F_all,
+        3) and the mask (R, F_all), float32."""
+        c = self.contacts64.reshape(-1, len(self.idx), 3).float()
+        R = c.shape[0]
+        on = torch.ones(R, len(self.idx)) if self.mask is None else self.mask.float().cpu()
+        targets = torch.zeros(R, self.robot.n_fingers, 3)
+        mask = torch.zeros(R, self.robot.n_fingers)
+        targets[:, self.idx] = c * on.unsqueeze(-1)
+        mask[:, self.idx] = on
+        return targets, mask
+
     def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
         """(T, n) configurations -> the palm in the world: R (T, 3, 3), t (T, 3)."""
         raise NotImplementedError

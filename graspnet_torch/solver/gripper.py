@@ -126,6 +126,11 @@ class GripperEnvironment(Environment):
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
         self.counts_collisions = self.proxy is not None
 
+    def proposal_input(self) -> tuple[Tensor, Tensor]:
+        """The object's two points in the world, as two slots: (R, 2, 3), mask (R, 2) of ones."""
+        targets = self._targets64.float()
+        return targets, torch.ones(targets.shape[:2])
+
     def evaluate(self, config: Tensor, trials: Tensor | None = None) -> Evaluation:
         """config: (T, n) -> the ``solver.gripper.settle`` settling steps, then d (T,) of eq. 26 as
         ``error``, the alignment (T,) of eq. 24 and, with a proxy, the collision count; ``config``

@@ -38,6 +38,7 @@ __all__ = ["LoopOutcome", "enough_succeeded", "run_loop"]
 # polished together: once DEFER_ROWS are waiting, or every DEFER_EVERY iterations (a polish of a
 # few rows costs about what one of a hundred does).
 DEFER_FROM, DEFER_ROWS, DEFER_EVERY = 256, 32, 8
+START_MARGIN = 1e-3  # a given start is kept this far (normalised) inside the bounds: the SRV output's logit is finite
 
 
 @dataclass
@@ -95,8 +96,12 @@ class LoopOutcome:
 
 
 def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
-             reward: RewardCfg | None = None, noise: NoiseCfg | None = None) -> LoopOutcome:
-    """Run T trials of the closed loop on one environment (settings default to the paper's)."""
+             reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Tensor | None = None
+             ) -> LoopOutcome:
+    """Run T trials of the closed loop on one environment (settings default to the paper's).
+    ``start``: (T, n) configurations the trials start at (``solver.start: proposal``), each
+    network's first mean output placed there (:meth:`ConfigurationNetwork.place`); None: random
+    within the bounds (the paper)."""
     solver, srv = solver or SolverCfg(), srv or SRVNetCfg()
     noise = noise or NoiseCfg()
     reward_fn = Reward(reward or RewardCfg(), solver.max_iterations, env.reward_base)
@@ -105,6 +110,10 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     gen = torch.Generator(device=device).manual_seed(seed)
     net = ConfigurationNetwork(n, T, srv, gen, dtype=dtype, device=device)
     o_prev = torch.rand(T, n, generator=gen, dtype=dtype, device=device)  # random start within the bounds
+    if start is not None:  # a given start: the networks' first mean outputs there
+        span = (env.upper - env.lower).clamp_min(torch.finfo(dtype).tiny)
+        o_prev = ((start.to(dtype=dtype, device=device) - env.lower) / span).clamp(START_MARGIN, 1 - START_MARGIN)
+        net.place(o_prev)
     o_start = o_prev.clone()
     threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
@@ -113,7 +122,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     with torch.inference_mode(not net.autograd):  # ~30 % less overhead per op; results are cloned out below
         t0 = time.perf_counter()
         best_config, best_ev, best_r, iterations = _iterate(env, net, solver, reward_fn, noise, gen, o_prev,
-                                                            threshold, hist, t0)
+                                                            threshold, hist, t0, start is not None)
         wall = time.perf_counter() - t0
     best_config, best_r, iterations, best_ev = best_config.clone(), best_r.clone(), iterations.clone(), best_ev.clone()
     history = None
@@ -141,9 +150,10 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
 
 def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
              gen: torch.Generator, o_prev: Tensor, threshold: float | None, hist: dict[str, list],
-             t0: float) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
+             t0: float, given: bool = False) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
     """The iterations; returns the reported configuration, its evaluation, its (noise-free)
-    reinforcement and the iteration count of every trial."""
+    reinforcement and the iteration count of every trial. With a ``given`` start the first
+    iteration evaluates the start itself (the networks, placed there, learn from the second on)."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
@@ -166,7 +176,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         noise_k = torch.randn(T, n, generator=gen, dtype=dtype, device=device)  # every trial's draw, always
         if live is None:
             step = net(x, noise_k)
-            o, r_hat, sigma = step.o, step.r_hat, step.sigma
+            o, r_hat, sigma = (o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
         else:  # the stopped trials' outputs are never used: their rows keep stale values
             step = net(x[live], noise_k[live])
             o = o_prev.index_copy(0, live, step.o)
@@ -180,7 +190,9 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
-        if live is None:
+        if given and k == 0:
+            pass  # the start itself was evaluated: nothing the networks drew to learn from
+        elif live is None:
             net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
         else:
             net.reinforce(observed[live], best.active[live])

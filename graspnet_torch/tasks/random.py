@@ -23,11 +23,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CONTACT_GENERATORS", "SEQUENCE_SPACES", "random_arm_problem", "random_gripper_problems",
-           "random_hand_problem", "random_obstacle_problems", "random_reachable_problem", "random_sequence"]
+           "random_hand_problem", "random_obstacle_problems", "random_posed_problem", "random_reachable_problem",
+           "random_sequence"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -253,6 +254,31 @@ def random_gripper_problems(robot: Robot, n: int, seed: int = 11) -> list[GraspP
         problems.append(GraspProblem.from_mapping({"name": f"random{k}", "robot": robot.name, "points": pts},
                                                   f"<random {k}>"))
     return problems
+
+
+def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None
+                         ) -> tuple[GraspProblem, Posture]:
+    """A random posture of any robot and the problem it solves (what a posture proposal model
+    learns from): for robots with fingers, a posture uniform in the robot's walk space
+    (:data:`SEQUENCE_SPACES`: a free hand's palm within its search space, an arm's joints) with
+    ``n_fingers`` contact fingers (see :func:`random_reachable_problem`); for a gripper, its body
+    joints uniform within their limits and the two gripper points as the object's (in either
+    order). Deterministic in ``seed``."""
+    from graspnet_torch.robot.postures import reference_posture
+
+    if robot.kind == "gripper":
+        g = torch.Generator().manual_seed(seed)
+        lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+        q = lo + (hi - lo) * torch.rand(len(lo), generator=g, dtype=torch.float64)
+        points = robot.gripper_points(q.unsqueeze(0))[0].tolist()
+        if bool(torch.rand((), generator=g) < 0.5):
+            points = points[::-1]
+        problem = GraspProblem.from_mapping({"robot": robot.name, "points": points},
+                                            source=f"random posed problem {seed} of {robot.name}")
+        home = robot.home_posture(torch.float64)
+        return problem, Posture(palm_pose=home.palm_pose, fingers=home.fingers, body=q)
+    problem = random_sequence(robot, seed, 1, n_fingers)[0]
+    return problem, reference_posture(robot, problem)
 
 
 def random_obstacle_problems(robot: Robot, n: int, seed: int = 7,

@@ -1,0 +1,115 @@
+"""Posture proposal checkpoints, beside the FCNN's: ``checkpoints/<robot>/posture.pt``, or
+``<folder>/<name>.posture.pt`` beside a robot config given by path.
+
+The file (``torch.save`` of plain dicts and tensors, loaded with ``weights_only=True``) records
+what the model was trained for (the robot's name and kind, its search variables and target
+slots, its finger or body joint names): loading it for a robot that differs, or a corrupted file,
+is refused with a clear error naming the file. Files are written atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from graspnet_torch.errors import CheckpointError
+from graspnet_torch.fcnn.checkpoint import non_finite_tensors
+from graspnet_torch.io import atomic_path
+from graspnet_torch.paths import checkpoints_dir
+from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
+from graspnet_torch.robot.robot import Robot
+
+__all__ = ["FORMAT", "load_proposal", "posture_checkpoint", "proposal_of", "robot_signature", "save_proposal"]
+
+FORMAT = "graspnet_torch.posture/1"
+
+
+def posture_checkpoint(robot: Robot) -> Path:
+    """Where a robot's proposal model is read from (and written by ``train_posture.py``): beside
+    its own FCNN checkpoint when its config names one of its own (``<name>.fcnn.pt`` ->
+    ``<name>.posture.pt``, a config given by path), else ``checkpoints/<name>/posture.pt``."""
+    cfg = robot.cfg
+    if cfg.checkpoint is not None and cfg.checkpoint.name == f"{cfg.name}.fcnn.pt":
+        return cfg.checkpoint.with_name(f"{cfg.name}.posture.pt")
+    return checkpoints_dir() / cfg.name / "posture.pt"
+
+
+def robot_signature(robot: Robot) -> dict:
+    """What a proposal model depends on: the robot's kind, the joints of its search variables and
+    its target slots (finger names, or a gripper's two points)."""
+    return {"kind": robot.kind, "fingers": list(robot.finger_names) if robot.n_fingers else [],
+            "body_joints": list(robot.body_joint_names) if robot.has_body else []}
+
+
+def _train_hint(robot: Robot) -> str:
+    return f"`python scripts/train_posture.py robot={robot.cfg.cli_name}`"
+
+
+def save_proposal(model: PostureProposal, robot: Robot, cfg: ProposalCfg, path: str | Path,
+                  info: dict | None = None) -> Path:
+    """Write the model to ``path`` atomically."""
+    payload = {"format": FORMAT, "robot": robot.name, "signature": robot_signature(robot), "slots": model.slots,
+               "n": model.n, "heads": cfg.heads, "hidden": list(cfg.hidden),
+               "state": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}, "info": info or {}}
+    with atomic_path(Path(path), suffix=".pt") as tmp:
+        torch.save(payload, tmp)
+    return Path(path)
+
+
+def load_proposal(robot: Robot, path: str | Path | None = None) -> PostureProposal:
+    """A robot's trained proposal model: ``path``, else :func:`posture_checkpoint`.
+
+    Raises:
+        CheckpointError: missing, corrupted or trained for another robot (the message names the file).
+    """
+    path = Path(path) if path is not None else posture_checkpoint(robot)
+    where = str(path)
+    if not path.is_file():
+        raise CheckpointError(f"{where}: no posture proposal model for robot '{robot.name}'; train one with "
+                              f"{_train_hint(robot)}")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise CheckpointError(f"{where}: not a readable posture proposal checkpoint ({type(exc).__name__})") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise CheckpointError(f"{where}: not a posture proposal checkpoint (format {FORMAT!r} expected)")
+    try:
+        signature, state = payload["signature"], payload["state"]
+        slots, n, heads, hidden = int(payload["slots"]), int(payload["n"]), int(payload["heads"]), payload["hidden"]
+        cfg = ProposalCfg(heads=heads, hidden=tuple(int(h) for h in hidden))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{where}: malformed posture proposal checkpoint ({type(exc).__name__})") from None
+    if payload.get("robot") != robot.name or signature != robot_signature(robot):
+        raise CheckpointError(f"{where}: trained for robot '{payload.get('robot')}' ({signature.get('kind')}), "
+                              f"not for robot '{robot.name}' as it is now; retrain with {_train_hint(robot)}")
+    bad = non_finite_tensors(state)
+    if bad:
+        raise CheckpointError(f"{where}: non-finite values (NaN or infinity) in {', '.join(bad[:3])}; retrain with "
+                              f"{_train_hint(robot)}")
+    model = PostureProposal(slots, n, cfg)
+    try:
+        model.load_state_dict(state)
+    except (RuntimeError, TypeError, KeyError) as exc:
+        raise CheckpointError(f"{where}: tensors do not fit the recorded sizes ({type(exc).__name__})") from None
+    if not bool((model.config_std > 0).all()) or not bool((model.target_std > 0).all()):
+        raise CheckpointError(f"{where}: scales must be positive; the file is corrupted")
+    return model.eval()
+
+
+_CACHE: dict[tuple, PostureProposal | None] = {}
+
+
+def proposal_of(robot: Robot) -> PostureProposal | None:
+    """The robot's proposal model, loaded once per file version; None when it has none (no file).
+    A file that exists but cannot be used raises :class:`~graspnet_torch.errors.CheckpointError`."""
+    path = posture_checkpoint(robot)
+    try:
+        st = path.stat()
+        stamp = (st.st_size, st.st_mtime_ns)
+    except OSError:
+        return None
+    key = (robot.name, id(robot.cfg), str(path), stamp)
+    if key not in _CACHE:
+        _CACHE[key] = load_proposal(robot, path)
+    return _CACHE[key]
