@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-solvers report-arm report-manus fcnn urdf clean
+.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-proposal bench-solvers report-arm report-manus fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -83,6 +83,9 @@ bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the s
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
 	$(PY) benchmarks/retarget.py --check
 
+bench-proposal: $(STAMP)  ## gt.solve_many from posture proposals beside random starts, 1000 hand problems (targets 5x, 3000/s; ~1 min)
+	$(PY) benchmarks/proposal.py --check
+
 bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cmaes, dls) on the same problems, targets (~11 min)
 	$(call EXPERIMENT_RUN,solvers)
 
@@ -96,6 +99,11 @@ report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, 
 
 fcnn: $(STAMP)  ## retrain the shipped FCNN checkpoint checkpoints/hand/fcnn.pt (fixed seed)
 	$(PY) scripts/train_fcnn.py robot=hand export=true hydra.run.dir=outputs/train_fcnn/hand-export
+
+posture: posture-hand posture-arm_hand posture-manus posture-trifinger  ## retrain every shipped posture proposal model (fixed seed; ~2-3 min each)
+
+posture-%: $(STAMP)  ## retrain one posture proposal model: posture-hand, posture-arm_hand, posture-manus, posture-trifinger
+	$(PY) scripts/train_posture.py robot=$(if $(filter trifinger,$*),examples/trifinger/trifinger.yaml,$*) progress=false hydra.run.dir=outputs/train_posture/$*-export
 
 urdf: $(STAMP)  ## regenerate the URDFs from urdf/build.py
 	$(PY) urdf/build.py

@@ -14,6 +14,7 @@ arm          the arm as a product, random arm problems (beyond the paper)   :cla
 random_hand  the HCNN on random reachable hand problems (beyond the paper)  :class:`RandomHandCfg`
 tradeoff     the noise study against Table 2, open choices swept (5.1)      :class:`TradeoffCfg`
 proxy        the collision proxy against FCL near meshes (beyond the paper) :class:`ProxyCfg`
+proposal     posture proposals: what they cost and buy (beyond the paper)   :class:`ProposalExperimentCfg`
 ===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -36,6 +37,7 @@ from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
 from graspnet_torch.experiments.manus import ManusCfg, run_manus
 from graspnet_torch.experiments.objects import ObjectsCfg, run_objects
 from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig10, run_tables
+from graspnet_torch.experiments.proposal import ProposalExperimentCfg, run_proposal
 from graspnet_torch.experiments.proxy import ProxyCfg, run_proxy
 from graspnet_torch.experiments.random_hand import RandomHandCfg, run_random_hand
 from graspnet_torch.experiments.report import ExperimentReport, Figure
@@ -44,9 +46,10 @@ from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
 from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 
 __all__ = ["EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg",
-           "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProxyCfg", "RandomHandCfg", "SolversCfg", "Table2Cfg",
-           "TradeoffCfg", "run_arm", "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proxy",
-           "run_random_hand", "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
+           "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg", "RandomHandCfg",
+           "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10", "run_manus", "run_noise_study",
+           "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_solvers", "run_table2", "run_tables",
+           "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -70,4 +73,5 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("random_hand", RandomHandCfg, run_random_hand),
     Experiment("tradeoff", TradeoffCfg, run_tradeoff),
     Experiment("proxy", ProxyCfg, run_proxy),
+    Experiment("proposal", ProposalExperimentCfg, run_proposal),
 )}

@@ -190,8 +190,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
-        if given and k == 0:
-            pass  # the start itself was evaluated: nothing the networks drew to learn from
+        if given and k == 0:  # the start itself was evaluated: nothing drawn to learn from; the
+            net.place(o_prev, observed)  # networks expect what the start got (narrow exploration near a grasp)
         elif live is None:
             net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
         else:
