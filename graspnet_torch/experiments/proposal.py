@@ -52,17 +52,14 @@ class ProposalExperimentCfg:
 def best_proposal_mm(robot: gt.Robot, problem: gt.GraspProblem) -> float:
     """The best of the robot's K proposals for a problem (within bounds, evaluated by its
     environment: a hand's fingers by the FCNN; no iteration), mm."""
-    from graspnet_torch.proposal import proposal_of
+    from graspnet_torch.proposal import proposal_of, proposals
     from graspnet_torch.solver import api
     from graspnet_torch.solver.environments import build_environment
 
     _robot, ik = api.robot_and_ik(problem.robot_cfg or robot.name)
     env = build_environment(robot, problem, ik, gt.SolverCfg())
-    targets, mask = env.proposal_input()
     with torch.inference_mode():
-        configs = proposal_of(robot)(targets, mask)[0][0]
-        configs = torch.minimum(torch.maximum(configs, env.lower), env.upper)
-        return float(env.evaluate(configs).error.min()) * 1000
+        return float(env.evaluate(proposals(proposal_of(robot), env)[0][0]).error.min()) * 1000
 
 
 def _solver(start: str, **changes) -> gt.SolverCfg:

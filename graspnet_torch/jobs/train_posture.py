@@ -23,6 +23,7 @@ from graspnet_torch.jobs.configs import TrainPostureJobCfg
 from graspnet_torch.proposal.checkpoint import posture_checkpoint, robot_signature, save_proposal
 from graspnet_torch.proposal.data import ProposalData, proposal_data
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
+from graspnet_torch.proposal.starts import proposals
 from graspnet_torch.proposal.train import ProposalTrainer
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
@@ -52,9 +53,7 @@ def evaluate_proposal(model: PostureProposal, robot: Robot, finger_ik: FingerIK 
         for k in range(n):
             problem, _ = random_posed_problem(robot, seed + k)
             env = build_environment(robot, problem, finger_ik, solver)
-            targets, mask = env.proposal_input()
-            configs = model(targets, mask)[0][0]
-            configs = torch.minimum(torch.maximum(configs, env.lower), env.upper)
+            configs = proposals(model, env)[0][0]
             ours.append(float(env.evaluate(configs).error.min()) * 1000)
             r = env.lower + (env.upper - env.lower) * torch.rand(configs.shape, generator=g)
             rand.append(float(env.evaluate(r).error.min()) * 1000)

@@ -3,39 +3,59 @@ configurations per problem, ranked by the environment's own evaluation."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import Tensor
 
 from graspnet_torch.proposal.model import PostureProposal
-from graspnet_torch.solver.environment import Environment
+from graspnet_torch.solver.environment import Environment, Evaluation
 
-__all__ = ["proposal_starts"]
+__all__ = ["proposal_starts", "proposals"]
 
 COLLISION_PENALTY_M = 1.0  # a proposal that collides ranks after every clear one
 
 
-def proposal_starts(model: PostureProposal, env: Environment, trials: int) -> Tensor:
-    """(T, n) the trials' starts, in the environment's search variables and dtype, within its
-    bounds: each problem's K proposals are evaluated by the environment (its error, a collision
-    counted as 1 m) and trial j of a problem starts at its j-th best (the K-th best repeats from
-    the best). ``trials``: T, every trial of the environment (a batch: its problems' runs)."""
+def proposals(model: PostureProposal, env: Environment) -> tuple[Tensor, Tensor | None]:
+    """Each problem's K proposals in the environment's search variables and dtype, within its
+    bounds: (P, K, n); and the first row (trial) of each problem (P,) (None: one problem)."""
     targets, mask = env.proposal_input()
     P = 1 if env.problem_index is None else int(env.problem_index.max()) + 1
-    runs = trials // P
-    first = torch.arange(P) * runs if env.problem_index is not None else torch.zeros(1, dtype=torch.long)
+    first = None if env.problem_index is None else torch.arange(P) * (targets.shape[0] // P)
+    rows = torch.zeros(1, dtype=torch.long) if first is None else first
     with torch.inference_mode():
-        configs, _ = model(targets[first.clamp(max=targets.shape[0] - 1)], mask[first.clamp(max=mask.shape[0] - 1)])
-        K, n = configs.shape[1], configs.shape[2]
-        lo, hi = (b.reshape(-1, n)[first.clamp(max=b.reshape(-1, n).shape[0] - 1)].cpu().float() for b in
-                  (env.lower, env.upper))
-        cand = torch.minimum(torch.maximum(configs, lo.unsqueeze(1)), hi.unsqueeze(1)).to(env.lower)  # (P, K, n)
-        rows = None if env.problem_index is None else first.repeat_interleave(K).to(env.lower.device)
+        configs = env.proposal_configs(model(targets[rows], mask[rows])[0], rows)
+        n = configs.shape[-1]
+        lo, hi = (b.reshape(-1, n)[rows if b.dim() == 2 else 0].reshape(-1, 1, n).cpu().to(configs)
+                  for b in (env.lower, env.upper))
+        return torch.minimum(torch.maximum(configs, lo), hi).to(env.lower), first
+
+
+def proposal_starts(model: PostureProposal, env: Environment, trials: int,
+                    observe: Callable[[Evaluation], Tensor] | None = None, keep: int | None = None) -> Tensor:
+    """(T, n) the trials' starts, in the environment's search variables and dtype, within its
+    bounds: each problem's K proposals (:func:`proposals`) are evaluated by the environment and
+    ranked, and trial j of a problem starts at its j-th best of the ``keep`` best (None: all K;
+    then from the best again). ``trials``: T, every trial of the environment (a batch: its
+    problems' runs).
+
+    Ranked by ``observe(evaluation)`` -> (B,) the reinforcement the search would observe (with
+    sensor noise: what it senses, each proposal one observation), highest first; None: by the
+    model's error, a collision counted as 1 m, lowest first."""
+    cand, first = proposals(model, env)
+    P, K, n = cand.shape
+    runs = trials // P
+    with torch.inference_mode():
+        rows = None if first is None else first.repeat_interleave(K).to(env.lower.device)
         ev = env.evaluate(cand.reshape(P * K, n), rows)
-        score = ev.error.float().cpu()
-        if ev.collisions is not None:
-            score = score + COLLISION_PENALTY_M * (ev.collisions.cpu() > 0).float()
+        if observe is not None:
+            score = -observe(ev).float().cpu()
+        else:
+            score = ev.error.float().cpu()
+            if ev.collisions is not None:
+                score = score + COLLISION_PENALTY_M * (ev.collisions.cpu() > 0).float()
         settled = ev.config.reshape(P, K, n)  # where the environment settled them (a gripper's settling steps)
         order = score.view(P, K).argsort(1)  # (P, K)
-        pick = order[:, torch.arange(runs) % K]  # (P, runs)
+        pick = order[:, torch.arange(runs) % min(K, keep or K)]  # (P, runs)
         starts = settled.gather(1, pick.to(settled.device).unsqueeze(-1).expand(P, runs, n))
     return starts.reshape(P * runs, n).clone()

@@ -187,7 +187,8 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
             outcome = run_cmaes(env, trials, seed, solver, reward, noise)
         else:
-            outcome = run_loop(env, trials, seed, solver, srv, reward, noise, start=_starts(env, trials, solver))
+            outcome = run_loop(env, trials, seed, solver, srv, reward, noise,
+                               start=_starts(env, trials, seed, solver, reward, noise))
         done = None
         if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
             pid = None if env.problem_index is None else env.problem_index.cpu()
@@ -200,11 +201,15 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
 
 _SAID_NO_MODEL: set[str] = set()
+NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: their own stream
 
 
-def _starts(env: Environment, trials: int, solver: SolverCfg) -> Tensor | None:
-    """The trials' starts of ``solver.start: proposal`` (None: random). A robot without a trained
-    posture proposal model starts at random, and the first such search says so."""
+def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg
+            ) -> Tensor | None:
+    """The trials' starts of ``solver.start: proposal`` (None: random). Ranked by the model's
+    error; with sensor noise by one noisy observation of each proposal's reinforcement (the
+    error is not observed), the trials at the best quarter. A robot without a trained posture
+    proposal model starts at random, and the first such search says so."""
     if solver.start != "proposal":
         return None
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
@@ -217,7 +222,14 @@ def _starts(env: Environment, trials: int, solver: SolverCfg) -> Tensor | None:
                           f"({posture_checkpoint(env.robot)}); its trials start at random (train one with "
                           f"`python scripts/train_posture.py robot={env.robot.cfg.cli_name}`)", stacklevel=3)
         return None
-    return proposal_starts(model, env, trials)
+    if noise.sigma == 0:
+        return proposal_starts(model, env, trials)
+    from graspnet_torch.rewards import add_noise
+
+    reward_fn = Reward(reward, solver.max_iterations, env.reward_base)
+    gen = torch.Generator(device=env.lower.device).manual_seed(seed + NOISY_RANKING_SEED)
+    return proposal_starts(model, env, trials, lambda ev: add_noise(reward_fn(ev, 1), noise.sigma, gen),
+                           keep=max(1, model.heads // 4))
 
 
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,

@@ -190,8 +190,14 @@ class Environment(ABC):
     @abstractmethod
     def proposal_input(self) -> tuple[Tensor, Tensor]:
         """What a posture proposal model (:mod:`graspnet_torch.proposal`) sees: each row's
-        targets in this environment's frame (R, S, 3) and their mask (R, S), R = 1 for one
-        problem or T (one row per trial) for a batch."""
+        targets in its proposal frame (R, S, 3) and their mask (R, S), R = 1 for one problem or
+        T (one row per trial) for a batch."""
+
+    def proposal_configs(self, configs: Tensor, rows: Tensor) -> Tensor:
+        """A proposal model's configurations (B, K, n) for the rows ``rows`` (B,) of
+        :meth:`proposal_input` -> this environment's search variables (B, K, n). Default: the
+        same (the model answers in them)."""
+        return configs
 
     # -- the whole configuration x: what solver=dls and the polishes move ------------------------
 

@@ -7,6 +7,7 @@ forward kinematics gives each fingertip's error (eq. 3, computed in the finger f
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -57,6 +58,7 @@ class HandEnvironment(FingerEnvironment):
         local = [p.moved(np.linalg.inv(s.frame)) for p, s in zip(problems, self.spaces, strict=True)]
         super().__init__(robot, local if len(local) > 1 else local[0], solver, ik, dtype, device, collisions, runs)
         self.world_problems = problems
+        self._proposal: tuple[Tensor, Tensor] | None = None
         frames = np.stack([s.frame for s in self.spaces])
         lo = np.stack([s.lower for s in self.spaces])
         hi = np.stack([s.upper for s in self.spaces])
@@ -90,6 +92,47 @@ class HandEnvironment(FingerEnvironment):
         return cls(robot, problem, solver, ik, dtype, device, collisions, spaces=[space]).near(
             posture, solver.polish.warm_step_deg)
 
+    def proposal_input(self) -> tuple[Tensor, Tensor]:
+        """The contacts in each problem's contact search frame
+        (:func:`~graspnet_torch.solver.search_space.contact_search_frame`, whatever its
+        ``palm_bounds``: the same contacts moved and turned give the same input), one slot per
+        robot finger: (R, F_all, 3), mask (R, F_all)."""
+        from graspnet_torch.robot.transforms import untransform_points
+
+        targets, mask = super().proposal_input()  # in the search frame G of each row
+        P_R, P_t = self._proposal_frames()  # the proposal frame P in G, per row
+        local = untransform_points(P_R.unsqueeze(1), P_t.unsqueeze(1), targets.double()).float()
+        return local * mask.unsqueeze(-1), mask
+
+    def proposal_configs(self, configs: Tensor, rows: Tensor) -> Tensor:
+        """Palm poses (B, K, 6) in the rows' proposal frames P -> in the search frame G (G^-1 P
+        pose), each angle within 2 pi of the middle of its bounds."""
+        from graspnet_torch.robot.transforms import compose, rt_to_pose
+
+        B, K, _ = configs.shape
+        P_R, P_t = (f[rows.cpu()] for f in self._proposal_frames())
+        R, t = pose_to_rt(configs.double().reshape(B * K, 6))
+        R, t = compose(P_R.repeat_interleave(K, 0), P_t.repeat_interleave(K, 0), R, t)
+        pose = rt_to_pose(R, t).reshape(B, K, 6)
+        lo, hi = (b.reshape(-1, 6)[rows.cpu() if b.dim() == 2 else 0] for b in self._bounds64)
+        middle = ((lo[..., 3:] + hi[..., 3:]) / 2).reshape(-1, 1, 3).expand(B, 1, 3)
+        pose[..., 3:] += 2 * math.pi * torch.round((middle - pose[..., 3:]) / (2 * math.pi))
+        return pose.to(configs)
+
+    def _proposal_frames(self) -> tuple[Tensor, Tensor]:
+        """Per row of :meth:`proposal_input`: the proposal frame P in the search frame G
+        (G^-1 C_p), rotation (R, 3, 3) and translation (R, 3), float64."""
+        if self._proposal is None:
+            from graspnet_torch.solver.search_space import contact_search_frame
+
+            frames = np.stack([np.linalg.inv(s.frame) @ contact_search_frame(self.robot, p)
+                               for p, s in zip(self.world_problems, self.spaces, strict=True)])
+            if len(self.world_problems) > 1:
+                frames = np.repeat(frames, self.runs, axis=0)
+            frames = torch.as_tensor(frames, dtype=torch.float64)
+            self._proposal = (frames[:, :3, :3], frames[:, :3, 3])
+        return self._proposal
+
     def palm_frame(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
         """The configuration is the palm pose. (T, 6) -> R (T, 3, 3), t (T, 3)."""
         return pose_to_rt(palm_pose)
@@ -104,7 +147,6 @@ class HandEnvironment(FingerEnvironment):
     def config_of(self, posture: Posture) -> Tensor:
         """The posture's palm pose in the (first) search frame G: G^-1 o pose (1, 6); each angle
         taken within 2 pi of the middle of its bounds."""
-        import math
 
         from graspnet_torch.robot.transforms import rt_to_pose
 

@@ -35,8 +35,8 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["PalmSearchSpace", "contact_frame", "finger_reach", "hand_frame", "palm_search_space",
-           "palm_space_around", "sample_hand_configurations"]
+__all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "hand_frame",
+           "palm_search_space", "palm_space_around", "sample_hand_configurations"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -132,16 +132,22 @@ def palm_search_space(robot: Robot, problem: GraspProblem) -> PalmSearchSpace:
         return PalmSearchSpace(np.eye(4), box.lower.copy(), box.upper.copy(),
                                "robot" if problem.palm_bounds == "robot" else "problem")
     fingers, world = _ordered_contacts(robot, problem)
+    G = contact_search_frame(robot, problem)
+    lo, hi = _reach_box(robot, problem, fingers, world, G)
+    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
+                           "contacts")
+
+
+def contact_search_frame(robot: Robot, problem: GraspProblem) -> np.ndarray:
+    """(4, 4) the search frame G = C H^-1 made from a problem's contacts (module docstring),
+    whatever its ``palm_bounds``: where a posture proposal model sees the contacts and answers."""
+    fingers, world = _ordered_contacts(robot, problem)
     reference = None
     if problem.object is not None:
         from graspnet_torch.robot.chain import rpy_matrix_np
 
         reference = rpy_matrix_np(problem.object.pose[3:])[:, 2]
-    C = contact_frame(world, reference)
-    G = C @ np.linalg.inv(hand_frame(robot, fingers))
-    lo, hi = _reach_box(robot, problem, fingers, world, G)
-    return PalmSearchSpace(G, np.concatenate([lo, ORIENTATIONS[0]]), np.concatenate([hi, ORIENTATIONS[1]]),
-                           "contacts")
+    return contact_frame(world, reference) @ np.linalg.inv(hand_frame(robot, fingers))
 
 
 def palm_space_around(robot: Robot, problem: GraspProblem, palm: np.ndarray) -> PalmSearchSpace:
