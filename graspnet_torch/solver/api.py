@@ -206,24 +206,27 @@ NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: the
 
 def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg
             ) -> Tensor | None:
-    """The trials' starts of ``solver.start: proposal`` (None: random). Ranked by the model's
-    error; with sensor noise by one noisy observation of each proposal's reinforcement (the
-    error is not observed), the trials at the best quarter. A robot without a trained posture
-    proposal model starts at random, and the first such search says so."""
-    if solver.start != "proposal":
+    """The trials' starts (None: random within the bounds) of ``solver.start``: 'proposal', or
+    'auto' where the search counts no collision (a proposal does not see the object or the
+    obstacles: near them it lands grasps through them, measured in the experiment proposal).
+    Ranked by the model's error; with sensor noise by one noisy observation of each proposal's
+    reinforcement (the error is not observed); the trials at the best quarter. A robot without
+    a trained posture proposal model starts at random, and with 'proposal' the first such search
+    says so."""
+    if solver.start == "random" or (solver.start == "auto" and env.counts_collisions):
         return None
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
 
     model = proposal_of(env.robot)
     if model is None:
-        if env.robot.name not in _SAID_NO_MODEL:
+        if solver.start == "proposal" and env.robot.name not in _SAID_NO_MODEL:
             _SAID_NO_MODEL.add(env.robot.name)
             warnings.warn(f"solver.start=proposal: robot '{env.robot.name}' has no posture proposal model "
                           f"({posture_checkpoint(env.robot)}); its trials start at random (train one with "
                           f"`python scripts/train_posture.py robot={env.robot.cfg.cli_name}`)", stacklevel=3)
         return None
     if noise.sigma == 0:
-        return proposal_starts(model, env, trials)
+        return proposal_starts(model, env, trials, keep=max(1, model.heads // 4))
     from graspnet_torch.rewards import add_noise
 
     reward_fn = Reward(reward, solver.max_iterations, env.reward_base)

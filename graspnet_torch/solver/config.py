@@ -215,11 +215,14 @@ class SolverCfg:
             iterations). ``None``: never (the paper).
         report: 'best' (the configuration with the highest observed reinforcement; without
             noise, the smallest error) or 'final' (the last one).
-        start: where the trials start: 'random' (uniform within the bounds, the paper) or
+        start: where the trials start: 'random' (uniform within the bounds, the paper),
             'proposal' (the robot's posture proposal model, :mod:`graspnet_torch.proposal`: each
-            problem's K proposals ranked by the environment's error, trial j at the j-th best, the
-            SRV network's first output placed there; a robot without a trained model starts at
-            random, said once). srv only.
+            problem's K proposals ranked by the environment's error (with sensor noise: by one
+            noisy observation each), trial j at the j-th best of the best quarter, evaluated as
+            the first iteration, the SRV network's mean output and expected reinforcement placed
+            there; a robot without a trained model starts at random, said once) or 'auto' (the
+            default: 'proposal' where the search counts no collision and the robot has a model,
+            else 'random': a proposal does not see objects or obstacles). srv only.
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
             errors, time) for logs and plots.
         dtype: 'float32' (hot path) or 'float64'.
@@ -236,7 +239,7 @@ class SolverCfg:
     stop_clear: bool | None = None
     restart_every: int | None = setting(None, lo=1, hi=10_000_000)
     report: str = setting("best", choices=("best", "final"))
-    start: str = setting("random", choices=("random", "proposal"))
+    start: str = setting("auto", choices=("auto", "random", "proposal"))
     history: bool = True
     dtype: str = setting("float32", choices=("float32", "float64"))
     polish: PolishCfg = PolishCfg()

@@ -187,11 +187,11 @@ class Environment(ABC):
         the usual environment."""
         return cls(robot, problem, solver, ik, dtype, device, collisions)
 
-    @abstractmethod
     def proposal_input(self) -> tuple[Tensor, Tensor]:
         """What a posture proposal model (:mod:`graspnet_torch.proposal`) sees: each row's
         targets in its proposal frame (R, S, 3) and their mask (R, S), R = 1 for one problem or
-        T (one row per trial) for a batch."""
+        T (one row per trial) for a batch. The hand, arm and gripper environments give it."""
+        raise NotImplementedError(f"{type(self).__name__} gives no input to a posture proposal model")
 
     def proposal_configs(self, configs: Tensor, rows: Tensor) -> Tensor:
         """A proposal model's configurations (B, K, n) for the rows ``rows`` (B,) of

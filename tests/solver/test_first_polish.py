@@ -1,5 +1,6 @@
 """solver.polish.from_r_free: with nothing to collide with, the first iteration's polish of every
-proposal lands most problems at once; near an object the setting changes nothing."""
+proposal of random learners (``solver.start: random``) lands most problems at once; near an object
+the setting changes nothing."""
 
 from __future__ import annotations
 
@@ -13,8 +14,8 @@ import graspnet_torch as gt
 
 def _with(solver: gt.Solver, **polish) -> gt.Solver:
     cfg = solver.solver_cfg
-    return gt.Solver(solver.robot, trials=8, solver=dataclasses.replace(cfg, polish=dataclasses.replace(cfg.polish,
-                                                                                                       **polish)))
+    return gt.Solver(solver.robot, trials=8, solver=dataclasses.replace(
+        cfg, start="random", polish=dataclasses.replace(cfg.polish, **polish)))
 
 
 @pytest.fixture(scope="module")

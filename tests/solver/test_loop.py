@@ -188,12 +188,12 @@ def test_stop_clear_must_be_a_boolean():
 
 @pytest.mark.slow
 def test_restarts_free_a_stuck_learner(hand):
-    """Random problem 10_046 x 4 learners: without restarts none of them lands within the 2000
-    iterations; restarting the ones still searching every 200 iterations lands it (and the batch
-    ends sooner)."""
+    """Random problem 10_046 x 4 learners from random starts: without restarts none of them lands
+    within the 2000 iterations; restarting the ones still searching every 200 iterations lands it
+    (and the batch ends sooner)."""
     problems = [gt.random_reachable_problem(hand, 10_000 + k) for k in (46, 58, 269, 284)]
-    plain = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=None))
-    restarted = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=200))
+    plain = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=None, start="random"))
+    restarted = gt.solve_many(problems, trials=4, seed=0, solver=SolverCfg(restart_every=200, start="random"))
     assert not plain[0].success and plain[0].best.iterations == 2000
     assert all(r.success for r in restarted)
     assert restarted[0].outcome.wall_time_s < plain[0].outcome.wall_time_s
