@@ -125,7 +125,8 @@ class HandEnvironment(FingerEnvironment):
         if self._proposal is None:
             from graspnet_torch.solver.search_space import contact_search_frame
 
-            frames = np.stack([np.linalg.inv(s.frame) @ contact_search_frame(self.robot, p)
+            frames = np.stack([np.eye(4) if s.kind == "contacts" else  # the search frame is the proposal frame
+                               np.linalg.inv(s.frame) @ contact_search_frame(self.robot, p)
                                for p, s in zip(self.world_problems, self.spaces, strict=True)])
             if len(self.world_problems) > 1:
                 frames = np.repeat(frames, self.runs, axis=0)
