@@ -8,13 +8,28 @@ import pytest
 
 import graspnet_torch as gt
 from graspnet_torch.fcnn.train import FCNNTrainCfg
-from graspnet_torch.jobs.configs import SolveGraspJobCfg, TrainFCNNJobCfg, estimate_solve_memory
+from graspnet_torch.jobs.configs import SolveGraspJobCfg, TrainFCNNJobCfg, TrainPostureJobCfg, estimate_solve_memory
+from graspnet_torch.proposal import ProposalCfg
 from graspnet_torch.settings import Free, build, lookup, setting, short
 
 
 def test_defaults_build_and_equal_the_dataclass_defaults():
-    for cls in (gt.SolverCfg, gt.SRVNetCfg, gt.RewardCfg, gt.NoiseCfg, FCNNTrainCfg, SolveGraspJobCfg, TrainFCNNJobCfg):
+    for cls in (gt.SolverCfg, gt.SRVNetCfg, gt.RewardCfg, gt.NoiseCfg, FCNNTrainCfg, SolveGraspJobCfg, TrainFCNNJobCfg,
+                ProposalCfg, TrainPostureJobCfg):
         assert build(cls, {}) == cls() == build(cls, None)
+
+
+@pytest.mark.parametrize(("path", "cls"), [("solver/srv.yaml", gt.SolverCfg), ("posture/default.yaml", ProposalCfg)])
+def test_the_shipped_group_yaml_lists_the_dataclass_defaults(path, cls):
+    """configs/<group>/<name>.yaml, which the command line composes, says what the Python API's
+    defaults are: the same values."""
+    import yaml
+
+    from graspnet_torch.paths import configs_dir
+
+    data = yaml.safe_load((configs_dir() / path).read_text())
+    data.pop("defaults", None)
+    assert build(cls, data) == cls()
 
 
 def test_every_field_of_every_job_has_a_type_the_checker_knows():
@@ -30,7 +45,7 @@ def test_every_field_of_every_job_has_a_type_the_checker_knows():
                 default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
                 build(cls, {f.name: list(default) if isinstance(default, tuple) else default})
 
-    for cls in (SolveGraspJobCfg, TrainFCNNJobCfg):
+    for cls in (SolveGraspJobCfg, TrainFCNNJobCfg, TrainPostureJobCfg):
         walk(cls)
 
 

@@ -114,6 +114,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["solver.polish.from_r_free=5"], "solver.polish.from_r_free=5: expected a number in [-1, 1] or null"),
     (["solver.polish.warm_step_deg=0"], "solver.polish.warm_step_deg=0: expected a number in (0, 360] or null"),
     (["solver.polish.centre=-1"], "solver.polish.centre=-1: expected a number in (0, 1000] or null"),
+    (["solver.start=learned"], "solver.start='learned': expected one of auto, random, proposal"),
     (["sequence=maybe"], "sequence='maybe': expected true or false"),
     (["solver.polish_iterations=5"], "unknown setting 'solver.polish_iterations' (now solver.polish.iterations)"),
     (["reward=r5"], "unknown reward 'r5': expected one of default, r1, r2, r3, r4"),
