@@ -211,17 +211,16 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     obstacles: near them it lands grasps through them, measured in the experiment proposal).
     Ranked by the model's error; with sensor noise by one noisy observation of each proposal's
     reinforcement (the error is not observed); the trials at the best quarter. A robot without
-    a trained posture proposal model starts at random, and with 'proposal' the first such search
-    says so."""
+    a trained posture proposal model starts at random, and its first such search says so."""
     if solver.start == "random" or (solver.start == "auto" and env.counts_collisions):
         return None
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
 
     model = proposal_of(env.robot)
     if model is None:
-        if solver.start == "proposal" and env.robot.name not in _SAID_NO_MODEL:
+        if env.robot.name not in _SAID_NO_MODEL:
             _SAID_NO_MODEL.add(env.robot.name)
-            warnings.warn(f"solver.start=proposal: robot '{env.robot.name}' has no posture proposal model "
+            warnings.warn(f"solver.start={solver.start}: robot '{env.robot.name}' has no posture proposal model "
                           f"({posture_checkpoint(env.robot)}); its trials start at random (train one with "
                           f"`python scripts/train_posture.py robot={env.robot.cfg.cli_name}`)", stacklevel=3)
         return None
