@@ -26,12 +26,12 @@ FORMAT = "graspnet_torch.posture/1"
 
 
 def posture_checkpoint(robot: Robot) -> Path:
-    """Where a robot's proposal model is read from (and written by ``train_posture.py``): beside
-    its own FCNN checkpoint when its config names one of its own (``<name>.fcnn.pt`` ->
-    ``<name>.posture.pt``, a config given by path), else ``checkpoints/<name>/posture.pt``."""
+    """Where a robot's proposal model is read from (and written by ``train_posture.py``):
+    ``<config folder>/<name>.posture.pt`` for a robot config given by its path (beside its FCNN),
+    else ``checkpoints/<name>/posture.pt``."""
     cfg = robot.cfg
-    if cfg.checkpoint is not None and cfg.checkpoint.name == f"{cfg.name}.fcnn.pt":
-        return cfg.checkpoint.with_name(f"{cfg.name}.posture.pt")
+    if cfg.cli_name != cfg.name:  # a config file of its own, not a shipped one
+        return Path(cfg.source).resolve().parent / f"{cfg.name}.posture.pt"
     return checkpoints_dir() / cfg.name / "posture.pt"
 
 
