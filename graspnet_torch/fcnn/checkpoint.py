@@ -25,8 +25,8 @@ from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.fingers import FingerChain
 from graspnet_torch.robot.robot import Robot, load_robot
 
-__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "finger_ik_of", "load_finger_ik", "non_finite_tensors",
-           "robot_checkpoint", "save_finger_ik"]
+__all__ = ["FORMAT", "chain_fingerprint", "default_checkpoint", "finger_ik_of", "load_finger_ik", "load_payload",
+           "non_finite_tensors", "robot_checkpoint", "save_finger_ik"]
 
 FORMAT = "graspnet_torch.fcnn/1"
 
@@ -55,6 +55,20 @@ def non_finite_tensors(obj: Any, prefix: str = "") -> list[str]:
     if isinstance(obj, list | tuple):
         return [p for i, v in enumerate(obj) for p in non_finite_tensors(v, f"{prefix}[{i}]")]
     return []
+
+
+def load_payload(path: str | Path, fmt: str, unreadable: str, foreign: str) -> dict:
+    """A file of plain dicts and tensors (``torch.load`` with ``weights_only=True``) that says it
+    is of format ``fmt``. Raises :class:`CheckpointError` "<path>: <unreadable> (<error type>)"
+    when torch cannot read it (it raises assorted errors on truncated or foreign files), and
+    "<path>: <foreign>" when it is not a dict of that format."""
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise CheckpointError(f"{path}: {unreadable} ({type(exc).__name__})") from None
+    if not isinstance(payload, dict) or payload.get("format") != fmt:
+        raise CheckpointError(f"{path}: {foreign}")
+    return payload
 
 
 def default_checkpoint(robot_name: str) -> Path:

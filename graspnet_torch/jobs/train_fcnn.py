@@ -14,7 +14,13 @@ from typing import Any
 import torch
 
 from graspnet_torch.errors import CheckpointError, ConfigError
-from graspnet_torch.fcnn.checkpoint import chain_fingerprint, non_finite_tensors, robot_checkpoint, save_finger_ik
+from graspnet_torch.fcnn.checkpoint import (
+    chain_fingerprint,
+    load_payload,
+    non_finite_tensors,
+    robot_checkpoint,
+    save_finger_ik,
+)
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
@@ -71,12 +77,8 @@ def _save_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int, trainers
 
 
 def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise CheckpointError(f"{path}: cannot resume, not a readable training state ({type(exc).__name__})") from None
-    if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
-        raise CheckpointError(f"{path}: cannot resume, not an FCNN training state")
+    state = load_payload(path, STATE_FORMAT, "cannot resume, not a readable training state",
+                         "cannot resume, not an FCNN training state")
     shapes = {"robot": str, "seed": int, "cfg": dict, "fingerprints": dict, "fingers": dict, "finished": list}
     wrong = [k for k, t in shapes.items() if not isinstance(state.get(k), t)]
     if wrong or not all(isinstance(f, str) for f in [*state["finished"], *state["fingers"], *state["fingerprints"]]) \

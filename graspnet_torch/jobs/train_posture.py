@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import CheckpointError, ConfigError
-from graspnet_torch.fcnn.checkpoint import finger_ik_of, non_finite_tensors
+from graspnet_torch.fcnn.checkpoint import finger_ik_of, load_payload, non_finite_tensors
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
@@ -86,12 +86,8 @@ def _signature(cfg: ProposalCfg) -> dict:
 
 
 def _load_state(path: Path, robot: Robot, cfg: ProposalCfg, seed: int) -> dict:
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise CheckpointError(f"{path}: cannot resume, not a readable training state ({type(exc).__name__})") from None
-    if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
-        raise CheckpointError(f"{path}: cannot resume, not a posture proposal training state")
+    state = load_payload(path, STATE_FORMAT, "cannot resume, not a readable training state",
+                         "cannot resume, not a posture proposal training state")
     if state.get("robot") != robot.name or state.get("seed") != seed or \
             state.get("signature") != robot_signature(robot):
         raise ConfigError(f"{path}: cannot resume, it trains robot '{state.get('robot')}' with seed "

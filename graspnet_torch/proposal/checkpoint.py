@@ -14,7 +14,7 @@ from pathlib import Path
 import torch
 
 from graspnet_torch.errors import CheckpointError
-from graspnet_torch.fcnn.checkpoint import non_finite_tensors
+from graspnet_torch.fcnn.checkpoint import load_payload, non_finite_tensors
 from graspnet_torch.io import atomic_path
 from graspnet_torch.paths import checkpoints_dir
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
@@ -68,12 +68,8 @@ def load_proposal(robot: Robot, path: str | Path | None = None) -> PosturePropos
     if not path.is_file():
         raise CheckpointError(f"{where}: no posture proposal model for robot '{robot.name}'; train one with "
                               f"{_train_hint(robot)}")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise CheckpointError(f"{where}: not a readable posture proposal checkpoint ({type(exc).__name__})") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise CheckpointError(f"{where}: not a posture proposal checkpoint (format {FORMAT!r} expected)")
+    payload = load_payload(path, FORMAT, "not a readable posture proposal checkpoint",
+                           f"not a posture proposal checkpoint (format {FORMAT!r} expected)")
     try:
         signature, state = payload["signature"], payload["state"]
         slots, n, heads, hidden = int(payload["slots"]), int(payload["n"]), int(payload["heads"]), payload["hidden"]
