@@ -6,12 +6,15 @@ and for sequences (tracking).
     result = solver.solve(problem, start=result)  # warm: from a previous result's posture
     results = solver.track(frames)                # a sequence, each frame from the last
 
-A warm start runs Levenberg-Marquardt over the whole configuration (the palm pose or the arm's
-joints with the contact fingers' joints: the local solver of ``solver=dls``) from the given
-posture; when it lands (every contact within ``solver.tolerance_mm``, no collision) that is the
-result, one trial, and the joints stay near the start's (the least-squares step is the smallest
-that closes the error). Otherwise the frame gets the full search (``solver.method``, ``trials``
-trials), with the warm trial kept among its trials.
+A warm start runs Levenberg-Marquardt over the whole configuration (the palm pose, searched in
+the start palm's own frame, or the arm's joints, with the contact fingers' joints: the local
+solver of ``solver=dls``) from the given posture, no finger joint moving more than
+``solver.polish.warm_step_deg``; where it does not land, once more from the posture moved toward
+mid-range joints with its contacts held (``solver.polish.centre``). When it lands (every contact
+within ``solver.tolerance_mm``, no collision) that is the result, one trial. Otherwise the frame
+gets the full search (``solver.method``, ``trials`` trials), with the warm trial kept among its
+trials, the successful trial nearest the start reported, and (as for a sequence's first frame)
+centred.
 """
 
 from __future__ import annotations
@@ -98,9 +101,6 @@ class Solver:
             warm = self._warm(problem, self._posture(start), seed)
             if warm.success:
                 return warm
-            rescue = self._warm(problem, self._posture(start), seed, centre=True)
-            if rescue.success:
-                return rescue
         cold = api.solve_with(self.robot, self.finger_ik, problem, self.trials, seed, self.solver_cfg, self.srv,
                               self.reward, self.noise, self.device)
         if warm is None:
@@ -176,15 +176,18 @@ class Solver:
             return start
         return trial_posture(self.robot, start.best if isinstance(start, GraspResult) else start)
 
-    def _warm(self, problem: GraspProblem, posture: Posture, seed: int, centre: bool = False) -> GraspResult:
+    def _warm(self, problem: GraspProblem, posture: Posture, seed: int) -> GraspResult:
         """Levenberg-Marquardt from the posture (``solver.polish.iterations`` steps, to
         ``solver.polish.tolerance_mm``), its fingers' joints within ``solver.polish.warm_step_deg``
-        of the posture's: a result of one trial."""
+        of the posture's; where it does not land, once more from the posture centred
+        (``solver.polish.centre``, in the same environment): a result of one trial."""
         env = self._around(problem, posture)
         x = env.whole_of(posture)
-        if centre and self.solver_cfg.polish.centre is not None:
-            x = env.centre(x, self.solver_cfg.polish.centre, CENTRE_STEPS)
-        return self._land(problem, env, x, seed)
+        warm = self._land(problem, env, x, seed)
+        weight = self.solver_cfg.polish.centre
+        if warm.success or weight is None:
+            return warm
+        return self._land(problem, env, env.centre(x, weight, CENTRE_STEPS), seed)
 
     def _around(self, problem: GraspProblem, posture: Posture) -> Environment:
         cfg = self.solver_cfg
