@@ -235,10 +235,11 @@ class FingerEnvironment(Environment):
         if step_deg is not None:
             import math
 
-            spec = [self.robot.fingers[self.robot.finger_names[i]].chain.spec for i in self.idx]
-            unit = torch.tensor([[math.radians(step_deg) if t != "prismatic" else step_deg / 1000
-                                  for t in s.joint_types] + [0.0] * (self.robot.joints_per_finger - len(s.joint_types))
-                                 for s in spec], dtype=torch.float64)
+            chains = [self.robot.fingers[self.robot.finger_names[i]].chain for i in self.idx]
+            j = self.robot.joints_per_finger
+            unit = torch.tensor([[math.radians(step_deg) if c.spec.joint_types[k] != "prismatic" else step_deg / 1000
+                                  for k in c.free] + [0.0] * (j - len(c.free))  # free joints; padding slots
+                                 for c in chains], dtype=torch.float64)
             q = posture.fingers[self.idx].to(torch.float64)
             flo, fhi = (torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
             lo, hi = torch.maximum(flo, q - unit), torch.minimum(fhi, q + unit)

@@ -103,3 +103,18 @@ def test_an_arm_carries_another_hand(trained, tmp_path):
     for c, world in zip(problem.contacts, problem.contacts_world(), strict=True):
         err_mm = float(torch.linalg.vector_norm(tips[arm.finger_index(c.finger)] - torch.as_tensor(world))) * 1000
         assert err_mm == pytest.approx(data["fingertip_error_mm"][c.finger], abs=1e-4)
+
+
+def test_tracking_the_odd_hand_bounds_each_free_joints_step(trained):
+    """Fingers of different sizes, a mimic joint: a tracked sequence's warm starts move no free
+    finger joint more than solver.polish.warm_step_deg (the padding slots never move) and land."""
+    robot, ik, _ = trained
+    frames = gt.random_sequence(robot, 5, 8, (3, 4))
+    results = gt.Solver(robot, trials=8, finger_ik=ik).track(frames)
+    step = math.radians(gt.SolverCfg().polish.warm_step_deg)
+    idx = [robot.finger_index(f) for f in frames[0].fingers]
+    for a, b in zip(results, results[1:], strict=False):
+        if len(b.trials) == 1:  # a warm start's own trial
+            qa, qb = (robot.finger_joints_from_file(r.best.joints)[idx] for r in (a, b))
+            assert float((qa - qb).abs().max()) <= step + 1e-6
+    assert sum(r.success for r in results) >= 7
