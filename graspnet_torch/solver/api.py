@@ -207,12 +207,15 @@ NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: the
 def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg
             ) -> Tensor | None:
     """The trials' starts (None: random within the bounds) of ``solver.start``: 'proposal', or
-    'auto' where the search counts no collision (a proposal does not see the object or the
-    obstacles: near them it lands grasps through them, measured in the experiment proposal).
+    'auto' where the problems have no object and no obstacles (a proposal does not see them: near
+    them it lands grasps through them, measured in the experiment proposal).
     Ranked by the model's error; with sensor noise by one noisy observation of each proposal's
     reinforcement (the error is not observed); the trials at the best quarter. A robot without
     a trained posture proposal model starts at random, and its first such search says so."""
-    if solver.start == "random" or (solver.start == "auto" and env.counts_collisions):
+    from graspnet_torch.collision.scene import has_environment
+
+    if solver.start == "random" or (solver.start == "auto" and any(has_environment(env.robot, p)
+                                                                   for p in env.problems)):
         return None
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
 

@@ -221,8 +221,8 @@ class SolverCfg:
             noisy observation each), trial j at the j-th best of the best quarter, evaluated as
             the first iteration, the SRV network's mean output and expected reinforcement placed
             there; a robot without a trained model starts at random, said once) or 'auto' (the
-            default: 'proposal' where the search counts no collision, else 'random': a proposal
-            does not see objects or obstacles). srv only.
+            default: 'proposal' where the problem has no object and no obstacles, else 'random': a
+            proposal does not see them, and near them its grasps pass through them). srv only.
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
             errors, time) for logs and plots.
         dtype: 'float32' (hot path) or 'float64'.

@@ -123,6 +123,7 @@ class Environment(ABC):
     """What every solver may call. Settings reach an environment when it is built.
 
     Attributes:
+        robot: the robot; problems: the problems (one, or a batch's), in the environment's frame.
         n: size of the searched configuration.
         lower, upper: (n,) bounds, or (T, n) per trial for a batch of problems.
         problem_index: (T,) each trial's problem in a batch of problems (trial t on problem

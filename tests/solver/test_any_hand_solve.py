@@ -4,6 +4,7 @@ result is recomputed from the URDF with mimic couplings exact."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
@@ -113,7 +114,7 @@ def test_tracking_the_odd_hand_bounds_each_free_joints_step(trained):
     results = gt.Solver(robot, trials=8, finger_ik=ik).track(frames)
     step = math.radians(gt.SolverCfg().polish.warm_step_deg)
     idx = [robot.finger_index(f) for f in frames[0].fingers]
-    for a, b in zip(results, results[1:], strict=False):
+    for a, b in itertools.pairwise(results):
         if len(b.trials) == 1:  # a warm start's own trial
             qa, qb = (robot.finger_joints_from_file(r.best.joints)[idx] for r in (a, b))
             assert float((qa - qb).abs().max()) <= step + 1e-6
