@@ -10,6 +10,7 @@ from torch import Tensor
 
 from graspnet_torch.proposal.model import PostureProposal
 from graspnet_torch.solver.environment import Environment, Evaluation
+from graspnet_torch.solver.loop import Starts
 
 __all__ = ["proposal_starts", "proposals"]
 
@@ -32,12 +33,15 @@ def proposals(model: PostureProposal, env: Environment) -> tuple[Tensor, Tensor 
 
 
 def proposal_starts(model: PostureProposal, env: Environment, trials: int,
-                    observe: Callable[[Evaluation], Tensor] | None = None, keep: int | None = None) -> Tensor:
-    """(T, n) the trials' starts, in the environment's search variables and dtype, within its
-    bounds: each problem's K proposals (:func:`proposals`) are evaluated by the environment and
-    ranked, and trial j of a problem starts at its j-th best of the ``keep`` best (None: all K;
-    then from the best again). ``trials``: T, every trial of the environment (a batch: its
-    problems' runs).
+                    observe: Callable[[Evaluation], Tensor] | None = None, keep: int | None = None,
+                    colliding_random: bool = True) -> Starts:
+    """The trials' starts (``config`` (T, n) in the environment's search variables and dtype,
+    within its bounds): each problem's K proposals (:func:`proposals`) are evaluated by the
+    environment and ranked, and trial j of a problem starts at its j-th best of the ``keep`` best
+    (None: all K; then from the best again). With ``colliding_random``, a proposal the
+    environment finds colliding (the model does not see objects and obstacles) is no start: that
+    trial starts at random, as the paper's do (``given`` False). ``trials``: T, every trial of the
+    environment (a batch: its problems' runs).
 
     Ranked by ``observe(evaluation)`` -> (B,) the reinforcement the search would observe (with
     sensor noise: what it senses, each proposal one observation), highest first; None: by the
@@ -58,4 +62,6 @@ def proposal_starts(model: PostureProposal, env: Environment, trials: int,
         order = score.view(P, K).argsort(1)  # (P, K)
         pick = order[:, torch.arange(runs) % min(K, keep or K)]  # (P, runs)
         starts = settled.gather(1, pick.to(settled.device).unsqueeze(-1).expand(P, runs, n))
-    return starts.reshape(P * runs, n).clone()
+        clear = torch.ones(P, K, dtype=torch.bool) if ev.collisions is None else (ev.collisions.cpu() == 0).view(P, K)
+        given = clear.gather(1, pick) | (not colliding_random)
+    return Starts(config=starts.reshape(P * runs, n).clone(), given=given.reshape(P * runs))

@@ -21,7 +21,7 @@ from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Report
 from graspnet_torch.solver.environments import build_environment, environment_class
-from graspnet_torch.solver.loop import LoopOutcome, enough_succeeded, run_loop
+from graspnet_torch.solver.loop import LoopOutcome, Starts, enough_succeeded, run_loop
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
@@ -205,12 +205,17 @@ NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: the
 
 
 def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg
-            ) -> Tensor | None:
+            ) -> Starts | None:
     """The trials' starts (None: random within the bounds) of ``solver.start``: 'proposal', or
     'auto' where the problems have no object and no obstacles (a proposal does not see them: near
     them it lands grasps through them, measured in the experiment proposal).
-    Ranked by the model's error; with sensor noise by one noisy observation of each proposal's
-    reinforcement (the error is not observed); the trials at the best quarter. A robot without
+    Ranked by the model's error, trial j at the j-th best; with sensor noise by one noisy
+    observation of each proposal's reinforcement (the error is not observed), the trials at the
+    best quarter. A proposal the environment finds colliding starts its trial (exploring widely:
+    the loop places no expected reinforcement there) where the trials are restarts of one search
+    (``solver.stop`` set: measured on the arm, its polish often lands clear); where every trial
+    runs to its own stop (``stop: null``, independent learners) it is no start: that trial starts
+    at random (measured on the MANUS, whose colliding proposals pass through the table). A robot without
     a trained posture proposal model starts at random, and its first such search says so."""
     from graspnet_torch.collision.scene import has_environment
 
@@ -228,13 +233,13 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
                           f"`python scripts/train_posture.py robot={env.robot.cfg.cli_name}`)", stacklevel=3)
         return None
     if noise.sigma == 0:
-        return proposal_starts(model, env, trials, keep=max(1, model.heads // 4))
+        return proposal_starts(model, env, trials, keep=None, colliding_random=solver.stop is None)
     from graspnet_torch.rewards import add_noise
 
     reward_fn = Reward(reward, solver.max_iterations, env.reward_base)
     gen = torch.Generator(device=env.lower.device).manual_seed(seed + NOISY_RANKING_SEED)
     return proposal_starts(model, env, trials, lambda ev: add_noise(reward_fn(ev, 1), noise.sigma, gen),
-                           keep=max(1, model.heads // 4))
+                           keep=max(1, model.heads // 4), colliding_random=solver.stop is None)
 
 
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,

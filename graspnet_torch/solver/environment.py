@@ -123,7 +123,8 @@ class Environment(ABC):
     """What every solver may call. Settings reach an environment when it is built.
 
     Attributes:
-        robot: the robot; problems: the problems (one, or a batch's), in the environment's frame.
+        robot: the robot; problems: the problems (one, or a batch's), in the environment's frame;
+            world_problems: the same as given (the world: what :meth:`report` answers in).
         n: size of the searched configuration.
         lower, upper: (n,) bounds, or (T, n) per trial for a batch of problems.
         problem_index: (T,) each trial's problem in a batch of problems (trial t on problem
@@ -137,6 +138,9 @@ class Environment(ABC):
     """
 
     error_key: ClassVar[str] = "total_error_mm"
+    robot: Robot
+    problems: list[GraspProblem]
+    world_problems: list[GraspProblem]
     n: int
     lower: Tensor
     upper: Tensor
@@ -233,9 +237,34 @@ class Environment(ABC):
     # -- the result ------------------------------------------------------------------------------
 
     @abstractmethod
-    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
-        """The reported configurations (T, n), recomputed in float64: clamped to the exact bounds,
-        the errors by forward kinematics against the problem (INTERFACE.md)."""
+    def report(self, config: Tensor, evaluation: Evaluation, rows: Tensor | None = None) -> Report:
+        """The reported configurations (B, n) of the trials ``rows`` (B,) (None: all T, in order),
+        recomputed in float64: clamped to the exact bounds, the errors by forward kinematics
+        against the problem (INTERFACE.md)."""
+
+    def confirm(self, config: Tensor, evaluation: Evaluation, rows: Tensor) -> Tensor:
+        """(B,) which of the trials ``rows`` (B,), whose configurations (of ``config`` (T, n),
+        ``evaluation``: every trial's) are grasps in the model, the exact collision check (FCL, as
+        the result counts collisions) finds clear: the loop stops a trial only there, for the
+        collision proxy can miss a link inside the object. All True where the problem has nothing
+        to collide with."""
+        from graspnet_torch.collision.cache import scene_for
+        from graspnet_torch.collision.scene import has_environment
+        from graspnet_torch.robot.postures import trial_posture
+
+        rows = rows.cpu()
+        pid = torch.zeros_like(rows) if self.problem_index is None else self.problem_index.cpu()[rows]
+        problems = [self.world_problems[int(k)] for k in pid]
+        exact = torch.tensor([has_environment(self.robot, p) for p in problems], dtype=torch.bool)
+        clear = torch.ones(rows.shape[0], dtype=torch.bool)
+        if not bool(exact.any()):
+            return clear
+        at = exact.nonzero().squeeze(1)
+        part = Evaluation(**{k: v[rows[at].to(v.device)] for k, v in evaluation.tensors().items()})
+        report = self.report(config[rows[at].to(config.device)], part, rows[at])
+        for k, fields in zip(at.tolist(), report.fields, strict=True):
+            clear[k] = scene_for(self.robot, problems[k]).check(trial_posture(self.robot, fields)).count == 0
+        return clear
 
     # -- robot-kind knowledge needed without an environment ------------------------------------
 

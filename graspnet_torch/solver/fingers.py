@@ -57,6 +57,7 @@ class FingerEnvironment(Environment):
             if missing:
                 raise ProblemError(f"{p.source}: no FCNN experts for finger(s) {', '.join(missing)}")
         self.robot, self.problems, self.problem, self.ik = robot, problems, problems[0], ik
+        self.world_problems = problems
         fingers, polish = solver.fingers, solver.polish
         self.refine, self.candidates, self.final_refine = fingers.refine, fingers.candidates, fingers.final_refine
         self.polish_iterations, self.polish_tol = polish.iterations, polish.tolerance_mm / 1000
@@ -380,8 +381,8 @@ class FingerEnvironment(Environment):
         solved = self.local_solve(x, self.polish_iterations, self.polish_tol, done, rows=trials)
         return self.whole_result(solved, config, trials)
 
-    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
-        """Per trial, the result fields of the reported configuration, recomputed in float64: the
+    def report(self, config: Tensor, evaluation: Evaluation, rows: Tensor | None = None) -> Report:
+        """Per trial (of ``rows``, None: all), the result fields of the reported configuration, recomputed in float64: the
         palm pose, every finger's joints (the non-contact fingers at home), the fingertip errors of
         its problem's contact fingers by forward kinematics against the contacts, and ``error``
         (E, metres). The loop runs in float32, whose rounded limits can exceed the exact ones by
@@ -391,21 +392,21 @@ class FingerEnvironment(Environment):
         from graspnet_torch.robot.transforms import rt_to_pose, transform_points
 
         robot = self.robot
-        exact = self.clamp(config)
+        exact = self.clamp(config, rows)
         T = exact.shape[0]
         flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
         home = robot.home_posture(torch.float64).fingers.expand(T, -1, -1)
         q = home.clone()
         chosen = torch.clamp(evaluation.joints.detach().to(torch.float64).cpu(), flo[self.idx], fhi[self.idx])
         if self.mask is not None:  # a finger a trial's problem does not use stays at home
-            chosen = torch.where(self.mask.cpu().unsqueeze(-1) > 0, chosen, home[:, self.idx])
+            chosen = torch.where(self._rows(self.mask, rows).cpu().unsqueeze(-1) > 0, chosen, home[:, self.idx])
         q[:, self.idx] = chosen
         R, t = self.palm_frame(exact)
-        contacts = self.contacts64
+        contacts = self._rows(self.contacts64, rows)
         if self.frame64 is not None:  # the search frame G -> the world: the palm G o pose, the contacts G c
             from graspnet_torch.robot.transforms import compose
 
-            G_R, G_t = self.frame64
+            G_R, G_t = (self._rows(g, rows) if g.shape[0] > 1 else g for g in self.frame64)
             R, t = compose(G_R, G_t, R, t)
             contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
         tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
@@ -415,7 +416,7 @@ class FingerEnvironment(Environment):
         column = {f: k for k, f in enumerate(self.fingers)}
         err_rows = err.tolist()
         joints = robot.finger_joints_to_file_many(q)  # every joint, mimic joints at their coupled values
-        pid = None if self.problem_index is None else self.problem_index.tolist()
+        pid = None if self.problem_index is None else self._rows(self.problem_index, rows).tolist()
         out, total = [], []
         for k in range(T):
             pose = palm[k]

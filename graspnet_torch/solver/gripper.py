@@ -78,7 +78,6 @@ class GripperEnvironment(Environment):
 
     error_key = "distance_mm"
     subsets = True
-    polishes = False  # its finish always polishes every joint (final_refine); SolverCfg.polish does not apply
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg,
                  ik: FingerIK | None = None, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
@@ -89,9 +88,13 @@ class GripperEnvironment(Environment):
                 raise ProblemError(f"{p.source}: robot '{robot.name}' has no gripper points or the problem no "
                                    f"'points'")
         self.robot, self.problems, self.problem = robot, problems, problems[0]
+        self.world_problems = problems
         self.n = len(robot.body_joint_names)
         cfg = solver.gripper
         self.refine, self.final_refine, self.tolerance_mm = cfg.settle, cfg.polish_iterations, solver.tolerance_mm
+        # inside the loop (solver.polish.from_r), a trial near a grasp is polished as a hand's is
+        self.polishes = solver.polish.mode == "whole" and solver.polish.iterations > 0
+        self.polish_iterations, self.polish_tol = solver.polish.iterations, solver.polish.tolerance_mm / 1000
         bounds = [gripper_bounds(robot, p, cfg.approach_m, cfg.approach_deg) for p in problems]
         targets = np.stack([p.points_world() for p in problems])  # (P, 2, 3)
         kw = {"dtype": dtype, "device": device}
@@ -246,27 +249,30 @@ class GripperEnvironment(Environment):
         return ev.config, ev
 
     def _least_squares(self, q: Tensor, goal: Tensor, iterations: int, tol: float = 0.0,
-                       done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None
-                    ) -> LMResult:
+                       done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
+                       trials: Tensor | None = None) -> LMResult:
         """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
         on the gripper points, float64, within the bounds, never into a collision the proxy sees.
 
-        q: (B, n) start, B a multiple of the trials (row r is trial r % T); goal: (B, 6) the two
-        object points in the pairing of each row. Returns where each row ended (``x``, ``err``).
+        q: (B, n) start, B a multiple of the trials (row r is trial r % T), or the rows of the
+        trials ``trials`` (B,); goal: (B, 6) the two object points in the pairing of each row.
+        Returns where each row ended (``x``, ``err``).
         """
         from graspnet_torch.solver.least_squares import levenberg_marquardt
 
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
         T = self.lower.shape[0] if self.lower.dim() == 2 else None
-        if lo.dim() == 2:  # a batch of problems: q holds copies of every trial
-            lo, hi = lo.repeat(q.shape[0] // lo.shape[0], 1), hi.repeat(q.shape[0] // hi.shape[0], 1)
+        trial_of = None
+        if T is not None:  # a batch of problems: the trial of each row
+            trial_of = trials.cpu() if trials is not None else torch.arange(q.shape[0]) % T
+            lo, hi = lo[trial_of], hi[trial_of]
 
         def points(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
             p, J = self.robot.gripper_points_jacobian(x)  # (B, 2, 3), (B, 2, 3, n)
             return p.reshape(-1, 6), J.reshape(-1, 6, self.n)
 
         def count(x: Tensor, rows: Tensor) -> Tensor:
-            pid = None if T is None else self.problem_index[rows % T]
+            pid = None if trial_of is None else self.problem_index[trial_of[rows]]
             return self._count(x, pid)
 
         return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=1e-2, lam_min=1e-4, lam_max=10.0,
@@ -290,14 +296,12 @@ class GripperEnvironment(Environment):
                     trace: list[Tensor] | None = None, rows: Tensor | None = None) -> LMResult:
         """Levenberg-Marquardt from x (T, n) onto both pairings of the object points at once
         (eq. 26-28), each trial keeping its better one; a trial stops once either pairing is
-        within ``tol`` or ``done`` says so. Every trial at once (``rows`` None: no in-loop polish)."""
+        within ``tol`` or ``done`` says so. ``rows``: the trials of x's rows (None: every trial, in order)."""
         from graspnet_torch.solver.least_squares import LMResult
 
-        if rows is not None:
-            raise NotImplementedError("the gripper's local solve runs on every trial at once")
-
         T = x.shape[0]
-        targets = self._targets64.expand(T, 2, 3)
+        targets = self._targets64 if rows is None or self._targets64.shape[0] == 1 else self._targets64[rows.cpu()]
+        targets = targets.expand(T, 2, 3)
         goal = torch.cat([targets.reshape(T, 6), targets.flip(1).reshape(T, 6)])
 
         def either(stopped: Tensor) -> Tensor:
@@ -307,7 +311,8 @@ class GripperEnvironment(Environment):
             return one.repeat(2)
 
         both: list[Tensor] | None = [] if trace is not None else None
-        solved = self._least_squares(x.repeat(2, 1), goal, iterations, tol, either, both)
+        solved = self._least_squares(x.repeat(2, 1), goal, iterations, tol, either, both,
+                                     None if rows is None else rows.repeat(2))
         if trace is not None:
             trace.extend(torch.minimum(e[:T], e[T:]) for e in both)
         crossed = solved.err[T:] < solved.err[:T]
@@ -317,9 +322,20 @@ class GripperEnvironment(Environment):
                         steps=torch.maximum(solved.steps[:T], solved.steps[T:]))
 
     def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
-        """The configurations (T, n) of solved rows and their evaluation (no settling steps)."""
+        """The configurations (B, n) of solved rows (of the trials ``rows``, None: all) and their
+        evaluation (no settling steps)."""
         config = solved.x.to(like)
-        return config, self.settled(config, settle=False)
+        return config, self.settled(config, rows, settle=False)
+
+    def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
+               ) -> tuple[Tensor, Evaluation]:
+        """``solver.polish.iterations`` Levenberg-Marquardt steps on both pairings of the object
+        points (:meth:`local_solve`) from the configurations (B, n) of the trials ``trials`` (B,),
+        never into a collision the proxy sees: a learner near a grasp lands in it, and stops.
+        Rows stop below ``solver.polish.tolerance_mm`` or when ``done`` says so."""
+        solved = self.local_solve(self.clamp(config, trials), self.polish_iterations, self.polish_tol, done,
+                                  rows=trials)
+        return self.whole_result(solved, config, trials)
 
     def _count(self, q: Tensor, pid: Tensor | None = None) -> Tensor:
         """(B,) the proxy's collision count of configurations (B, n) of the trials of problems
@@ -332,19 +348,24 @@ class GripperEnvironment(Environment):
         levels, palm = self.proxy.body_levels_and_palm(config)
         return self.proxy.count(palm, self._no_fingers.expand(config.shape[0], 0, 0), config, levels, pid).to(q.device)
 
-    def clamp(self, config: Tensor) -> Tensor:
-        """(T, n) configurations clipped to the bounds, float64 on the CPU."""
+    def clamp(self, config: Tensor, rows: Tensor | None = None) -> Tensor:
+        """(B, n) configurations of the trials ``rows`` (None: all T) clipped to their bounds,
+        float64 on the CPU."""
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
+        if rows is not None and lo.dim() == 2:
+            lo, hi = lo[rows.cpu()], hi[rows.cpu()]
         return torch.clamp(config.detach().to(torch.float64).cpu(), lo, hi)
 
-    def report(self, config: Tensor, evaluation: Evaluation) -> Report:
-        """Per trial, recomputed in float64: every body joint by name (m / degrees), the palm
-        (gripper) pose, the two gripper points, d in mm, the alignment and ``error`` (d, metres)."""
+    def report(self, config: Tensor, evaluation: Evaluation, rows: Tensor | None = None) -> Report:
+        """Per trial (of ``rows``, None: all), recomputed in float64: every body joint by name
+        (m / degrees), the palm (gripper) pose, the two gripper points, d in mm, the alignment and
+        ``error`` (d, metres)."""
         from graspnet_torch.robot.transforms import rt_to_pose
 
-        q = self.clamp(config)
+        q = self.clamp(config, rows)
         points = self.robot.gripper_points(q)
-        _r, alignment, _r2, d = manus_reward(points, self._targets64.expand_as(points))
+        targets = self._targets64 if rows is None or self._targets64.shape[0] == 1 else self._targets64[rows.cpu()]
+        _r, alignment, _r2, d = manus_reward(points, targets.expand_as(points))
         palm = rt_to_pose(*self.robot.palm_frame(q))
         deg = 180.0 / math.pi
         out = []

@@ -32,13 +32,28 @@ from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.tracker import Tracker, enough_succeeded
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
-__all__ = ["LoopOutcome", "enough_succeeded", "run_loop"]
+__all__ = ["LoopOutcome", "Starts", "enough_succeeded", "run_loop"]
 
 # In a batch of at least DEFER_FROM trials (gt.solve_many), trials that come near a solution are
 # polished together: once DEFER_ROWS are waiting, or every DEFER_EVERY iterations (a polish of a
 # few rows costs about what one of a hundred does).
 DEFER_FROM, DEFER_ROWS, DEFER_EVERY = 256, 32, 8
 START_MARGIN = 1e-3  # a given start is kept this far (normalised) inside the bounds: the SRV output's logit is finite
+
+
+@dataclass
+class Starts:
+    """Where the trials of a loop start (``solver.start: proposal``).
+
+    Attributes:
+        config: (T, n) configurations, in the search's units.
+        given: (T,) bool: the trials that start at their row of ``config``; the others start at
+            random within the bounds, as the paper's do (a proposal the environment finds
+            colliding is no start).
+    """
+
+    config: Tensor
+    given: Tensor
 
 
 @dataclass
@@ -96,12 +111,13 @@ class LoopOutcome:
 
 
 def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
-             reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Tensor | None = None
+             reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Starts | None = None
              ) -> LoopOutcome:
     """Run T trials of the closed loop on one environment (settings default to the paper's).
-    ``start``: (T, n) configurations the trials start at (``solver.start: proposal``), each
-    network's first mean output placed there (:meth:`ConfigurationNetwork.place`); None: random
-    within the bounds (the paper)."""
+    ``start``: where the trials start (``solver.start: proposal``): a given start is evaluated as
+    the first iteration, and its network's first mean output and expected reinforcement are
+    placed there (:meth:`ConfigurationNetwork.place`); None: every trial at random within the
+    bounds (the paper)."""
     solver, srv = solver or SolverCfg(), srv or SRVNetCfg()
     noise = noise or NoiseCfg()
     reward_fn = Reward(reward or RewardCfg(), solver.max_iterations, env.reward_base)
@@ -110,10 +126,19 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     gen = torch.Generator(device=device).manual_seed(seed)
     net = ConfigurationNetwork(n, T, srv, gen, dtype=dtype, device=device)
     o_prev = torch.rand(T, n, generator=gen, dtype=dtype, device=device)  # random start within the bounds
-    if start is not None:  # a given start: the networks' first mean outputs there
+    given = None
+    if start is not None and bool(start.given.any()):  # given starts: the networks' first mean outputs there
         span = (env.upper - env.lower).clamp_min(torch.finfo(dtype).tiny)
-        o_prev = ((start.to(dtype=dtype, device=device) - env.lower) / span).clamp(START_MARGIN, 1 - START_MARGIN)
-        net.place(o_prev)
+        o_given = ((start.config.to(dtype=dtype, device=device) - env.lower) / span).clamp(START_MARGIN,
+                                                                                           1 - START_MARGIN)
+        given = start.given.to(device)
+        if bool(given.all()):
+            o_prev, given = o_given, None  # every trial given: one path
+            net.place(o_prev)
+        else:
+            o_prev = torch.where(given.unsqueeze(1), o_given, o_prev)
+            net.place(o_prev, rows=given)
+    every = start is not None and bool(start.given.all())  # every trial given (none: all random)
     o_start = o_prev.clone()
     threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
@@ -122,7 +147,7 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     with torch.inference_mode(not net.autograd):  # ~30 % less overhead per op; results are cloned out below
         t0 = time.perf_counter()
         best_config, best_ev, best_r, iterations = _iterate(env, net, solver, reward_fn, noise, gen, o_prev,
-                                                            threshold, hist, t0, start is not None)
+                                                            threshold, hist, t0, every, given)
         wall = time.perf_counter() - t0
     best_config, best_r, iterations, best_ev = best_config.clone(), best_r.clone(), iterations.clone(), best_ev.clone()
     history = None
@@ -150,10 +175,12 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
 
 def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
              gen: torch.Generator, o_prev: Tensor, threshold: float | None, hist: dict[str, list],
-             t0: float, given: bool = False) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
+             t0: float, given: bool = False, some: Tensor | None = None
+             ) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
     """The iterations; returns the reported configuration, its evaluation, its (noise-free)
-    reinforcement and the iteration count of every trial. With a ``given`` start the first
-    iteration evaluates the start itself (the networks, placed there, learn from the second on)."""
+    reinforcement and the iteration count of every trial. With ``given`` starts (every trial's;
+    or ``some`` (T,) bool: those trials') the first iteration evaluates the start itself (the
+    networks, placed there, learn from the second on)."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
@@ -168,6 +195,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     pending = torch.zeros(T, dtype=torch.bool, device=device)
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
+    confirm = grasp_rule and env.counts_collisions  # a grasp stops a trial once FCL, too, finds it clear
     tolerance = solver.tolerance_mm / 1000
     live = None  # the trials whose networks still run, once most have stopped (None: all)
     r_hat = sigma = None
@@ -177,6 +205,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         if live is None:
             step = net(x, noise_k)
             o, r_hat, sigma = (o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
+            if some is not None and k == 0:
+                o = torch.where(some.unsqueeze(1), o_prev, o)
         else:  # the stopped trials' outputs are never used: their rows keep stale values
             step = net(x[live], noise_k[live])
             o = o_prev.index_copy(0, live, step.o)
@@ -190,8 +220,14 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
         observed = add_noise(r, noise.sigma, gen)  # (15)
-        if given and k == 0:  # the start itself was evaluated: nothing drawn to learn from; the
-            net.place(o_prev, observed)  # networks expect what the start got (narrow exploration near a grasp)
+        if (given or some is not None) and k == 0:  # the start itself was evaluated: nothing drawn to learn
+            # from; the networks expect what the start got (narrow exploration near a grasp), but for
+            # a colliding start (R3/R4 weigh its collisions more with every iteration): wide
+            clear = None if ev.collisions is None else ev.collisions.to(device) == 0
+            if some is not None:
+                net.reinforce(observed, ~some)  # the others learn from their first draw
+            rows = some if clear is None else clear if some is None else some & clear
+            net.place(o_prev, observed, rows=rows)
         elif live is None:
             net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
         else:
@@ -227,6 +263,19 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
         if threshold is not None:
             if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
                 done = best.active & env.grasped(ev, tolerance)
+                if confirm and bool(done.any()):  # ... and clear by the exact check (the proxy can miss a link)
+                    rows = done.nonzero().squeeze(1)
+                    refused = torch.zeros_like(done).index_fill(
+                        0, rows[~env.confirm(best.config, best.evaluation, rows).to(device)], True)
+                    if bool(refused.any()):  # those trials start again: new network, new random start
+                        done = done & ~refused
+                        best.forget(refused)
+                        rows = refused.nonzero().squeeze(1)
+                        net.restart(rows if live is None else torch.searchsorted(live, rows), gen)
+                        o_prev = o_prev.index_copy(0, rows, torch.rand(rows.numel(), n, generator=gen, dtype=dtype,
+                                                                        device=device))
+                        o_prev2 = o_prev
+                        polished_at = polished_at.index_fill(0, rows, -float("inf"))
             else:  # the paper's rule: the observed reinforcement exceeds the threshold
                 done = best.active & (observed > threshold)
                 if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop

@@ -54,6 +54,7 @@ class Tracker:
         self.evaluation: Evaluation | None = None
         self.r: Tensor | None = None
         self.observed: Tensor | None = None
+        self._forgotten: Tensor | None = None
 
     def rescore(self, iteration: int | Tensor) -> None:
         """R3/R4 with collision counts: the kept configurations scored as they would be at ``iteration``."""
@@ -72,6 +73,8 @@ class Tracker:
             return
         if better is None:
             better = observed > self.observed
+        if self._forgotten is not None:  # trials whose kept configuration was refused: any offer replaces it
+            better, self._forgotten = better | self._forgotten, None
         if not self.all_active:
             better = better & self.active
         self.observed = torch.where(better, observed, self.observed)
@@ -102,6 +105,11 @@ class Tracker:
         self.config = config.clone()
         self.r = torch.full((T,), -float("inf"), dtype=dtype, device=config.device)
         self.observed = self.r.clone()
+
+    def forget(self, trials: Tensor) -> None:
+        """The kept configurations of ``trials`` (T,) bool are no longer worth keeping (a grasp the
+        exact collision check refused): the next :meth:`offer` replaces them whatever it brings."""
+        self._forgotten = trials if self._forgotten is None else self._forgotten | trials
 
     def finish(self, done: Tensor, at: int | Tensor) -> bool:
         """The trials ``done`` (T,) have succeeded at iteration ``at`` (an int, or (T,)): they stop,

@@ -114,21 +114,24 @@ class ConfigurationNetwork(nn.Module):
         out._cache = None
         return out
 
-    def place(self, o: Tensor, expected: Tensor | None = None) -> None:
+    def place(self, o: Tensor, expected: Tensor | None = None, rows: Tensor | None = None) -> None:
         """Shift the output layer's biases so that, fed its start ``o`` (T, n) in (0, 1) with no
         change (the input of the first iterations), each network's mean output is ``o`` and,
         given ``expected`` (T,), its expected reinforcement is that (the start's own: a start near
         a grasp is explored narrowly, eq. 11): the search starts at a given configuration (a
         posture proposal) instead of wherever its random weights put it. The weights and
-        learning rules are unchanged."""
+        learning rules are unchanged. ``rows`` (T,) bool: only those networks (None: all)."""
         with torch.no_grad():
             x = torch.cat([o, torch.zeros_like(o)], 1).unsqueeze(1).to(self.W1)
             h1 = torch.tanh(torch.baddbmm(self.b1, x, self.W1))
             h2 = torch.tanh(torch.baddbmm(self.b2, h1, self.W2))
             logit = torch.logit(o.to(self.W1)).unsqueeze(1)
-            self.theta_b.copy_(logit - h2 @ self.theta)
+            keep = None if rows is None else rows.to(self.W1.device).view(-1, 1, 1)
+            self.theta_b.copy_(logit - h2 @ self.theta if keep is None else
+                               torch.where(keep, logit - h2 @ self.theta, self.theta_b))
             if expected is not None:
-                self.phi_b.copy_(expected.to(self.W1).view(-1, 1, 1) - h2 @ self.phi)
+                phi_b = expected.to(self.W1).view(-1, 1, 1) - h2 @ self.phi
+                self.phi_b.copy_(phi_b if keep is None else torch.where(keep, phi_b, self.phi_b))
 
     def restart(self, rows: Tensor, generator: torch.Generator | None = None) -> None:
         """New initial weights for the networks of the trials ``rows`` (B,), drawn as at construction."""

@@ -81,8 +81,10 @@ def test_the_loop_evaluates_its_given_start_first(shipped):
     problem = gt.random_reachable_problem(robot, FRESH + 50, 4)
     cfg = gt.SolverCfg(polish=gt.PolishCfg(from_r=None), max_iterations=3)
     env = build_environment(robot, problem, ik, cfg)
-    start = proposal_starts(model, env, 6)
-    outcome = run_loop(env, 6, 0, cfg, start=start)
+    starts = proposal_starts(model, env, 6)
+    assert bool(starts.given.all())  # nothing to collide with: every trial at its proposal
+    outcome = run_loop(env, 6, 0, cfg, start=starts)
+    start = starts.config
     span = env.upper - env.lower
     kept = env.lower + span * ((start - env.lower) / span).clamp(START_MARGIN, 1 - START_MARGIN)  # kept inside
     expected = env.evaluate(kept).error
@@ -186,7 +188,7 @@ def test_solve_many_starts_every_problem_at_its_own_proposals(shipped):
     starts = proposal_starts(model, batch, 8)
     for k, p in enumerate(problems):
         alone = proposal_starts(model, build_environment(robot, p, ik, cfg), 2)
-        assert torch.allclose(starts[2 * k: 2 * k + 2], alone, atol=1e-5)
+        assert torch.allclose(starts.config[2 * k: 2 * k + 2], alone.config, atol=1e-5)
     results = gt.solve_many(problems, trials=2, solver=replace(cfg, start="proposal"))
     assert all(r.success and r.best.total_error_mm < 1 for r in results)
     assert math.isfinite(sum(r.best.total_error_mm for r in results))
