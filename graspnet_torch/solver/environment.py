@@ -262,8 +262,8 @@ class Environment(ABC):
         at = exact.nonzero().squeeze(1)
         part = Evaluation(**{k: v[rows[at].to(v.device)] for k, v in evaluation.tensors().items()})
         report = self.report(config[rows[at].to(config.device)], part, rows[at])
-        for k, fields in zip(at.tolist(), report.fields, strict=True):
-            clear[k] = scene_for(self.robot, problems[k]).check(trial_posture(self.robot, fields)).count == 0
+        for k, trial in zip(at.tolist(), report.fields, strict=True):
+            clear[k] = scene_for(self.robot, problems[k]).check(trial_posture(self.robot, trial)).count == 0
         return clear
 
     # -- robot-kind knowledge needed without an environment ------------------------------------

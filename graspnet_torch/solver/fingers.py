@@ -382,9 +382,10 @@ class FingerEnvironment(Environment):
         return self.whole_result(solved, config, trials)
 
     def report(self, config: Tensor, evaluation: Evaluation, rows: Tensor | None = None) -> Report:
-        """Per trial (of ``rows``, None: all), the result fields of the reported configuration, recomputed in float64: the
-        palm pose, every finger's joints (the non-contact fingers at home), the fingertip errors of
-        its problem's contact fingers by forward kinematics against the contacts, and ``error``
+        """Per trial (of ``rows``, None: all), the result fields of the reported configuration,
+        recomputed in float64: the palm pose, every finger's joints (the non-contact fingers at
+        home), the fingertip errors of its problem's contact fingers by forward kinematics against
+        the contacts, and ``error``
         (E, metres). The loop runs in float32, whose rounded limits can exceed the exact ones by
         ~1e-7: configurations and joints are clamped to the exact bounds and limits first."""
         import math
