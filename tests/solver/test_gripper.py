@@ -223,3 +223,23 @@ def test_closed_form_points_and_jacobian_match_the_kernel_and_finite_differences
     fd = torch.stack([(manus.gripper_points(q + h * eye[k]) - manus.gripper_points(q - h * eye[k])).reshape(6, 6)
                       / (2 * h) for k in range(9)], dim=-1)
     assert torch.allclose(J, fd, atol=1e-7)
+
+
+@pytest.mark.slow
+def test_learners_near_a_grasp_are_polished_inside_the_loop_and_stop(manus):
+    """Every learner of the protocol runs to its own stop (``stop: null``): with the in-loop polish
+    (the default, as a hand's) the learners land and stop within a few hundred iterations, where
+    without it (``polish.from_r: null``) they jitter a few mm from the grasp until the budget ends;
+    both end on grasps (the polish after the loop), the in-loop one no worse."""
+    from dataclasses import replace
+
+    from graspnet_torch.tasks.manus import cube_problem, protocol_positions
+
+    problems = [cube_problem(x, y) for x, y in protocol_positions()[::16]]
+    cfg = gt.SolverCfg(stop=None, start="random")
+    inside = gt.solve_many(problems, trials=4, seed=0, solver=cfg)
+    after = gt.solve_many(problems, trials=4, seed=0, solver=replace(cfg, polish=replace(cfg.polish, from_r=None)))
+    its = [np.median([t.iterations for t in r.trials]) for r in (inside + after)]
+    assert max(its[:4]) < 300 and min(its[4:]) == 2000
+    solved = [sum(t.success for r in rs for t in r.trials) for rs in (inside, after)]
+    assert solved[0] >= solved[1] >= 12

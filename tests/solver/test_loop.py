@@ -221,3 +221,42 @@ def test_selected_networks_step_as_in_the_whole_batch():
             part.reinforce(r[rows])
     assert torch.allclose(part.W1, net.W1[rows], rtol=0, atol=1e-6)
     assert torch.allclose(part.theta, net.theta[rows], rtol=0, atol=1e-6)
+
+
+class _Refused(_Colliding):
+    """:class:`_Colliding` whose exact collision check (:meth:`confirm`) refuses the grasps of its
+    first ``refusals`` calls, as FCL refuses a link inside the object that the proxy misses."""
+
+    counts_collisions = True
+
+    def __init__(self, refusals):
+        super().__init__()
+        self.refusals, self.confirmed = refusals, []
+
+    def confirm(self, config, evaluation, rows):
+        self.confirmed.append(rows.tolist())
+        return torch.full((rows.shape[0],), len(self.confirmed) > self.refusals)
+
+
+@pytest.mark.parametrize("refusals", [0, 2])
+def test_a_grasp_the_exact_check_refuses_does_not_stop_its_trial(refusals):
+    """The grasp rule stops a trial at iteration 6 (the first clear grasp in the model); where the
+    exact check refuses it, the trial searches on (from a new start) and stops at the first grasp
+    it confirms: one check per iteration until then, of the trials that claimed a grasp."""
+    from graspnet_torch.solver.loop import run_loop
+
+    env = _Refused(refusals)
+    out = run_loop(env, 2, 0, SolverCfg(max_iterations=50), reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
+    assert out.iterations.tolist() == [6 + refusals] * 2
+    assert env.confirmed == [[0, 1]] * (refusals + 1)
+    assert bool(out.success.all())
+
+
+def test_the_paper_rule_does_not_ask_the_exact_check():
+    """The paper's stop (the reinforcement's threshold) stays the paper's: no exact check."""
+    from graspnet_torch.solver.loop import run_loop
+
+    env = _Refused(10)
+    out = run_loop(env, 2, 0, SolverCfg(max_iterations=50, stop_rule="reinforcement", stop_clear=True),
+                   reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
+    assert out.iterations.tolist() == [6, 6] and env.confirmed == []
