@@ -60,7 +60,7 @@ def best_proposal_mm(robot: gt.Robot, problem: gt.GraspProblem) -> float:
     _robot, ik = api.robot_and_ik(problem.robot_cfg or robot.name)
     env = build_environment(robot, problem, ik, gt.SolverCfg())
     with torch.inference_mode():
-        return float(env.evaluate(proposals(proposal_of(robot), env)[0][0]).error.min()) * 1000
+        return float(env.evaluate(proposals(proposal_of(robot), env).config[0]).error.min()) * 1000
 
 
 def _solver(start: str, **changes) -> gt.SolverCfg:

@@ -53,7 +53,7 @@ def evaluate_proposal(model: PostureProposal, robot: Robot, finger_ik: FingerIK 
         for k in range(n):
             problem, _ = random_posed_problem(robot, seed + k)
             env = build_environment(robot, problem, finger_ik, solver)
-            configs = proposals(model, env)[0][0]
+            configs = proposals(model, env).config[0]
             ours.append(float(env.evaluate(configs).error.min()) * 1000)
             r = env.lower + (env.upper - env.lower) * torch.rand(configs.shape, generator=g)
             rand.append(float(env.evaluate(r).error.min()) * 1000)
