@@ -278,14 +278,12 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
     report = env.report(outcome.config, outcome.evaluation)
     results = []
-    for k, problem in enumerate(batch):
-        rows = slice(k * trials, (k + 1) * trials)
-        part = outcome.select(rows)
+    settings = _settings_dict(trials, solver, srv, reward, noise)
+    for problem, part, part_report in zip(batch, outcome.split(trials), report.split(trials), strict=True):
         part.wall_time_s = outcome.wall_time_s / len(batch)  # the batch's time, shared out
-        trial_results, failure = _trials(robot, problem, env, report.select(rows), part, reward, solver)
+        trial_results, failure = _trials(robot, problem, env, part_report, part, reward, solver)
         results.append(GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source,
-                                   seed=seed, settings=_settings_dict(trials, solver, srv, reward, noise),
-                                   outcome=part, failure=failure))
+                                   seed=seed, settings=dict(settings), outcome=part, failure=failure))
     return results
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -39,6 +39,7 @@ if TYPE_CHECKING:
 __all__ = ["Done", "Environment", "Evaluation", "Report"]
 
 Done = Callable[[Tensor], Tensor]  # done(converged (B,) bool) -> (B,) bool: the rows that may stop
+_PARTS = ("error", "finger_errors", "joints", "collisions", "alignment", "config")  # Evaluation's fields, in order
 
 
 @dataclass
@@ -66,7 +67,8 @@ class Evaluation:
 
     def tensors(self) -> dict[str, Tensor]:
         """The parts that are present, by name."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+        parts = ((name, getattr(self, name)) for name in _PARTS)
+        return {name: value for name, value in parts if value is not None}
 
     def where(self, mask: Tensor, other: Evaluation) -> Evaluation:
         """Per trial: this evaluation where ``mask`` (T,) is true, else ``other``."""
@@ -113,10 +115,13 @@ class Report:
     error_mm: list[float]
     landed: list[bool]
 
-    def select(self, trials: slice) -> Report:
-        """The report of a range of trials (a batch of problems: one problem's trials)."""
-        ev = replace(self.evaluation, **{k: v[trials] for k, v in self.evaluation.tensors().items()})
-        return Report(self.fields[trials], ev, self.error_mm[trials], self.landed[trials])
+    def split(self, runs: int) -> list[Report]:
+        """The reports of consecutive groups of ``runs`` trials (a batch of problems: one per
+        problem, in order)."""
+        ev = {k: v.split(runs) for k, v in self.evaluation.tensors().items()}
+        return [Report(self.fields[a: a + runs], Evaluation(**{k: v[p] for k, v in ev.items()}),
+                       self.error_mm[a: a + runs], self.landed[a: a + runs])
+                for p, a in enumerate(range(0, len(self.fields), runs))]
 
 
 class Environment(ABC):

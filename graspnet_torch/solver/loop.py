@@ -21,7 +21,7 @@ one seeded generator.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
@@ -83,16 +83,21 @@ class LoopOutcome:
     history: dict[str, Tensor] | None
     start: Tensor | None = None
 
-    def select(self, trials: slice) -> LoopOutcome:
-        """The outcome of a range of trials (a batch of problems: one problem's trials)."""
-        ev = replace(self.evaluation, **{k: v[trials] for k, v in self.evaluation.tensors().items()})
+    def split(self, runs: int) -> list[LoopOutcome]:
+        """The outcomes of consecutive groups of ``runs`` trials (a batch of problems: one per
+        problem, in order), each tensor split once (views)."""
+        ev = {k: v.split(runs) for k, v in self.evaluation.tensors().items()}
         history = None
-        if self.history is not None:
-            history = {k: v if v.dim() == 1 else v[:, trials] for k, v in self.history.items()}  # time, iteration: (K,)
-        return LoopOutcome(config=self.config[trials], evaluation=ev, reinforcement=self.reinforcement[trials],
-                           iterations=self.iterations[trials], success=self.success[trials],
-                           wall_time_s=self.wall_time_s, history=history,
-                           start=None if self.start is None else self.start[trials])
+        if self.history is not None:  # time, iteration: (K,); the others (K, T, ...)
+            history = {k: v if v.dim() == 1 else v.split(runs, dim=1) for k, v in self.history.items()}
+        config, r, its, success = (v.split(runs) for v in (self.config, self.reinforcement, self.iterations,
+                                                             self.success))
+        start = None if self.start is None else self.start.split(runs)
+        return [LoopOutcome(config=config[p], evaluation=Evaluation(**{k: v[p] for k, v in ev.items()}),
+                            reinforcement=r[p], iterations=its[p], success=success[p], wall_time_s=self.wall_time_s,
+                            history=None if history is None else {k: v if isinstance(v, Tensor) else v[p]
+                                                                  for k, v in history.items()},
+                            start=None if start is None else start[p]) for p in range(len(config))]
 
     @property
     def joints(self) -> Tensor | None:

@@ -260,3 +260,12 @@ def test_the_paper_rule_does_not_ask_the_exact_check():
     out = run_loop(env, 2, 0, SolverCfg(max_iterations=50, stop_rule="reinforcement", stop_clear=True),
                    reward=gt.RewardCfg(kind="r3", a=1.0, p=1000))
     assert out.iterations.tolist() == [6, 6] and env.confirmed == []
+
+
+def test_an_evaluation_lists_every_part_it_has():
+    """Evaluation.tensors() names every field that is set (a field added later is not forgotten)."""
+    from dataclasses import fields
+
+    ev = Evaluation(**{f.name: torch.zeros(2) for f in fields(Evaluation)})
+    assert list(ev.tensors()) == [f.name for f in fields(Evaluation)]
+    assert list(Evaluation(error=torch.zeros(2)).tensors()) == ["error"]
