@@ -217,12 +217,15 @@ class SolverCfg:
             noise, the smallest error) or 'final' (the last one).
         start: where the trials start: 'random' (uniform within the bounds, the paper),
             'proposal' (the robot's posture proposal model, :mod:`graspnet_torch.proposal`: each
-            problem's K proposals ranked by the environment's error (with sensor noise: by one
-            noisy observation each), trial j at the j-th best of the best quarter, evaluated as
-            the first iteration, the SRV network's mean output and expected reinforcement placed
-            there; a robot without a trained model starts at random, said once) or 'auto' (the
-            default: 'proposal' where the problem has no object and no obstacles, else 'random': a
-            proposal does not see them, and near them its grasps pass through them). srv only.
+            problem's K proposals ranked (by the model's score where nothing can collide, else by
+            the environment's error, a collision as 1 m; with sensor noise by one noisy
+            observation each), trial j at the j-th best, evaluated as the first iteration, the
+            SRV network's mean output and expected reinforcement placed there (a colliding one:
+            no expected reinforcement, or with ``stop: null`` a random start instead); a robot
+            without a trained model starts at random, said once) or 'auto' (the default:
+            'proposal' where the problem has no object and no obstacles, else 'random': a
+            proposal does not see them, and near them its grasps pass through them or land less
+            exactly; the arm's config sets 'proposal'). srv only.
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
             errors, time) for logs and plots.
         dtype: 'float32' (hot path) or 'float64'.
