@@ -178,9 +178,12 @@ class CollisionScene:
         robot: the robot (its URDF's collision primitives).
         problem: obstacles and object; its contact fingers' distal links may touch the object.
         object_tolerance: penetration of the object (metres) below which a link does not count.
+        touching: whether the contact fingers' distal links (a gripper's jaws) may touch the object
+            (the reported count); False: they count as any link does (a reach motion's approach).
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M):
+    def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M,
+                 touching: bool = True):
         import fcl
 
         self.robot, self.problem, self.object_tolerance = robot, problem, object_tolerance
@@ -189,7 +192,7 @@ class CollisionScene:
         self.obstacles = [_environment_object(o) for o in environment_obstacles(robot, problem)]
         self.self_pairs = self_collision_pairs(robot)
         self.object = _environment_object(problem.object) if problem.object is not None else None
-        self.touching = self.distal_links(robot, self.shapes, problem.fingers)
+        self.touching = self.distal_links(robot, self.shapes, problem.fingers) if touching else set()
         # meshes: FCL finds where a link crosses the surface; inside and depth are measured (collision/mesh.py)
         from graspnet_torch.collision.mesh import mesh_query
 

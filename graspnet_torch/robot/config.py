@@ -102,8 +102,8 @@ class ProblemSchema:
 
 PROBLEM_SCHEMAS = {
     "hand": ProblemSchema("contacts", "palm_bounds", "palm_pose"),
-    "arm_hand": ProblemSchema("contacts", "bounds", "arm_joints"),
-    "gripper": ProblemSchema("points", None, None, ("approach",)),
+    "arm_hand": ProblemSchema("contacts", "bounds", "arm_joints", ("start",)),
+    "gripper": ProblemSchema("points", None, None, ("approach", "start")),
 }
 """Robot kind -> the kind-specific keys of its problems (the rest: object, obstacles, texts)."""
 

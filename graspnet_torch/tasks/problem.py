@@ -27,14 +27,27 @@ from graspnet_torch.tasks.shapes import Shape, check_free_contacts, numbers, obs
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
 
 KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds", "bounds", "obstacles", "name",
-              "description", "reference",
+              "description", "reference", "start",
               "notes"}
 
 KIND_KEYS = {"contacts": "one point per finger", "points": "a gripper's two object points",
              "approach": "a gripper's approach configuration", "palm_bounds": "a free hand's palm box",
-             "bounds": "an arm's joint ranges", "reference": "a reference posture"}
+             "bounds": "an arm's joint ranges", "reference": "a reference posture",
+             "start": "the configuration a reach motion starts from (robots with a body)"}
 """The problem keys that only some kinds of robot take (``RobotCfg.problem_schema``), with what they are."""
 REFERENCE_PLACEMENT = {"palm_pose": "[x, y, z, rx, ry, rz]", "arm_joints": "{joint: deg}"}
+
+
+def _joint_values(raw: Any, where: str) -> dict[str, float] | None:
+    """A mapping URDF joint name -> value as written (metres, degrees), or None; checked for
+    form and range here (the names and limits against the robot where it is used)."""
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping) or not raw or not all(isinstance(k, str) for k in raw):
+        raise ProblemError(f"{where}: expected a mapping joint name -> value (m, degrees)")
+    values = number_list(list(raw.values()), None, where, ProblemError, -MAX_ANGLE_DEG, MAX_ANGLE_DEG,
+                         "joint values (m, degrees)")
+    return dict(zip(raw, values, strict=True))
 
 
 def _check_texts(data: Mapping, source: str) -> None:
@@ -83,6 +96,8 @@ class GraspProblem:
             metres, that the gripper's two marked points must meet (either pairing); else None.
         approach: a gripper robot: the configuration the user reached, by URDF joint name as
             written (metres, degrees); the search stays near it. None: the robot's search space.
+        start: a robot with a body: the configuration its reach motion starts from, by URDF joint
+            name as written (metres, degrees; joints left out at home). None: the home posture.
         source: where it came from, for messages.
     """
 
@@ -99,6 +114,7 @@ class GraspProblem:
     joint_bounds: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False)
     points: np.ndarray | None = field(default=None, compare=False)
     approach: dict[str, float] | None = field(default=None, compare=False)
+    start: dict[str, float] | None = field(default=None, compare=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -203,7 +219,8 @@ class GraspProblem:
         _check_texts(data, source)
         return cls(robot=robot, contacts=tuple(contacts), object=obj, palm_bounds=bounds, obstacles=obstacles,
                    name=data.get("name"), description=data.get("description"), reference=reference,
-                   source=source, robot_cfg=robot_cfg, joint_bounds=joint_bounds)
+                   source=source, robot_cfg=robot_cfg, joint_bounds=joint_bounds,
+                   start=_joint_values(data.get("start"), f"{source}: start"))
 
     @classmethod
     def _gripper_problem(cls, data: Mapping, source: str, robot: str, robot_cfg: RobotCfg, folder: Path | None,
@@ -222,18 +239,12 @@ class GraspProblem:
         shape = {"folder": folder, "allow_outside_paths": allow_outside_paths}
         obj = Shape.from_mapping(data["object"], f"{source}: object", **shape) if data.get("object") is not None \
             else None
-        approach = data.get("approach")
-        if approach is not None:
-            if not isinstance(approach, Mapping) or not approach or not all(isinstance(k, str) for k in approach):
-                raise ProblemError(f"{source}: approach: expected a mapping joint name -> value (m, degrees)")
-            values = number_list(list(approach.values()), None, f"{source}: approach", ProblemError,
-                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values (m, degrees)")
-            approach = dict(zip(approach, values, strict=True))
+        approach = _joint_values(data.get("approach"), f"{source}: approach")
         obstacles = obstacles_of(data, source, shape)
         _check_texts(data, source)
         return cls(robot=robot, contacts=(), object=obj, obstacles=obstacles, name=data.get("name"),
                    description=data.get("description"), source=source, robot_cfg=robot_cfg, points=points,
-                   approach=approach)
+                   approach=approach, start=_joint_values(data.get("start"), f"{source}: start"))
 
     def points_world(self) -> np.ndarray:
         """(2, 3) the object points in the world (object pose applied)."""
@@ -353,6 +364,8 @@ class GraspProblem:
             out["palm_bounds"] = "robot" if self.palm_bounds == "robot" else self.palm_bounds.to_degrees()
         if self.obstacles:
             out["obstacles"] = [o.to_mapping() for o in self.obstacles]
+        if self.start:
+            out["start"] = dict(self.start)
         return out
 
 
