@@ -10,6 +10,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
+from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
 from graspnet_torch.robot import (
     ChainKernel,
     ChainSpec,
@@ -70,6 +71,7 @@ __all__ = [
     "PoseBounds",
     "Posture",
     "ProblemError",
+    "ReachCfg",
     "RewardCfg",
     "Robot",
     "RobotCfg",
@@ -79,13 +81,16 @@ __all__ = [
     "SigmaCfg",
     "Solver",
     "SolverCfg",
+    "Trajectory",
     "TrialResult",
     "__version__",
     "available_robots",
     "available_tasks",
+    "check_motion",
     "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
+    "plan_reach",
     "random_reachable_problem",
     "random_sequence",
     "solve",

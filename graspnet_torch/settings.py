@@ -132,6 +132,8 @@ def check_value(tp: Any, meta: Mapping[str, Any], value: Any, key: str) -> Any:
                 continue
         raise _fail(key, value, tp, meta)
     if dataclasses.is_dataclass(tp):
+        if isinstance(value, bool) and "enabled" in _fields(tp):  # a switched group: reach=true = reach.enabled=true
+            value = {"enabled": value}
         return build(tp, value, key)
     if origin is Literal:
         if value in args and not isinstance(value, bool):

@@ -201,6 +201,7 @@ class CollisionScene:
         self._mesh_object = mesh_query(problem.object) if problem.object is not None and \
             problem.object.kind == "mesh" else None
         self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
+        self._objects_of: dict[str, list] | None = None  # link -> its collision objects (self-collision)
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
         self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
         self.links = fcl.DynamicAABBTreeCollisionManager()
@@ -318,9 +319,13 @@ class CollisionScene:
     def _links_collide(self, a: str, b: str) -> bool:
         import fcl
 
-        return any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
-                   for oa, sa in zip(self.link_objects, self.shapes, strict=True) if sa.link == a
-                   for ob, sb in zip(self.link_objects, self.shapes, strict=True) if sb.link == b)
+        if self._objects_of is None:  # each link's collision objects, gathered once
+            self._objects_of = {}
+            for obj, shape in zip(self.link_objects, self.shapes, strict=True):
+                self._objects_of.setdefault(shape.link, []).append(obj)
+        request = fcl.CollisionRequest()
+        return any(fcl.collide(oa, ob, request, fcl.CollisionResult())
+                   for oa in self._objects_of.get(a, ()) for ob in self._objects_of.get(b, ()))
 
     def _pairwise(self) -> set[tuple[str, int]]:
         import fcl

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.fcnn.train import FCNNTrainCfg
+from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.proposal.model import ProposalCfg
 from graspnet_torch.settings import Free, clip, setting
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
@@ -53,6 +54,7 @@ class SolveGraspJobCfg:
     allow_outside_paths: bool = False
     batch: int = setting(1000, lo=1, hi=1_000_000)  # problem=DIR / .jsonl: problems per vectorised search
     sequence: bool = False  # problem=DIR / .jsonl: frames in order, each warm-started from the last (gt.Solver.track)
+    reach: ReachCfg = setting(factory=ReachCfg)  # reach=true: the motion to the grasp (reach.timeout_s=..., ...)
 
 
 @dataclass(frozen=True)

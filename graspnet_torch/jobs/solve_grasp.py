@@ -20,6 +20,7 @@ import torch
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
+from graspnet_torch.motion import ReachCfg, StateLayout, Trajectory, check_start, plan_reach
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
@@ -216,6 +217,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
                        4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
     check_problem(problem, solver)
+    if job.reach.enabled or problem.start:
+        check_start(robot_and_ik(problem.robot_cfg)[0], problem)  # a known joint, within limits, clear
     return job, problem, device, out, solver
 
 
@@ -259,6 +262,8 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     if result.failure is not None:
         print(f"no grasp: {result.failure}")
+    if job.reach.enabled:
+        result.trajectory = reach_motion(robot, problem, result, job.reach)
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
     if job.tensorboard:
@@ -267,6 +272,24 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     if job.pictures:
         _warn_on_failure("pictures", write_pictures, robot, problem, result, run_dir)
     return result
+
+
+def reach_motion(robot, problem: GraspProblem, result: GraspResult, cfg: ReachCfg) -> Trajectory:
+    """The reach motion to the result's grasp (``reach=true``), said in one line; no grasp: no
+    motion (``found`` false, the reason)."""
+    if not result.success:
+        layout = StateLayout.of(robot, cfg.palm_speed)
+        motion = Trajectory.missing(list(layout.names), layout.revolute, "no grasp to reach (the solve did not "
+                                    "succeed)", 0.0)
+    else:
+        motion = plan_reach(problem, result, cfg, robot)
+    if motion.found:
+        print(f"reach motion: {len(motion.times)} rows, {motion.times[-1]:.2f} s long, planned in "
+              f"{motion.planning_time_s:.2f} s ({motion.planner}; collision-free at {cfg.resolution_deg:g} deg / "
+              f"{cfg.resolution_mm:g} mm)")
+    else:
+        print(f"no reach motion: {motion.reason}")
+    return motion
 
 
 def _has_environment(robot, problem: GraspProblem) -> bool:

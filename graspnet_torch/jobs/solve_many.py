@@ -123,6 +123,9 @@ def prepare_many(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     problem (as :func:`~graspnet_torch.jobs.solve_grasp.prepare_solve` checks one), the output
     folder (a folder or nothing yet, writable) and the memory of one batch."""
     job, groups, robot = job_settings(cfg)
+    if job.reach.enabled:
+        raise ConfigError("reach=true plans the motion of one problem: give problem=FILE (a folder or .jsonl "
+                          "of problems: plan each result's motion with gt.plan_reach)")
     device = check_device(job.device)
     named = load_problems(job.problem, robot, job.allow_outside_paths)
     problems = [p for _, p in named]

@@ -11,9 +11,13 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.io import atomic_write_text
+
+if TYPE_CHECKING:
+    from graspnet_torch.motion.trajectory import Trajectory
 
 __all__ = ["FIELD_ORDER", "GraspResult", "TrialResult"]
 
@@ -75,6 +79,7 @@ class GraspResult:
     outcome: object | None = field(default=None, repr=False, compare=False)  # the loop's tensors and curves
     failure: str | None = None  # why no trial succeeded (one line), or None
     chosen: int | None = None  # the reported trial's index, when a solver chose it (tracking: the nearest)
+    trajectory: Trajectory | None = None  # the reach motion to the reported grasp (reach=true), or None
 
     @property
     def best(self) -> TrialResult:
@@ -123,6 +128,8 @@ class GraspResult:
             out["seed"] = self.seed
         if self.settings:
             out["settings"] = self.settings
+        if self.trajectory is not None:
+            out["trajectory"] = self.trajectory.to_dict()
         return out
 
     def to_json(self, indent: int | None = 2) -> str:

@@ -1,0 +1,300 @@
+"""Reach motions (beyond the paper: its section 8's future work): from a start configuration to
+the reported grasp, collision-free, timed.
+
+A robot with a body (an arm carrying a hand, the MANUS) moves in three straight or planned parts:
+
+1. at the start, its fingers open (to the pre-grasp opening, below);
+2. OMPL plans the body's joints to the grasp's, fingers open, every link clear of the object,
+   the obstacles, the floor and its own links (the strict scene: no fingertip may touch);
+3. at the grasp, the fingers close on their contacts (where, as in the result, the contact
+   fingertips may touch the object).
+
+The opening: each contact fingertip backed off from its contact, away from the object's centre,
+by the largest of 4, 3, 2, 1 cm at which the hand at the grasp is clear (finger inverse
+kinematics from the grasp's joints). A
+gripper (the MANUS) has no fingers: its jaws may touch the object as in the result. A free hand
+has no start: its motion is the approach from a pre-grasp pose, the palm backed off
+``reach.backoff_m`` from the grasp away from the contacts with the fingers open, in a straight
+line to the grasp, then the fingers close.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from itertools import pairwise
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.motion.config import ReachCfg
+from graspnet_torch.motion.planner import plan_path
+from graspnet_torch.motion.trajectory import Trajectory, time_path
+from graspnet_torch.motion.validity import MotionChecker, StateLayout
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.tasks.problem import GraspProblem
+
+if TYPE_CHECKING:
+    from graspnet_torch.solver.result import GraspResult, TrialResult
+
+__all__ = ["OPENINGS_M", "check_motion", "check_start", "plan_reach", "start_posture"]
+
+OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
+PLANNER = "RRTConnect"
+COARSE = 4  # the planner first checks its motions at 4x the step; the path found is then checked at the step
+
+
+def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
+    """The configuration a reach motion starts from: the problem's ``start`` (by URDF joint name,
+    degrees or metres as written; joints left out at home), else the home posture. Refuses
+    (:class:`ProblemError`) an unknown joint or a value outside its limits."""
+    home = robot.home_posture(torch.float64)
+    if not problem.start:
+        return home
+    where = f"{problem.source}: start"
+    if not robot.has_body:
+        raise ProblemError(f"{where}: robot '{robot.name}' has no body (a free hand's motion is its approach)")
+    layout = StateLayout.of(robot)
+    body, fingers = home.body.clone(), home.fingers.clone()
+    finger_slots = {name: (k, i) for k, f in enumerate(robot.fingers.values())
+                    for i, name in enumerate(f.chain.joint_names)}
+    kinds = dict(zip(robot.body_joint_names, robot.body.joint_types, strict=True))
+    for name, value in problem.start.items():
+        if name in kinds:
+            k = robot.body_joint_names.index(name)
+            v = math.radians(value) if kinds[name] != "prismatic" else value
+            lo, hi = robot.body_limits[0][k], robot.body_limits[1][k]
+            body[k] = v
+        elif name in finger_slots:
+            k, i = finger_slots[name]
+            finger = robot.fingers[robot.finger_names[k]]
+            revolute = finger.chain.spec.joint_types[finger.chain.free[i]] != "prismatic"
+            v = math.radians(value) if revolute else value
+            lo, hi = robot.finger_limits[0][k, i], robot.finger_limits[1][k, i]
+            fingers[k, i] = v
+        else:
+            known = list(robot.body_joint_names) + list(finger_slots)
+            raise ProblemError(f"{where}: unknown joint '{name}' of robot '{robot.name}' (joints: "
+                               f"{', '.join(known[:12])}{', ...' if len(known) > 12 else ''})")
+        if not lo - 1e-9 <= v <= hi + 1e-9:
+            unit, scale = ("m", 1.0) if (name in kinds and kinds[name] == "prismatic") else ("deg", 180 / math.pi)
+            raise ProblemError(f"{where}.{name}: {value:g} lies outside its limits [{lo * scale:.4g}, "
+                               f"{hi * scale:.4g}] {unit}")
+    del layout
+    from graspnet_torch.robot.transforms import rt_to_pose
+
+    return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=fingers, body=body)
+
+
+def check_start(robot: Robot, problem: GraspProblem) -> None:
+    """Refuse (:class:`ProblemError`, before any work) a reach start with an unknown joint, outside
+    its limits, or colliding (FCL, with the fingers as given)."""
+    posture = start_posture(robot, problem)
+    if not robot.has_body:
+        return
+    from graspnet_torch.collision.scene import CollisionScene, has_environment
+
+    if has_environment(robot, problem):
+        report = CollisionScene(robot, problem, touching=False).check(posture)
+        if report.count:
+            what = [f"{link} with obstacle {o}" for link, o in report.obstacle_pairs][:2] + \
+                [f"{link} in the object" for link in report.object_links][:2] + \
+                [f"{a} with {b}" for a, b in report.self_pairs][:2]
+            named = "the problem's start" if problem.start else "the home posture (the default start)"
+            raise ProblemError(f"{problem.source}: start: {named} collides ({', '.join(what)})")
+
+
+def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: ReachCfg | None = None,
+               robot: Robot | None = None) -> Trajectory:
+    """The reach motion to a result's grasp (its best trial, or the trial given): collision-free
+    (FCL at ``reach.resolution_deg`` / ``resolution_mm`` between consecutive rows) and timed
+    within the URDF's velocity limits and ``reach.acceleration``. A motion not found within
+    ``reach.timeout_s`` comes back with ``found`` false and a one-line reason."""
+    from graspnet_torch.robot.postures import trial_posture
+    from graspnet_torch.solver.api import robot_and_ik
+
+    cfg = cfg or ReachCfg()
+    robot = robot or robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    trial = result.best if hasattr(result, "best") else result  # a GraspResult or one of its trials
+    t0 = time.perf_counter()
+    layout = StateLayout.of(robot, cfg.palm_speed)
+    checker = MotionChecker(robot, problem, layout, cfg.touch_mm)
+    goal = checker.state(trial_posture(robot, trial))
+    path = _body_path if robot.has_body else _hand_path
+    corners, reason = path(robot, problem, checker, goal, cfg)
+    if corners is None:
+        return Trajectory.missing(list(layout.names), layout.revolute, reason, time.perf_counter() - t0, PLANNER)
+    velocity = layout.velocity
+    acceleration = np.full_like(velocity, cfg.acceleration)
+    times, rows, _corners = time_path(corners, velocity, acceleration, cfg.sample_hz)
+    return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)
+
+
+def _opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> np.ndarray | None:
+    """The most open of :func:`_openings`, or None."""
+    return next(iter(_openings(checker, problem, goal, cfg)), None)
+
+
+def _openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> Iterator[np.ndarray]:
+    """The pre-grasp states at the grasp, most open first: each contact fingertip backed off from
+    its contact, away from the object's centre (or the contacts' centroid), by each of
+    :data:`OPENINGS_M` at which the hand is clear and its closing onto the grasp clear; the
+    other fingers as in the grasp (a gripper: the grasp itself)."""
+    from graspnet_torch.robot.ik import refine
+
+    robot, m = checker.robot, checker.layout.body
+    if robot.n_fingers == 0:
+        yield goal
+        return
+    posture = checker.posture(goal)
+    contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
+    centre = np.asarray(problem.object.pose[:3], dtype=np.float64) if problem.object is not None else contacts.mean(0)
+    out = contacts - centre
+    norms = np.linalg.norm(out, axis=1, keepdims=True)
+    palm = posture.palm_pose[:3].numpy()
+    out = np.where(norms > 1e-6, out / np.maximum(norms, 1e-12), (palm - contacts) /
+                   np.maximum(np.linalg.norm(palm - contacts, axis=1, keepdims=True), 1e-12))
+    if robot.has_body:
+        tips = robot.fingertips_world_from_body(posture.body, posture.fingers)
+    else:
+        tips = robot.fingertips_world(posture.palm_pose, posture.fingers)
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    rows = [robot.finger_index(f) for f in problem.fingers]
+    res = (cfg.resolution_deg, cfg.resolution_mm)
+    for distance in OPENINGS_M:
+        targets = tips.clone()
+        targets[rows] = torch.as_tensor(contacts + distance * out)
+        if robot.has_body:
+            bases = robot.world_to_bases_from_body(targets, posture.body)
+        else:
+            bases = robot.world_to_bases(targets, posture.palm_pose)
+        q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, 40)
+        pre = goal.copy()
+        pre[m:] = q[torch.as_tensor(robot.finger_mask)].numpy()
+        if checker.clear(pre[None])[0] and checker.first_collision(pre, goal, *res) is None:
+            yield pre
+
+
+def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
+               ) -> tuple[np.ndarray | None, str]:
+    """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers
+    open, the grasp; or None and why."""
+    m = checker.layout.body
+    start = checker.state(start_posture(robot, problem))
+    pre = _opening(checker, problem, goal, cfg)
+    if pre is None:
+        return None, "no pre-grasp opening of the fingers at the grasp is clear of the object"
+    opened = start.copy()
+    opened[m:] = pre[m:]
+    res = (cfg.resolution_deg, cfg.resolution_mm)
+    if robot.n_fingers and checker.first_collision(start, opened, *res) is not None:
+        return None, "opening the fingers at the start collides"
+    lower, upper = checker.layout.lower[:m], checker.layout.upper[:m]
+    fingers = pre[m:]
+
+    def full(body: np.ndarray) -> np.ndarray:
+        return np.concatenate([body, fingers])
+
+    deadline = time.perf_counter() + cfg.timeout_s
+    path, reason = None, ""
+    for coarse in (COARSE, 1):  # plan at a coarser step, then check the path at the fine one (else plan fine)
+        step = (cfg.resolution_deg * coarse, cfg.resolution_mm * coarse)
+        scale = checker.layout.scale(*step)[:m]
+
+        def segment_clear(a: np.ndarray, b: np.ndarray, step: tuple[float, float] = step) -> bool:
+            return checker.first_collision(full(a), full(b), *step) is None
+
+        def state_clear(x: np.ndarray) -> bool:
+            return bool(checker.clear(full(x)[None])[0])
+
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            break
+        path, reason = plan_path(opened[:m], pre[:m], lower, upper, scale, segment_clear, state_clear, left,
+                                 cfg.seed)
+        if path is not None and (coarse == 1 or all(checker.first_collision(full(a), full(b), *res) is None
+                                                     for a, b in pairwise(path))):
+            break
+        path = None
+    if path is None:
+        return None, reason or f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
+    body = [full(b) for b in path]
+    corners = [start] + ([opened] if robot.n_fingers else []) + body[1:] + ([goal] if robot.n_fingers else [])
+    return _distinct(np.stack(corners)), ""
+
+
+def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
+               ) -> tuple[np.ndarray | None, str]:
+    """A free hand's approach: the pre-grasp pose (backed off from the contacts, fingers open),
+    the grasp's palm with the fingers open, the grasp."""
+    contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
+    away = goal[:3] - contacts.mean(0)
+    if np.linalg.norm(away) < 1e-9:
+        return None, "the palm sits at the contacts' centre: no direction to back off along"
+    res = (cfg.resolution_deg, cfg.resolution_mm)
+    reason = "no pre-grasp opening of the fingers at the grasp is clear of the object"
+    for pre in _openings(checker, problem, goal, cfg):
+        back = pre.copy()
+        back[:3] = goal[:3] + cfg.backoff_m * away / np.linalg.norm(away)
+        if checker.first_collision(back, pre, *res) is None:
+            return np.stack([back, pre, goal]), ""
+        reason = f"the straight approach from {cfg.backoff_m:g} m away collides at every opening of the fingers"
+    return None, reason
+
+
+def _distinct(corners: np.ndarray) -> np.ndarray:
+    """Corners without consecutive repeats."""
+    keep = [0] + [k for k in range(1, len(corners)) if np.max(np.abs(corners[k] - corners[k - 1])) > 1e-12]
+    return corners[keep]
+
+
+def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajectory: Trajectory,
+                 cfg: ReachCfg | None = None, resolution_deg: float = 0.5, resolution_mm: float = 1.0
+                 ) -> list[str]:
+    """An independent re-check of a motion; returns what fails (empty: it holds).
+
+    - the first row is the start (a free hand: any pre-grasp) and the last the reported
+      configuration (1e-6);
+    - every row within the joint limits;
+    - the velocities (finite differences) within the URDF's, the accelerations within
+      ``reach.acceleration`` (1e-6 relative);
+    - FCL at ``resolution_deg`` / ``resolution_mm`` along the straight lines between consecutive
+      rows: clear (:class:`~graspnet_torch.motion.MotionChecker`: the contact fingertips may
+      touch the object only within ``reach.touch_mm`` of their contacts).
+    """
+    from graspnet_torch.robot.postures import trial_posture
+
+    cfg = cfg or ReachCfg()
+    layout = StateLayout.of(robot, cfg.palm_speed)
+    checker = MotionChecker(robot, problem, layout, cfg.touch_mm)
+    x, t = trajectory.positions, trajectory.times
+    out = []
+    goal = checker.state(trial_posture(robot, trial))
+    if np.max(np.abs(x[-1] - goal)) > 1e-6:
+        out.append(f"the last row differs from the reported configuration by {np.max(np.abs(x[-1] - goal)):.3g}")
+    if robot.has_body:
+        start = checker.state(start_posture(robot, problem))
+        if np.max(np.abs(x[0] - start)) > 1e-6:
+            out.append(f"the first row differs from the start by {np.max(np.abs(x[0] - start)):.3g}")
+    if np.any(x < layout.lower - 1e-9) or np.any(x > layout.upper + 1e-9):
+        out.append("a row lies outside the joint limits")
+    if np.any(np.diff(t) <= 0):
+        out.append("the times do not increase")
+    else:
+        dt = np.diff(t)[:, None]
+        v = np.diff(x, axis=0) / dt
+        if np.any(np.abs(v) > layout.velocity * (1 + 1e-6)):
+            out.append(f"a velocity exceeds its limit (by {np.max(np.abs(v) / layout.velocity):.4g}x)")
+        if len(t) > 2:
+            a = 2 * (v[1:] - v[:-1]) / (dt[1:] + dt[:-1])
+            if np.any(np.abs(a) > cfg.acceleration * (1 + 1e-6)):
+                out.append(f"an acceleration exceeds {cfg.acceleration:g} (up to {np.max(np.abs(a)):.4g})")
+    for k in range(len(x) - 1):
+        hit = checker.first_collision(x[k], x[k + 1], resolution_deg, resolution_mm)
+        if hit is not None:
+            out.append(f"FCL finds a collision between rows {k} and {k + 1}")
+            break
+    return out

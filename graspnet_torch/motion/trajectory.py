@@ -1,0 +1,116 @@
+"""A timed motion in joint space and its time parameterisation.
+
+A path is a polyline in joint space (waypoints (W, n), internal units: rad, m). Each of its
+segments is timed on its own from rest to rest with Ruckig, phase-synchronised (every joint
+starts and stops together, so the motion stays on the straight segment the collision check
+tested), within each joint's velocity and the acceleration limit; the timed motion is sampled
+at ``sample_hz`` and at every corner.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+__all__ = ["Trajectory", "time_path"]
+
+
+@dataclass
+class Trajectory:
+    """A reach motion (the result's ``trajectory``).
+
+    Attributes:
+        joint_names: URDF joint names (a free hand: ``palm_x`` ... ``palm_rz`` first), in order.
+        times: (W,) seconds, increasing from 0.
+        positions: (W, n) radians or metres (a free hand's palm: metres, radians).
+        revolute: (n,) which columns are angles (degrees in the file).
+        planner: the planner that found the approach.
+        planning_time_s: the planning wall time (planner, simplification, checks, timing).
+        found: whether a motion was found; else ``reason`` says why in one line.
+    """
+
+    joint_names: list[str]
+    times: np.ndarray
+    positions: np.ndarray
+    revolute: np.ndarray
+    planner: str = "RRTConnect"
+    planning_time_s: float = 0.0
+    found: bool = True
+    reason: str = ""
+
+    @classmethod
+    def missing(cls, joint_names: list[str], revolute: np.ndarray, reason: str, planning_time_s: float,
+                planner: str = "RRTConnect") -> Trajectory:
+        """No motion: ``found`` false and the one-line reason."""
+        n = len(joint_names)
+        return cls(joint_names, np.zeros(0), np.zeros((0, n)), revolute, planner, planning_time_s, False, reason)
+
+    def to_dict(self) -> dict:
+        """The result file's ``trajectory`` (degrees for the angles)."""
+        scale = np.where(self.revolute, 180.0 / math.pi, 1.0)
+        return {"joint_names": list(self.joint_names), "times": [float(t) for t in self.times],
+                "positions": (self.positions * scale).tolist(), "planner": self.planner,
+                "planning_time_s": float(self.planning_time_s), "found": bool(self.found), "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, data: dict, revolute: np.ndarray) -> Trajectory:
+        """The inverse of :meth:`to_dict` (``revolute``: which columns are angles)."""
+        positions = np.asarray(data["positions"], dtype=np.float64).reshape(-1, len(data["joint_names"]))
+        return cls(list(data["joint_names"]), np.asarray(data["times"], dtype=np.float64),
+                   positions * np.where(revolute, math.pi / 180.0, 1.0), np.asarray(revolute, dtype=bool),
+                   data.get("planner", ""), float(data.get("planning_time_s", 0.0)), bool(data["found"]),
+                   data.get("reason", ""))
+
+
+def time_path(waypoints: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, sample_hz: float
+              ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Time a polyline from rest to rest, segment by segment (Ruckig, phase-synchronised).
+
+    Args:
+        waypoints: (W, n) corners, internal units.
+        velocity, acceleration: (n,) limits per joint.
+        sample_hz: samples per second within a segment.
+    Returns:
+        times (S,), positions (S, n) and the row of each corner (W,).
+    """
+    from ruckig import InputParameter, Result, Ruckig, Synchronization
+    from ruckig import Trajectory as RuckigTrajectory
+
+    W, n = waypoints.shape
+    times, rows, corners = [0.0], [waypoints[0].copy()], [0]
+    otg = Ruckig(n)
+    for a, b in pairwise(waypoints):
+        t0 = times[-1]
+        if np.max(np.abs(b - a)) < 1e-12:
+            continue
+        inp = InputParameter(n)
+        inp.current_position, inp.target_position = a.tolist(), b.tolist()
+        inp.current_velocity = inp.current_acceleration = [0.0] * n
+        inp.target_velocity = inp.target_acceleration = [0.0] * n
+        inp.max_velocity, inp.max_acceleration = velocity.tolist(), acceleration.tolist()
+        inp.max_jerk = [math.inf] * n
+        inp.synchronization = Synchronization.Phase
+        traj = RuckigTrajectory(n)
+        if otg.calculate(inp, traj) not in (Result.Working, Result.Finished):
+            raise RuntimeError("ruckig could not time a segment")
+        duration = traj.duration
+        steps = max(1, math.ceil(duration * sample_hz))
+        for k in range(1, steps + 1):
+            t = duration * k / steps
+            p = b if k == steps else _on_segment(a, b, np.asarray(traj.at_time(t)[0]))
+            times.append(t0 + t)
+            rows.append(np.asarray(p, dtype=np.float64))
+        corners.append(len(rows) - 1)
+    while len(corners) < W:  # repeated corners (no motion between them)
+        corners.append(len(rows) - 1)
+    return np.asarray(times), np.stack(rows), corners
+
+
+def _on_segment(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """p projected onto the segment a-b (phase synchronisation keeps it there up to rounding)."""
+    d = b - a
+    s = float(np.clip((p - a) @ d / (d @ d), 0.0, 1.0))
+    return a + s * d

@@ -1,0 +1,205 @@
+"""Collision checks of a robot's states and straight motions (FCL, the model of the result's
+``collisions``), for the planner and for the independent re-check of a motion.
+
+A state is a vector x of the planned variables in internal units: a robot with a body, its body
+joints then its free finger joints (F, n) flattened; a free hand, its palm pose (x, y, z, rx,
+ry, rz) then its fingers. A state is clear when no link collides with an obstacle, the floor or
+another link and none enters the object by more than the tolerance; only where every contact
+fingertip (a gripper's two marked points) has arrived within ``touch_mm`` of its contact may the
+contact fingers' distal links (the jaws) touch the object, as in the reported grasp.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["MotionChecker", "StateLayout"]
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """The planned variables of a robot: names, which are angles, limits and the check's step.
+
+    Attributes:
+        names: the trajectory's joint names (a free hand: ``palm_x`` .. ``palm_rz`` first; then
+            every finger's free joints, by URDF name).
+        revolute: (n,) which variables are angles.
+        lower, upper: (n,) limits (a free hand's palm: +-inf, its angles +-pi).
+        velocity: (n,) speed limits (URDF ``<limit velocity>``; a free hand's palm: ``palm_speed``).
+        body: how many leading variables move the palm (body joints or the palm pose).
+    """
+
+    names: tuple[str, ...]
+    revolute: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    body: int
+
+    @classmethod
+    def of(cls, robot: Robot, palm_speed: float = 0.5) -> StateLayout:
+        names, revolute, lower, upper, velocity = [], [], [], [], []
+        if robot.has_body:
+            lo, hi = robot.body_limits
+            for k, (name, kind) in enumerate(zip(robot.body_joint_names, robot.body.joint_types, strict=True)):
+                names.append(name)
+                revolute.append(kind != "prismatic")
+                lower.append(lo[k])
+                upper.append(hi[k])
+                velocity.append(_urdf_velocity(robot, name))
+            body = len(names)
+        else:
+            for axis in "xyz":
+                names.append(f"palm_{axis}")
+                revolute.append(False)
+                lower.append(-math.inf)
+                upper.append(math.inf)
+                velocity.append(palm_speed)
+            for axis in "xyz":
+                names.append(f"palm_r{axis}")
+                revolute.append(True)
+                lower.append(-math.inf)
+                upper.append(math.inf)
+                velocity.append(palm_speed * 2)
+            body = 6
+        flo, fhi = robot.finger_limits
+        for k, finger in enumerate(robot.fingers.values()):
+            chain = finger.chain
+            for i in range(finger.n_joints):
+                name = chain.joint_names[i]
+                names.append(name)
+                revolute.append(chain.spec.joint_types[chain.free[i]] != "prismatic")
+                lower.append(flo[k, i])
+                upper.append(fhi[k, i])
+                velocity.append(_urdf_velocity(robot, name))
+        return cls(tuple(names), np.asarray(revolute), np.asarray(lower), np.asarray(upper), np.asarray(velocity),
+                   body)
+
+    def steps(self, a: np.ndarray, b: np.ndarray, resolution_deg: float, resolution_mm: float) -> int:
+        """How many equal steps from a to b keep every variable's step within the resolution."""
+        res = np.where(self.revolute, math.radians(resolution_deg), resolution_mm / 1000.0)
+        return max(1, math.ceil(float(np.max(np.abs(b - a) / res)) - 1e-9))
+
+    def scale(self, resolution_deg: float, resolution_mm: float) -> np.ndarray:
+        """(n,) the step of each variable: a state in units of it moves each by at most 1 per unit."""
+        return np.where(self.revolute, math.radians(resolution_deg), resolution_mm / 1000.0)
+
+
+def _urdf_velocity(robot: Robot, joint: str) -> float:
+    limit = robot.urdf.joints[joint].limit
+    v = None if limit is None else limit.velocity
+    if v is None or not math.isfinite(float(v)) or float(v) <= 0:
+        raise ValueError(f"{robot.cfg.urdf}: joint '{joint}' has no velocity limit (<limit velocity=...>)")
+    return float(v)
+
+
+class MotionChecker:
+    """FCL checks of states and straight motions of one robot in one problem's scene."""
+
+    def __init__(self, robot: Robot, problem: GraspProblem, layout: StateLayout, touch_mm: float = 20.0):
+        from graspnet_torch.collision.scene import CollisionScene
+
+        self.robot, self.problem, self.layout, self.touch = robot, problem, layout, touch_mm / 1000.0
+        self.scenes = {True: CollisionScene(robot, problem, touching=True),
+                       False: CollisionScene(robot, problem, touching=False)}
+        self.checks = 0
+        if robot.n_fingers:
+            self._rows = [robot.finger_index(f) for f in problem.fingers]
+            self._targets = torch.as_tensor(np.asarray(problem.contacts_world(), dtype=np.float64))
+        else:
+            self._targets = torch.as_tensor(problem.points_world(), dtype=torch.float64)
+
+    def arrived(self, states: np.ndarray) -> np.ndarray:
+        """(B,) whether every contact fingertip (a gripper's marked points, either pairing) lies
+        within ``touch_mm`` of its contact."""
+        robot, m = self.robot, self.layout.body
+        x = torch.as_tensor(np.asarray(states, dtype=np.float64))
+        if robot.n_fingers == 0:
+            points = robot.gripper_points(x[:, :m])
+            d = torch.minimum((points - self._targets).norm(dim=-1).amax(-1),
+                              (points - self._targets.flip(0)).norm(dim=-1).amax(-1))
+            return (d <= self.touch).numpy()
+        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
+        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+        tips = robot.fingertips_world_from_body(x[:, :m], q) if robot.has_body else \
+            robot.fingertips_world(x[:, :6], q)
+        return ((tips[:, self._rows] - self._targets).norm(dim=-1).amax(-1) <= self.touch).numpy()
+
+    def posture(self, x: np.ndarray) -> Posture:
+        """The :class:`Posture` of a state (1-D, internal units)."""
+        return self.postures(x[None])[0]
+
+    def postures(self, states: np.ndarray) -> list[Posture]:
+        """The :class:`Posture` of each state (B, n), the palm poses by one batched forward kinematics."""
+        robot, m = self.robot, self.layout.body
+        x = torch.as_tensor(np.asarray(states, dtype=np.float64))
+        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
+        if robot.n_fingers:
+            q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+        if robot.has_body:
+            from graspnet_torch.robot.transforms import rt_to_pose
+
+            body = x[:, :m]
+            palm = rt_to_pose(*robot.palm_frame(body))
+            return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
+        none = torch.zeros(0, dtype=torch.float64)
+        return [Posture(palm_pose=x[k, :6], fingers=q[k], body=none) for k in range(x.shape[0])]
+
+    def state(self, posture: Posture) -> np.ndarray:
+        """The state (1-D) of a posture."""
+        head = posture.body if self.robot.has_body else posture.palm_pose
+        fingers = posture.fingers[torch.as_tensor(self.robot.finger_mask)] if self.robot.n_fingers else \
+            torch.zeros(0, dtype=torch.float64)
+        return np.concatenate([head.numpy().astype(np.float64), fingers.numpy().astype(np.float64)])
+
+    def clear(self, states: np.ndarray) -> np.ndarray:
+        """(B,) which states (B, n) are clear (module docstring)."""
+        self.checks += len(states)
+        ok = np.array([r.count == 0 for r in self.scenes[False].check_many(self.postures(states))], dtype=bool)
+        if not ok.all():
+            retry = np.nonzero(~ok)[0]
+            retry = retry[self.arrived(states[retry])]
+            if retry.size:
+                reports = self.scenes[True].check_many(self.postures(states[retry]))
+                ok[retry] = [r.count == 0 for r in reports]
+        return ok
+
+    def first_collision(self, a: np.ndarray, b: np.ndarray, resolution_deg: float, resolution_mm: float,
+                        batch: int = 32) -> int | None:
+        """The straight motion from a to b in steps within the resolution: the index of a colliding
+        state (0 = a; the states are tested ends first, then by halving), or None when it is clear
+        throughout (both ends included)."""
+        n = self.layout.steps(a, b, resolution_deg, resolution_mm)
+        order = _bisection_order(n + 1)  # the ends, the middle, the quarters, ...: a collision is found early
+        s = np.linspace(0.0, 1.0, n + 1)
+        for start in range(0, n + 1, batch):
+            part = order[start: start + batch]
+            ok = self.clear(a + s[part, None] * (b - a))
+            if not ok.all():
+                return int(part[~ok].min())
+        return None
+
+
+def _bisection_order(count: int) -> np.ndarray:
+    """Indices 0..count-1: both ends first, then the midpoints of ever finer halvings."""
+    if count <= 2:
+        return np.arange(count)
+    order, seen = [0, count - 1], {0, count - 1}
+    step = count - 1
+    while step > 1:
+        half = step // 2 if step % 2 == 0 else (step + 1) // 2
+        for k in range(0, count - 1, step):
+            mid = min(k + half, count - 1)
+            if mid not in seen:
+                seen.add(mid)
+                order.append(mid)
+        step = half
+    order += [k for k in range(count) if k not in seen]
+    return np.asarray(order)
