@@ -30,6 +30,10 @@ class ReachCfg:
             once every one of them is within this of its contact (the end of the motion).
         backoff_m: a free hand's pre-grasp: the palm backed off this far from the grasp, away from
             the contacts.
+        approach_m: a robot with a body: the pre-grasp its planned motion ends at, the palm (a
+            gripper's frame) backed off this far from the grasp, away from the contacts, its
+            orientation kept; from there a straight line to the grasp (where that pre-grasp is out of
+            reach or collides, the motion is planned to the grasp itself).
         sample_hz: rows of the timed motion per second (and every corner of the path).
         seed: the planner's random seed.
     """
@@ -42,6 +46,7 @@ class ReachCfg:
     palm_speed: float = setting(0.5, lo=0.0, lo_open=True, hi=100.0)
     touch_mm: float = setting(20.0, lo=0.0, hi=1000.0)
     backoff_m: float = setting(0.1, lo=0.0, lo_open=True, hi=2.0)
+    approach_m: float = setting(0.05, lo=0.0, lo_open=True, hi=1.0)
     sample_hz: float = setting(50.0, lo=1.0, hi=10_000.0)
     seed: int = setting(0, lo=0, hi=2**31 - 1)
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from itertools import pairwise
 from typing import TYPE_CHECKING
 
@@ -40,11 +41,12 @@ from graspnet_torch.tasks.problem import GraspProblem
 if TYPE_CHECKING:
     from graspnet_torch.solver.result import GraspResult, TrialResult
 
-__all__ = ["OPENINGS_M", "check_motion", "check_start", "plan_reach", "start_posture"]
+__all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_reach", "start_posture"]
 
 OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
 PLANNER = "RRTConnect"
-COARSE = 4  # the planner first checks its motions at 4x the step; the path found is then checked at the step
+COARSE = 8  # the planner checks its motions at 8x the verification step; the path found is then verified
+VERIFY = 0.5  # the planned path is verified at half the output's check step (then the output itself)
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -123,14 +125,36 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     layout = StateLayout.of(robot, cfg.palm_speed)
     checker = MotionChecker(robot, problem, layout, cfg.touch_mm)
     goal = checker.state(trial_posture(robot, trial))
-    path = _body_path if robot.has_body else _hand_path
-    corners, reason = path(robot, problem, checker, goal, cfg)
-    if corners is None:
-        return Trajectory.missing(list(layout.names), layout.revolute, reason, time.perf_counter() - t0, PLANNER)
     velocity = layout.velocity
     acceleration = np.full_like(velocity, cfg.acceleration)
-    times, rows, _corners = time_path(corners, velocity, acceleration, cfg.sample_hz)
-    return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)
+    res = (cfg.resolution_deg, cfg.resolution_mm)
+    reason = ""
+    for verify in (VERIFY, VERIFY / 4):  # the rows found are checked as check_motion does; else planned finer
+        left = cfg.timeout_s - (time.perf_counter() - t0)
+        if left <= 0:
+            break
+        budget = replace(cfg, timeout_s=left)
+        if robot.has_body:
+            corners, reason = _body_path(robot, problem, checker, goal, budget, verify)
+        else:
+            corners, reason = _hand_path(robot, problem, checker, goal, budget)
+        if corners is None:
+            break
+        times, rows, _corners = time_path(corners, velocity, acceleration, cfg.sample_hz)
+        if colliding_row(checker, rows, *res) is None:
+            return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)
+        reason = "the motion found collides between its rows at the check step (planned again finer)"
+    return Trajectory.missing(list(layout.names), layout.revolute, reason or
+                              f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s",
+                              time.perf_counter() - t0, PLANNER)
+
+
+def colliding_row(checker: MotionChecker, rows: np.ndarray, resolution_deg: float, resolution_mm: float) -> int | None:
+    """The first row k whose straight line to row k + 1, tested at the step, collides; None: none."""
+    for k in range(len(rows) - 1):
+        if checker.first_collision(rows[k], rows[k + 1], resolution_deg, resolution_mm) is not None:
+            return k
+    return None
 
 
 def _opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> np.ndarray | None:
@@ -178,10 +202,13 @@ def _openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, c
             yield pre
 
 
-def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
-               ) -> tuple[np.ndarray | None, str]:
+def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg,
+               verify: float = VERIFY) -> tuple[np.ndarray | None, str]:
     """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers
-    open, the grasp; or None and why."""
+    open, the grasp; or None and why. A mobile base first drives (a straight line, the arm as at
+    the start), then the arm is planned with the base where the grasp has it; where that fails,
+    base and arm are planned together. ``verify``: the planned path is checked at this fraction
+    of the step."""
     m = checker.layout.body
     start = checker.state(start_posture(robot, problem))
     pre = _opening(checker, problem, goal, cfg)
@@ -192,56 +219,130 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     res = (cfg.resolution_deg, cfg.resolution_mm)
     if robot.n_fingers and checker.first_collision(start, opened, *res) is not None:
         return None, "opening the fingers at the start collides"
-    lower, upper = checker.layout.lower[:m], checker.layout.upper[:m]
-    fingers = pre[m:]
-
-    def full(body: np.ndarray) -> np.ndarray:
-        return np.concatenate([body, fingers])
-
     deadline = time.perf_counter() + cfg.timeout_s
+    fine = (cfg.resolution_deg * verify, cfg.resolution_mm * verify)
+    final: list[np.ndarray] = []  # the straight approach from a backed-off pre-grasp, when there is one
+    backed = _backed_off(robot, problem, checker, pre, cfg.approach_m)
+    if backed is not None and checker.clear(backed[None])[0] and \
+            checker.first_collision(backed, pre, *fine) is None:
+        pre, final = backed, [pre]
     path, reason = None, ""
-    for coarse in (COARSE, 1):  # plan at a coarser step, then check the path at the fine one (else plan fine)
-        step = (cfg.resolution_deg * coarse, cfg.resolution_mm * coarse)
-        scale = checker.layout.scale(*step)[:m]
-
-        def segment_clear(a: np.ndarray, b: np.ndarray, step: tuple[float, float] = step) -> bool:
-            return checker.first_collision(full(a), full(b), *step) is None
-
-        def state_clear(x: np.ndarray) -> bool:
-            return bool(checker.clear(full(x)[None])[0])
-
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            break
-        path, reason = plan_path(opened[:m], pre[:m], lower, upper, scale, segment_clear, state_clear, left,
-                                 cfg.seed)
-        if path is not None and (coarse == 1 or all(checker.first_collision(full(a), full(b), *res) is None
-                                                     for a, b in pairwise(path))):
-            break
-        path = None
+    base = len(robot.urdf.chain_spec(robot.cfg.mobile_base.base, robot.cfg.mobile_base.tip).joint_names) \
+        if robot.cfg.mobile_base is not None else 0
+    if base:  # drive, then reach
+        driven = opened.copy()
+        driven[:base] = pre[:base]
+        if checker.first_collision(opened, driven, *fine) is None:
+            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, fine, deadline)
+            if arm is not None:
+                path = [opened, *arm]
+    if path is None:
+        path, reason = _plan(checker, opened, pre, range(m), cfg, fine, deadline)
     if path is None:
         return None, reason or f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
-    body = [full(b) for b in path]
-    corners = [start] + ([opened] if robot.n_fingers else []) + body[1:] + ([goal] if robot.n_fingers else [])
+    corners = [start, *path, *final] + ([goal] if robot.n_fingers else [])
     return _distinct(np.stack(corners)), ""
+
+
+def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, state: np.ndarray, distance: float
+                ) -> np.ndarray | None:
+    """The state with the palm (a gripper's frame) moved ``distance`` away from the contacts
+    (their centroid; a gripper: its object points' midpoint), its orientation kept: damped least
+    squares on the body joints (the palm frame's Jacobian), within the limits; None when that is
+    not reached within 1 mm / 0.5 degree."""
+    from graspnet_torch.robot.ik import damped_pinv_step
+
+    m = checker.layout.body
+    q = torch.as_tensor(state[:m].copy())
+    R0, t0 = robot.palm_frame(q)
+    targets = np.asarray(problem.contacts_world() if robot.n_fingers else problem.points_world(), dtype=np.float64)
+    away = t0.numpy() - targets.mean(0)
+    if np.linalg.norm(away) < 1e-9:
+        return None
+    goal_t = t0 + torch.as_tensor(distance * away / np.linalg.norm(away))
+    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+    for _ in range(40):
+        R, t, J = robot.palm_frame_jacobian(q)
+        E = R0 @ R.T
+        w = 0.5 * torch.stack([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+        err = torch.cat([goal_t - t, w])
+        if float(err[:3].norm()) < 1e-4 and float(w.norm()) < 1e-3:
+            break
+        q = torch.minimum(torch.maximum(q + damped_pinv_step(J, err, 1e-2), lo), hi)
+    R, t = robot.palm_frame(q)
+    E = R0 @ R.T
+    if float((goal_t - t).norm()) > 1e-3 or float(torch.arccos(((E.trace() - 1) / 2).clamp(-1, 1))) > math.radians(0.5):
+        return None
+    out = state.copy()
+    out[:m] = q.numpy()
+    return out
+
+
+def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg: ReachCfg,
+          fine: tuple[float, float], deadline: float) -> tuple[list[np.ndarray] | None, str]:
+    """Full states from a to b (included) moving only the variables ``dims``: planned with motions
+    checked at :data:`COARSE` times the step ``fine``; each segment of the path found that
+    collides at ``fine`` is planned again between its ends at ``fine``."""
+    dims = np.asarray(dims)
+    lower, upper = checker.layout.lower[dims], checker.layout.upper[dims]
+
+    def full(x: np.ndarray) -> np.ndarray:
+        out = a.copy()
+        out[dims] = x
+        return out
+
+    def search(u: np.ndarray, v: np.ndarray, step: tuple[float, float]) -> tuple[np.ndarray | None, str]:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return None, f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
+        return plan_path(u, v, lower, upper, checker.layout.scale(*step)[dims],
+                         lambda x, y: checker.first_collision(full(x), full(y), *step) is None,
+                         lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed)
+
+    path, reason = search(a[dims], b[dims], (fine[0] * COARSE, fine[1] * COARSE))
+    if path is None:
+        return None, reason
+    out = [path[0]]
+    for u, v in pairwise(path):
+        if checker.first_collision(full(u), full(v), *fine) is None:
+            out.append(v)
+            continue
+        repair, reason = search(u, v, fine)
+        if repair is None:
+            return None, reason
+        out.extend(repair[1:])
+    return [full(x) for x in out], ""
 
 
 def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
                ) -> tuple[np.ndarray | None, str]:
-    """A free hand's approach: the pre-grasp pose (backed off from the contacts, fingers open),
-    the grasp's palm with the fingers open, the grasp."""
+    """A free hand's approach: the pre-grasp pose (the palm backed off ``reach.backoff_m``, its
+    orientation kept, the fingers open), in a straight line to the grasp's palm, then the
+    fingers close. The directions tried, in order: away from the contacts' centroid, away from
+    the object's centre, then along each of the palm frame's axes both ways."""
+    from graspnet_torch.robot.transforms import pose_to_rt
+
     contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
-    away = goal[:3] - contacts.mean(0)
-    if np.linalg.norm(away) < 1e-9:
-        return None, "the palm sits at the contacts' centre: no direction to back off along"
+    palm = goal[:3]
+    R, _t = pose_to_rt(torch.as_tensor(goal[:6]))
+    candidates = [palm - contacts.mean(0)]
+    if problem.object is not None:
+        candidates.append(palm - np.asarray(problem.object.pose[:3], dtype=np.float64))
+    candidates += [sign * R.numpy()[:, k] for k in range(3) for sign in (-1.0, 1.0)]
+    directions: list[np.ndarray] = []
+    for d in candidates:
+        if np.linalg.norm(d) > 1e-9 and all(np.dot(d / np.linalg.norm(d), e) < 0.999 for e in directions):
+            directions.append(d / np.linalg.norm(d))
     res = (cfg.resolution_deg, cfg.resolution_mm)
     reason = "no pre-grasp opening of the fingers at the grasp is clear of the object"
     for pre in _openings(checker, problem, goal, cfg):
-        back = pre.copy()
-        back[:3] = goal[:3] + cfg.backoff_m * away / np.linalg.norm(away)
-        if checker.first_collision(back, pre, *res) is None:
-            return np.stack([back, pre, goal]), ""
-        reason = f"the straight approach from {cfg.backoff_m:g} m away collides at every opening of the fingers"
+        for direction in directions:
+            back = pre.copy()
+            back[:3] = palm + cfg.backoff_m * direction
+            if checker.first_collision(back, pre, *res) is None:
+                return np.stack([back, pre, goal]), ""
+        reason = (f"no straight approach from {cfg.backoff_m:g} m away ({len(directions)} directions tried) is clear "
+                  f"at any opening of the fingers")
     return None, reason
 
 
@@ -292,9 +393,7 @@ def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajec
             a = 2 * (v[1:] - v[:-1]) / (dt[1:] + dt[:-1])
             if np.any(np.abs(a) > cfg.acceleration * (1 + 1e-6)):
                 out.append(f"an acceleration exceeds {cfg.acceleration:g} (up to {np.max(np.abs(a)):.4g})")
-    for k in range(len(x) - 1):
-        hit = checker.first_collision(x[k], x[k + 1], resolution_deg, resolution_mm)
-        if hit is not None:
-            out.append(f"FCL finds a collision between rows {k} and {k + 1}")
-            break
+    hit = colliding_row(checker, x, resolution_deg, resolution_mm)
+    if hit is not None:
+        out.append(f"FCL finds a collision between rows {hit} and {hit + 1}")
     return out

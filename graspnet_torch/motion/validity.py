@@ -20,7 +20,7 @@ import torch
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["MotionChecker", "StateLayout"]
+__all__ = ["MotionChecker", "StateLayout", "state_postures"]
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,24 @@ class StateLayout:
         return np.where(self.revolute, math.radians(resolution_deg), resolution_mm / 1000.0)
 
 
+def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> list[Posture]:
+    """The :class:`Posture` of each state (B, n) (internal units), the palm poses of a robot with a
+    body by one batched forward kinematics."""
+    m = layout.body
+    x = torch.as_tensor(np.asarray(states, dtype=np.float64))
+    q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
+    if robot.n_fingers:
+        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+    if robot.has_body:
+        from graspnet_torch.robot.transforms import rt_to_pose
+
+        body = x[:, :m]
+        palm = rt_to_pose(*robot.palm_frame(body))
+        return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
+    none = torch.zeros(0, dtype=torch.float64)
+    return [Posture(palm_pose=x[k, :6], fingers=q[k], body=none) for k in range(x.shape[0])]
+
+
 def _urdf_velocity(robot: Robot, joint: str) -> float:
     limit = robot.urdf.joints[joint].limit
     v = None if limit is None else limit.velocity
@@ -137,20 +155,8 @@ class MotionChecker:
         return self.postures(x[None])[0]
 
     def postures(self, states: np.ndarray) -> list[Posture]:
-        """The :class:`Posture` of each state (B, n), the palm poses by one batched forward kinematics."""
-        robot, m = self.robot, self.layout.body
-        x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
-        if robot.n_fingers:
-            q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
-        if robot.has_body:
-            from graspnet_torch.robot.transforms import rt_to_pose
-
-            body = x[:, :m]
-            palm = rt_to_pose(*robot.palm_frame(body))
-            return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
-        none = torch.zeros(0, dtype=torch.float64)
-        return [Posture(palm_pose=x[k, :6], fingers=q[k], body=none) for k in range(x.shape[0])]
+        """The :class:`Posture` of each state (B, n) (:func:`state_postures`)."""
+        return state_postures(self.robot, self.layout, states)
 
     def state(self, posture: Posture) -> np.ndarray:
         """The state (1-D) of a posture."""
