@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-proposal bench-solvers report-arm report-manus fcnn posture urdf clean
+.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-proposal bench-solvers report-arm report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -91,6 +91,9 @@ bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cm
 
 report-manus: $(STAMP)  ## the experiment manus: section 7.2, 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 (~7 min)
 	$(call EXPERIMENT_RUN,manus)
+
+report-reach: $(STAMP)  ## the experiment reach: motions from home to every arm and MANUS grasp, re-checked, checks (~5 min)
+	$(call EXPERIMENT_RUN,reach)
 
 report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)
 	$(call EXPERIMENT_RUN,table3)

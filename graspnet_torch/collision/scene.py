@@ -46,6 +46,18 @@ def environment_obstacles(robot: Robot, problem: GraspProblem) -> list[Shape]:
     return obstacles
 
 
+def _shape_extent(shape) -> np.ndarray:
+    """(8 or V, 3) points bounding a link shape, in its link's frame (a box's or a cylinder's
+    corners, a sphere's bounding box, a mesh's vertices)."""
+    if shape.kind == "mesh":
+        local = np.asarray(shape.mesh.vertices, dtype=np.float64)
+    else:
+        half = {"box": lambda d: np.asarray(d) / 2, "cylinder": lambda d: np.array([d[0], d[0], d[1] / 2]),
+                "sphere": lambda d: np.array([d[0]] * 3)}[shape.kind](shape.size)
+        local = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    return local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
+
+
 def has_environment(robot: Robot, problem: GraspProblem) -> bool:
     """Whether there is anything to collide with: an object, obstacles, a floor or own links."""
     return bool(problem.object is not None or problem.obstacles or robot.cfg.floor is not None
@@ -202,6 +214,8 @@ class CollisionScene:
             problem.object.kind == "mesh" else None
         self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
         self._objects_of: dict[str, list] | None = None  # link -> its collision objects (self-collision)
+        self._spheres: dict[str, tuple[np.ndarray, float]] | None = None  # link -> bounding sphere (its frame)
+        self._frames: dict[str, np.ndarray] = {}
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
         self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
         self.links = fcl.DynamicAABBTreeCollisionManager()
@@ -233,6 +247,29 @@ class CollisionScene:
         for obj, shape in zip(self.link_objects, self.shapes, strict=True):
             obj.setTransform(_transform(frames[shape.link] @ shape.origin))
         self.links.update()
+        self._frames = frames
+
+    def _near_pairs(self) -> list[tuple[str, str]]:
+        """The self-collision pairs whose links' bounding spheres (each link's shapes, in its
+        frame) overlap where :meth:`place` put them: only those can collide."""
+        if self._spheres is None:
+            self._spheres = {}
+            for link in {name for pair in self.self_pairs for name in pair}:
+                points = [_shape_extent(s) for s in self.shapes if s.link == link]
+                if not points:
+                    continue
+                cloud = np.concatenate(points)
+                centre = (cloud.min(0) + cloud.max(0)) / 2
+                self._spheres[link] = (centre, float(np.linalg.norm(cloud - centre, axis=1).max()) + 1e-3)
+        out = []
+        for a, b in self.self_pairs:
+            if a not in self._spheres or b not in self._spheres:
+                continue
+            (ca, ra), (cb, rb) = self._spheres[a], self._spheres[b]
+            Ta, Tb = self._frames[a], self._frames[b]
+            if np.linalg.norm(Ta[:3, :3] @ ca + Ta[:3, 3] - Tb[:3, :3] @ cb - Tb[:3, 3]) <= ra + rb:
+                out.append((a, b))
+        return out
 
     def check(self, posture: Posture) -> CollisionReport:
         """The collision count of a posture and what makes it up."""
@@ -295,7 +332,7 @@ class CollisionScene:
                     if depth > self.object_tolerance:
                         link = self.shapes[i].link
                         depths[link] = max(depth, depths.get(link, 0.0))
-        own = [(a, b) for a, b in self.self_pairs if self._links_collide(a, b)]
+        own = [(a, b) for a, b in self._near_pairs() if self._links_collide(a, b)] if self.self_pairs else []
         return CollisionReport(len(pairs) + len(depths) + len(own), sorted(pairs), depths, own)
 
     def _shape_points(self, i: int, pose: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ random_hand  the HCNN on random reachable hand problems (beyond the paper)  :cla
 tradeoff     the noise study against Table 2, open choices swept (5.1)      :class:`TradeoffCfg`
 proxy        the collision proxy against FCL near meshes (beyond the paper) :class:`ProxyCfg`
 proposal     posture proposals: what they cost and buy (beyond the paper)   :class:`ProposalExperimentCfg`
+reach        reach motions to every arm and MANUS grasp (beyond the paper)  :class:`ReachExperimentCfg`
 ===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -40,6 +41,7 @@ from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig
 from graspnet_torch.experiments.proposal import ProposalExperimentCfg, run_proposal
 from graspnet_torch.experiments.proxy import ProxyCfg, run_proxy
 from graspnet_torch.experiments.random_hand import RandomHandCfg, run_random_hand
+from graspnet_torch.experiments.reach import ReachExperimentCfg, run_reach
 from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
 from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
@@ -47,9 +49,9 @@ from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 
 __all__ = ["EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg",
            "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg", "RandomHandCfg",
-           "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10", "run_manus", "run_noise_study",
-           "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_solvers", "run_table2", "run_tables",
-           "run_tradeoff"]
+           "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10", "run_manus",
+           "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_reach",
+           "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -74,4 +76,5 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("tradeoff", TradeoffCfg, run_tradeoff),
     Experiment("proxy", ProxyCfg, run_proxy),
     Experiment("proposal", ProposalExperimentCfg, run_proposal),
+    Experiment("reach", ReachExperimentCfg, run_reach),
 )}

@@ -332,7 +332,8 @@ def posture_panels(robot, problem: GraspProblem, result: GraspResult) -> list:
 
 
 def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
-    """posture.png (the best trial) and learning.png (the curves) in ``run_dir``."""
+    """posture.png (the best trial), learning.png (the curves) and, with a reach motion, reach.gif
+    in ``run_dir``."""
     from graspnet_torch.viz import plot_learning_curves, render_robot
 
     path = render_robot(robot, posture_panels(robot, problem, result), run_dir / "posture.png")
@@ -344,4 +345,8 @@ def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: P
                                       run_dir / "learning.png", f"{problem.name or 'problem'}: learning of "
                                       f"{len(result.trials)} trials", highlight=best_index)
         print(f", {curves}", end="")
+    if result.trajectory is not None and result.trajectory.found:
+        from graspnet_torch.viz.motion import write_reach_gif
+
+        print(f", {write_reach_gif(robot, problem, result.trajectory, run_dir / 'reach.gif')}", end="")
     print()

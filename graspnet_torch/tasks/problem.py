@@ -45,9 +45,16 @@ def _joint_values(raw: Any, where: str) -> dict[str, float] | None:
         return None
     if not isinstance(raw, Mapping) or not raw or not all(isinstance(k, str) for k in raw):
         raise ProblemError(f"{where}: expected a mapping joint name -> value (m, degrees)")
-    values = number_list(list(raw.values()), None, where, ProblemError, -MAX_ANGLE_DEG, MAX_ANGLE_DEG,
-                         "joint values (m, degrees)")
-    return dict(zip(raw, values, strict=True))
+    out = {}
+    for name, value in raw.items():
+        key = f"{where}.{clip(name, 40)}"
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ProblemError(f"{key}: expected a number (m, degrees), got {short(value)}")
+        if not (math.isfinite(value) and -MAX_ANGLE_DEG <= value <= MAX_ANGLE_DEG):
+            raise ProblemError(f"{key}: {short(value)} is not a finite number within [{-MAX_ANGLE_DEG:g}, "
+                               f"{MAX_ANGLE_DEG:g}]")
+        out[name] = float(value)
+    return out
 
 
 def _check_texts(data: Mapping, source: str) -> None:

@@ -284,12 +284,13 @@ def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int]
 def random_obstacle_problems(robot: Robot, n: int, seed: int = 7,
                              fingers: Sequence[str] = ("thumb", "index", "middle"),
                              anchors: Sequence[str] = ("shoulder_rotation_link", "elbow_flexion_link", "palm"),
-                             ) -> list[GraspProblem]:
+                             clear_of: Sequence[Posture] = ()) -> list[GraspProblem]:
     """``n`` problems of a hand on an arm among obstacles: a random arm posture (the middle 60 % of
     every joint range) and ``fingers`` (the middle 60 % of their ranges) give the contacts; two or
     three obstacles (boxes, cylinders, spheres of 3-15 cm) are centred 12-20 cm from a point near
     one of the links ``anchors``, kept only if they clear that posture (FCL) and swallow no contact;
-    the search space is +-30 deg about the posture, shifted by up to 10 deg."""
+    the search space is +-30 deg about the posture, shifted by up to 10 deg. ``clear_of``: other
+    postures the obstacles must clear too (a reach motion's start: the robot's home)."""
     import numpy as np
 
     from graspnet_torch.collision import CollisionScene
@@ -329,7 +330,8 @@ def random_obstacle_problems(robot: Robot, n: int, seed: int = 7,
             problem = GraspProblem.from_mapping(data, source=f"random-{len(problems)}", robot_cfg=robot.cfg)
         except ProblemError:  # an obstacle swallows a contact: draw again
             continue
-        if CollisionScene(robot, problem).count(posture) > 0:
-            continue  # an obstacle hits the posture that made the contacts: draw again
+        scene = CollisionScene(robot, problem)
+        if scene.count(posture) > 0 or any(scene.count(p) > 0 for p in clear_of):
+            continue  # an obstacle hits the posture that made the contacts (or one to clear): draw again
         problems.append(problem)
     return problems

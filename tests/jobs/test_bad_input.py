@@ -365,3 +365,28 @@ def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, m
     """A sample of the refusals above as real commands in a fresh process (solve_grasp.py's: the
     memory estimate and the oversized problem file above)."""
     _refused_in_a_fresh_process(tmp_path, script, *args, message=message)
+
+
+@pytest.mark.parametrize(("text", "args", "message"), [
+    (ENV1 + "start: {elbow_twist: 10}\n", ["reach=true"], "start: unknown joint 'elbow_twist' of robot 'arm_hand'"),
+    (ENV1 + "start: {elbow_flexion: 170}\n", ["reach=true"], "start.elbow_flexion: 170 lies outside its limits [0, 145"),
+    (ENV1 + "start: {shoulder_flexion: 40, elbow_flexion: 60, shoulder_abduction: 20}\n", ["reach=true"],
+     "start: the problem's start collides"),
+    (ENV1 + "start: {elbow_flexion: x}\n", [], "start.elbow_flexion: expected a number"),
+    (GLASS3 + "start: {index_mcp: 10}\n", ["reach=true"], "'start' (the configuration a reach motion starts from"),
+    (ENV1, ["reach.timeout_s=0"], "reach.timeout_s=0"),
+    (ENV1, ["reach=maybe"], "reach"),
+])
+def test_bad_reach_input_is_refused(tmp_path, text, args, message):
+    """A reach motion's start with an unknown joint, outside its limits, colliding or malformed, a
+    free hand's start, and bad reach settings: exit 2, one line, nothing written."""
+    path = _problem(tmp_path, text)
+    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", *args, message=message)
+
+
+def test_reach_of_many_problems_is_refused(tmp_path):
+    folder = tmp_path / "problems"
+    folder.mkdir()
+    (folder / "a.yaml").write_text(ENV1)
+    _refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", "reach=true",
+             message="reach=true plans the motion of one problem")
