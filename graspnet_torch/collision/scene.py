@@ -214,7 +214,8 @@ class CollisionScene:
             problem.object.kind == "mesh" else None
         self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
         self._objects_of: dict[str, list] | None = None  # link -> its collision objects (self-collision)
-        self._spheres: dict[str, tuple[np.ndarray, float]] | None = None  # link -> bounding sphere (its frame)
+        self._spheres: tuple | None = None  # the self-collision links' bounding spheres (their frames)
+        self._object_spheres: tuple | None = None  # the link shapes' and the object's bounding spheres
         self._frames: dict[str, np.ndarray] = {}
         self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
         self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
@@ -249,27 +250,48 @@ class CollisionScene:
         self.links.update()
         self._frames = frames
 
+    def _near_object(self) -> np.ndarray:
+        """(S,) which link shapes' bounding spheres reach the object's (only those can cross it or
+        lie inside it) where :meth:`place` put them."""
+        if self._object_spheres is None:
+            extents = [_shape_extent(s) for s in self.shapes]
+            centres = np.stack([(e.min(0) + e.max(0)) / 2 for e in extents])
+            radii = np.array([np.linalg.norm(e - c, axis=1).max() for e, c in zip(extents, centres, strict=True)])
+            vertices = np.asarray(self.problem.object.trimesh().vertices, dtype=np.float64)
+            middle = (vertices.min(0) + vertices.max(0)) / 2
+            reach = float(np.linalg.norm(vertices - middle, axis=1).max()) + 1e-3
+            self._object_spheres = (centres, radii + 1e-3, middle, reach)
+        centres, radii, middle, reach = self._object_spheres
+        frames = np.stack([self._frames[s.link] for s in self.shapes])
+        world = np.einsum("sij,sj->si", frames[:, :3, :3], centres) + frames[:, :3, 3]
+        return np.linalg.norm(world - middle, axis=1) <= radii + reach
+
     def _near_pairs(self) -> list[tuple[str, str]]:
         """The self-collision pairs whose links' bounding spheres (each link's shapes, in its
         frame) overlap where :meth:`place` put them: only those can collide."""
         if self._spheres is None:
-            self._spheres = {}
-            for link in {name for pair in self.self_pairs for name in pair}:
+            links = sorted({name for pair in self.self_pairs for name in pair})
+            spheres = {}
+            for link in links:
                 points = [_shape_extent(s) for s in self.shapes if s.link == link]
-                if not points:
-                    continue
-                cloud = np.concatenate(points)
-                centre = (cloud.min(0) + cloud.max(0)) / 2
-                self._spheres[link] = (centre, float(np.linalg.norm(cloud - centre, axis=1).max()) + 1e-3)
-        out = []
-        for a, b in self.self_pairs:
-            if a not in self._spheres or b not in self._spheres:
-                continue
-            (ca, ra), (cb, rb) = self._spheres[a], self._spheres[b]
-            Ta, Tb = self._frames[a], self._frames[b]
-            if np.linalg.norm(Ta[:3, :3] @ ca + Ta[:3, 3] - Tb[:3, :3] @ cb - Tb[:3, 3]) <= ra + rb:
-                out.append((a, b))
-        return out
+                if points:
+                    cloud = np.concatenate(points)
+                    centre = (cloud.min(0) + cloud.max(0)) / 2
+                    spheres[link] = (centre, float(np.linalg.norm(cloud - centre, axis=1).max()) + 1e-3)
+            pairs = [(a, b) for a, b in self.self_pairs if a in spheres and b in spheres]
+            names = sorted(spheres)
+            index = {name: k for k, name in enumerate(names)}
+            self._spheres = (names, np.stack([spheres[n][0] for n in names]) if names else np.zeros((0, 3)),
+                             np.array([spheres[n][1] for n in names]), pairs,
+                             np.array([index[a] for a, _ in pairs], dtype=int),
+                             np.array([index[b] for _, b in pairs], dtype=int))
+        names, centres, radii, pairs, ia, ib = self._spheres
+        if not pairs:
+            return []
+        frames = np.stack([self._frames[n] for n in names])  # (L, 4, 4)
+        world = np.einsum("lij,lj->li", frames[:, :3, :3], centres) + frames[:, :3, 3]
+        near = np.linalg.norm(world[ia] - world[ib], axis=1) <= radii[ia] + radii[ib]
+        return [pair for pair, ok in zip(pairs, near, strict=True) if ok]
 
     def check(self, posture: Posture) -> CollisionReport:
         """The collision count of a posture and what makes it up."""
@@ -307,8 +329,9 @@ class CollisionScene:
         if self.object is not None:
             request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
             measured = []  # a mesh object: the links that cross its surface or may lie wholly inside
+            near = self._near_object()
             for i, (obj, shape) in enumerate(zip(self.link_objects, self.shapes, strict=True)):
-                if shape.link in self.touching:
+                if shape.link in self.touching or not near[i]:
                     continue
                 result = fcl.CollisionResult()
                 crossing = fcl.collide(obj, self.object, request, result)

@@ -23,8 +23,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import replace
-from itertools import pairwise
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,8 +43,7 @@ __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_r
 
 OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
 PLANNER = "RRTConnect"
-COARSE = 8  # the planner checks its motions at 8x the verification step; the path found is then verified
-VERIFY = 0.5  # the planned path is verified at half the output's check step (then the output itself)
+COARSE = 4  # the planner checks its motions at 4x the check step; the motion found is then checked at it
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -128,22 +125,30 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     velocity = layout.velocity
     acceleration = np.full_like(velocity, cfg.acceleration)
     res = (cfg.resolution_deg, cfg.resolution_mm)
-    reason = ""
-    for verify in (VERIFY, VERIFY / 4):  # the rows found are checked as check_motion does; else planned finer
-        left = cfg.timeout_s - (time.perf_counter() - t0)
-        if left <= 0:
-            break
-        budget = replace(cfg, timeout_s=left)
-        if robot.has_body:
-            corners, reason = _body_path(robot, problem, checker, goal, budget, verify)
-        else:
-            corners, reason = _hand_path(robot, problem, checker, goal, budget)
-        if corners is None:
-            break
-        times, rows, _corners = time_path(corners, velocity, acceleration, cfg.sample_hz)
-        if colliding_row(checker, rows, *res) is None:
+    deadline = t0 + cfg.timeout_s
+    if robot.has_body:
+        corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline)
+    else:
+        corners, reason = _hand_path(robot, problem, checker, goal, cfg)
+    while corners is not None:  # the rows are checked as check_motion does; a colliding stretch is planned again
+        times, rows, at = time_path(corners, velocity, acceleration, cfg.sample_hz)
+        k = colliding_row(checker, rows, *res)
+        if k is None:
             return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)
-        reason = "the motion found collides between its rows at the check step (planned again finer)"
+        j = int(np.searchsorted(at, k, side="right")) - 1  # the corner segment the colliding rows lie on
+        u, v = corners[j], corners[j + 1]
+        moving = np.nonzero(np.abs(v - u) > 1e-12)[0]
+        if not robot.has_body or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
+            reason = "a straight part of the motion collides between its rows at the check step"
+            break
+        finer = (res[0] / (2 * COARSE), res[1] / (2 * COARSE))  # the detour's motions checked at half the step
+        detour, reason = _plan(checker, u, v, range(layout.body), cfg, finer, deadline)
+        if detour is None:
+            break
+        if len(detour) == 2:  # clear at half the step but not at the step: a grazing contact between samples
+            reason = "the motion grazes an obstacle between its rows at the check step"
+            break
+        corners = np.concatenate([corners[: j + 1], np.stack(detour[1:-1]), corners[j + 1:]])
     return Trajectory.missing(list(layout.names), layout.revolute, reason or
                               f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s",
                               time.perf_counter() - t0, PLANNER)
@@ -203,12 +208,11 @@ def _openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, c
 
 
 def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg,
-               verify: float = VERIFY) -> tuple[np.ndarray | None, str]:
+               deadline: float) -> tuple[np.ndarray | None, str]:
     """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers
     open, the grasp; or None and why. A mobile base first drives (a straight line, the arm as at
     the start), then the arm is planned with the base where the grasp has it; where that fails,
-    base and arm are planned together. ``verify``: the planned path is checked at this fraction
-    of the step."""
+    base and arm are planned together (by :func:`_plan`, until ``deadline``)."""
     m = checker.layout.body
     start = checker.state(start_posture(robot, problem))
     pre = _opening(checker, problem, goal, cfg)
@@ -219,12 +223,11 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     res = (cfg.resolution_deg, cfg.resolution_mm)
     if robot.n_fingers and checker.first_collision(start, opened, *res) is not None:
         return None, "opening the fingers at the start collides"
-    deadline = time.perf_counter() + cfg.timeout_s
-    fine = (cfg.resolution_deg * verify, cfg.resolution_mm * verify)
+
     final: list[np.ndarray] = []  # the straight approach from a backed-off pre-grasp, when there is one
     backed = _backed_off(robot, problem, checker, pre, cfg.approach_m)
     if backed is not None and checker.clear(backed[None])[0] and \
-            checker.first_collision(backed, pre, *fine) is None:
+            checker.first_collision(backed, pre, *res) is None:
         pre, final = backed, [pre]
     path, reason = None, ""
     base = len(robot.urdf.chain_spec(robot.cfg.mobile_base.base, robot.cfg.mobile_base.tip).joint_names) \
@@ -232,12 +235,12 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     if base:  # drive, then reach
         driven = opened.copy()
         driven[:base] = pre[:base]
-        if checker.first_collision(opened, driven, *fine) is None:
-            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, fine, deadline)
+        if checker.first_collision(opened, driven, *res) is None:
+            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, res, deadline)
             if arm is not None:
                 path = [opened, *arm]
     if path is None:
-        path, reason = _plan(checker, opened, pre, range(m), cfg, fine, deadline)
+        path, reason = _plan(checker, opened, pre, range(m), cfg, res, deadline)
     if path is None:
         return None, reason or f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
     corners = [start, *path, *final] + ([goal] if robot.n_fingers else [])
@@ -279,39 +282,28 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
 
 
 def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg: ReachCfg,
-          fine: tuple[float, float], deadline: float) -> tuple[list[np.ndarray] | None, str]:
-    """Full states from a to b (included) moving only the variables ``dims``: planned with motions
-    checked at :data:`COARSE` times the step ``fine``; each segment of the path found that
-    collides at ``fine`` is planned again between its ends at ``fine``."""
+          step: tuple[float, float], deadline: float) -> tuple[list[np.ndarray] | None, str]:
+    """Full states from a to b (included) moving only the variables ``dims``, planned with motions
+    checked at :data:`COARSE` times ``step`` (the caller checks the result at the step, and plans
+    a colliding stretch again, finer)."""
     dims = np.asarray(dims)
     lower, upper = checker.layout.lower[dims], checker.layout.upper[dims]
+    coarse = (step[0] * COARSE, step[1] * COARSE)
 
     def full(x: np.ndarray) -> np.ndarray:
         out = a.copy()
         out[dims] = x
         return out
 
-    def search(u: np.ndarray, v: np.ndarray, step: tuple[float, float]) -> tuple[np.ndarray | None, str]:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return None, f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
-        return plan_path(u, v, lower, upper, checker.layout.scale(*step)[dims],
-                         lambda x, y: checker.first_collision(full(x), full(y), *step) is None,
-                         lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed)
-
-    path, reason = search(a[dims], b[dims], (fine[0] * COARSE, fine[1] * COARSE))
+    left = deadline - time.perf_counter()
+    if left <= 0:
+        return None, f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
+    path, reason = plan_path(a[dims], b[dims], lower, upper, checker.layout.scale(*coarse)[dims],
+                             lambda x, y: checker.first_collision(full(x), full(y), *coarse) is None,
+                             lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed)
     if path is None:
         return None, reason
-    out = [path[0]]
-    for u, v in pairwise(path):
-        if checker.first_collision(full(u), full(v), *fine) is None:
-            out.append(v)
-            continue
-        repair, reason = search(u, v, fine)
-        if repair is None:
-            return None, reason
-        out.extend(repair[1:])
-    return [full(x) for x in out], ""
+    return [full(x) for x in path], ""
 
 
 def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
