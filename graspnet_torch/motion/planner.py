@@ -15,7 +15,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["plan_path"]
+__all__ = ["SIMPLIFY_S", "plan_path"]
+
+SIMPLIFY_S = 0.5  # at most this long simplifying a path found (within the time left)
 
 
 def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray, scale: np.ndarray,
@@ -75,7 +77,7 @@ def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.
     if not setup.haveExactSolutionPath():
         setup.clear()
         return None, f"no collision-free path within reach.timeout_s={timeout_s:g} s ({status})"
-    left = max(0.05, timeout_s - (time.perf_counter() - t0))
+    left = min(max(0.05, timeout_s - (time.perf_counter() - t0)), SIMPLIFY_S)
     setup.getPathSimplifier().simplify(setup.getSolutionPath(), left)
     path = setup.getSolutionPath()
     out = np.stack([unscaled(path.getState(i)) for i in range(path.getStateCount())])

@@ -43,7 +43,7 @@ __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_r
 
 OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
 PLANNER = "RRTConnect"
-COARSE = 4  # the planner checks its motions at 4x the check step; the motion found is then checked at it
+COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -141,11 +141,14 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
         if not robot.has_body or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
             reason = "a straight part of the motion collides between its rows at the check step"
             break
-        finer = (res[0] / (2 * COARSE), res[1] / (2 * COARSE))  # the detour's motions checked at half the step
-        detour, reason = _plan(checker, u, v, range(layout.body), cfg, finer, deadline)
+        for divide in (2, 8):  # the detour's motions checked at half the step (an eighth where that is not enough)
+            detour, reason = _plan(checker, u, v, range(layout.body), cfg, (res[0] / divide, res[1] / divide),
+                                   deadline)
+            if detour is None or len(detour) > 2:
+                break
         if detour is None:
             break
-        if len(detour) == 2:  # clear at half the step but not at the step: a grazing contact between samples
+        if len(detour) == 2:  # clear at an eighth of the step but not at the step: a grazing contact
             reason = "the motion grazes an obstacle between its rows at the check step"
             break
         corners = np.concatenate([corners[: j + 1], np.stack(detour[1:-1]), corners[j + 1:]])
@@ -154,11 +157,22 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
                               time.perf_counter() - t0, PLANNER)
 
 
-def colliding_row(checker: MotionChecker, rows: np.ndarray, resolution_deg: float, resolution_mm: float) -> int | None:
-    """The first row k whose straight line to row k + 1, tested at the step, collides; None: none."""
+def colliding_row(checker: MotionChecker, rows: np.ndarray, resolution_deg: float, resolution_mm: float,
+                  batch: int = 64) -> int | None:
+    """The first row k whose straight line to row k + 1, tested at the step (both ends included),
+    collides; None: none does. Each row is tested once (the end of one line is the start of the
+    next)."""
+    states, owner = [rows[:1]], [0]
     for k in range(len(rows) - 1):
-        if checker.first_collision(rows[k], rows[k + 1], resolution_deg, resolution_mm) is not None:
-            return k
+        n = checker.layout.steps(rows[k], rows[k + 1], resolution_deg, resolution_mm)
+        s = np.arange(1, n + 1)[:, None] / n
+        states.append(rows[k] + s * (rows[k + 1] - rows[k]))
+        owner += [k] * n
+    every, owner = np.concatenate(states), np.asarray(owner)
+    for start in range(0, len(every), batch):
+        ok = checker.clear(every[start: start + batch])
+        if not ok.all():
+            return int(owner[start + int(np.argmin(ok))])
     return None
 
 
@@ -224,6 +238,7 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     if robot.n_fingers and checker.first_collision(start, opened, *res) is not None:
         return None, "opening the fingers at the start collides"
 
+    coarse = (cfg.resolution_deg * COARSE, cfg.resolution_mm * COARSE)  # the planner's step (then checked finer)
     final: list[np.ndarray] = []  # the straight approach from a backed-off pre-grasp, when there is one
     backed = _backed_off(robot, problem, checker, pre, cfg.approach_m)
     if backed is not None and checker.clear(backed[None])[0] and \
@@ -236,11 +251,11 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
         driven = opened.copy()
         driven[:base] = pre[:base]
         if checker.first_collision(opened, driven, *res) is None:
-            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, res, deadline)
+            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, coarse, deadline)
             if arm is not None:
                 path = [opened, *arm]
     if path is None:
-        path, reason = _plan(checker, opened, pre, range(m), cfg, res, deadline)
+        path, reason = _plan(checker, opened, pre, range(m), cfg, coarse, deadline)
     if path is None:
         return None, reason or f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
     corners = [start, *path, *final] + ([goal] if robot.n_fingers else [])
@@ -284,11 +299,11 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
 def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg: ReachCfg,
           step: tuple[float, float], deadline: float) -> tuple[list[np.ndarray] | None, str]:
     """Full states from a to b (included) moving only the variables ``dims``, planned with motions
-    checked at :data:`COARSE` times ``step`` (the caller checks the result at the step, and plans
-    a colliding stretch again, finer)."""
+    checked at ``step`` (the caller checks the result at its own step, and plans a colliding
+    stretch again, finer)."""
     dims = np.asarray(dims)
     lower, upper = checker.layout.lower[dims], checker.layout.upper[dims]
-    coarse = (step[0] * COARSE, step[1] * COARSE)
+    coarse = step
 
     def full(x: np.ndarray) -> np.ndarray:
         out = a.copy()
