@@ -76,7 +76,7 @@ def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.
     status = setup.solve(float(timeout_s))
     if not setup.haveExactSolutionPath():
         setup.clear()
-        return None, f"no collision-free path within reach.timeout_s={timeout_s:g} s ({status})"
+        return None, f"OMPL found no collision-free path in the {timeout_s:.2g} s left ({status})"
     left = min(max(0.05, timeout_s - (time.perf_counter() - t0)), SIMPLIFY_S)
     setup.getPathSimplifier().simplify(setup.getSolutionPath(), left)
     path = setup.getSolutionPath()

@@ -152,8 +152,8 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
             reason = "the motion grazes an obstacle between its rows at the check step"
             break
         corners = np.concatenate([corners[: j + 1], np.stack(detour[1:-1]), corners[j + 1:]])
-    return Trajectory.missing(list(layout.names), layout.revolute, reason or
-                              f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s",
+    reason = reason or "no collision-free path"
+    return Trajectory.missing(list(layout.names), layout.revolute, f"{reason} (reach.timeout_s={cfg.timeout_s:g} s)",
                               time.perf_counter() - t0, PLANNER)
 
 
@@ -257,7 +257,7 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     if path is None:
         path, reason = _plan(checker, opened, pre, range(m), cfg, coarse, deadline)
     if path is None:
-        return None, reason or f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
+        return None, reason or "no collision-free path"
     corners = [start, *path, *final] + ([goal] if robot.n_fingers else [])
     return _distinct(np.stack(corners)), ""
 
@@ -312,7 +312,7 @@ def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg
 
     left = deadline - time.perf_counter()
     if left <= 0:
-        return None, f"no collision-free path within reach.timeout_s={cfg.timeout_s:g} s"
+        return None, "no time left"
     path, reason = plan_path(a[dims], b[dims], lower, upper, checker.layout.scale(*coarse)[dims],
                              lambda x, y: checker.first_collision(full(x), full(y), *coarse) is None,
                              lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed)
