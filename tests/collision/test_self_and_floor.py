@@ -238,7 +238,7 @@ def test_self_collisions_agree_with_every_pair_tested_directly():
         posture = Posture(rt_to_pose(*robot.palm_frame(body)), torch.zeros(0, 0, dtype=torch.float64), body)
         frames = robot.link_frames(posture)
 
-        def objects(link):
+        def objects(link, frames=frames):
             out = []
             for s in shapes:
                 if s.link == link:

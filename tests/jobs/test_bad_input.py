@@ -369,7 +369,8 @@ def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, m
 
 @pytest.mark.parametrize(("text", "args", "message"), [
     (ENV1 + "start: {elbow_twist: 10}\n", ["reach=true"], "start: unknown joint 'elbow_twist' of robot 'arm_hand'"),
-    (ENV1 + "start: {elbow_flexion: 170}\n", ["reach=true"], "start.elbow_flexion: 170 lies outside its limits [0, 145"),
+    (ENV1 + "start: {elbow_flexion: 170}\n", ["reach=true"],
+     "start.elbow_flexion: 170 lies outside its limits [0, 145"),
     (ENV1 + "start: {shoulder_flexion: 40, elbow_flexion: 60, shoulder_abduction: 20}\n", ["reach=true"],
      "start: the problem's start collides"),
     (ENV1 + "start: {elbow_flexion: x}\n", [], "start.elbow_flexion: expected a number"),

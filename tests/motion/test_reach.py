@@ -128,7 +128,8 @@ def test_reach_true_adds_the_motion_to_the_result_and_a_gif(tmp_path):
     motion = result["trajectory"]
     assert motion["found"] and motion["reason"] == "" and motion["planner"] == "RRTConnect"
     names = motion["joint_names"]
-    first, last = dict(zip(names, motion["positions"][0])), dict(zip(names, motion["positions"][-1]))
+    first = dict(zip(names, motion["positions"][0], strict=True))
+    last = dict(zip(names, motion["positions"][-1], strict=True))
     assert first["shoulder_abduction"] == pytest.approx(10) and first["elbow_flexion"] == pytest.approx(20)
     assert first["shoulder_flexion"] == 0
     for joint, value in result["arm_joints"].items():
