@@ -22,7 +22,7 @@ SIMPLIFY_S = 0.5  # at most this long simplifying a path found (within the time 
 
 def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray, scale: np.ndarray,
               segment_clear: Callable[[np.ndarray, np.ndarray], bool], state_clear: Callable[[np.ndarray], bool],
-              timeout_s: float, seed: int = 0) -> tuple[np.ndarray | None, str]:
+              timeout_s: float, seed: int = 0, reach: float | None = None) -> tuple[np.ndarray | None, str]:
     """A path from ``start`` to ``goal`` (n,) within [lower, upper].
 
     Args:
@@ -32,6 +32,7 @@ def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.
         state_clear: whether one state is clear.
         timeout_s: the planner's budget.
         seed: OMPL's random seed.
+        reach: the planner's longest step (scaled units; None: a fifth of the space's diagonal).
     Returns:
         the waypoints (W, n) from start to goal (internal units), or None and a one-line reason.
     """
@@ -70,7 +71,7 @@ def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.
         begin[k], end[k] = float(start[k] / scale[k]), float(goal[k] / scale[k])
     setup.setStartAndGoalStates(begin, end)
     planner = og.RRTConnect(info)
-    planner.setRange(max(1.0, 0.2 * math.sqrt(float(np.sum((hi - lo) ** 2)))))
+    planner.setRange(max(1.0, reach if reach is not None else 0.2 * math.sqrt(float(np.sum((hi - lo) ** 2)))))
     setup.setPlanner(planner)
     t0 = time.perf_counter()
     status = setup.solve(float(timeout_s))

@@ -43,6 +43,7 @@ __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_r
 
 OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
 PLANNER = "RRTConnect"
+DETOUR_DEG, DETOUR_M = 15.0, 0.05  # a detour searches this far around the stretch it replaces
 COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
 
 
@@ -136,14 +137,15 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
         if k is None:
             return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)
         j = int(np.searchsorted(at, k, side="right")) - 1  # the corner segment the colliding rows lie on
+        # (the detour moves the joints that segment moves)
         u, v = corners[j], corners[j + 1]
         moving = np.nonzero(np.abs(v - u) > 1e-12)[0]
         if not robot.has_body or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
             reason = "a straight part of the motion collides between its rows at the check step"
             break
-        for divide in (2, 8):  # the detour's motions checked at half the step (an eighth where that is not enough)
-            detour, reason = _plan(checker, u, v, range(layout.body), cfg, (res[0] / divide, res[1] / divide),
-                                   deadline)
+        for divide in (1, 8):  # the detour's motions checked at the step (an eighth where that is not enough)
+            detour, reason = _plan(checker, u, v, moving, cfg, (res[0] / divide, res[1] / divide), deadline,
+                                   local=True)
             if detour is None or len(detour) > 2:
                 break
         if detour is None:
@@ -296,13 +298,20 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     return out
 
 
-def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg: ReachCfg,
-          step: tuple[float, float], deadline: float) -> tuple[list[np.ndarray] | None, str]:
+def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range | np.ndarray, cfg: ReachCfg,
+          step: tuple[float, float], deadline: float, local: bool = False) -> tuple[list[np.ndarray] | None, str]:
     """Full states from a to b (included) moving only the variables ``dims``, planned with motions
     checked at ``step`` (the caller checks the result at its own step, and plans a colliding
-    stretch again, finer)."""
+    stretch again, finer). ``local``: a detour, searched within :data:`DETOUR_DEG` (prismatic:
+    :data:`DETOUR_M`) of the box spanned by a and b, with steps of at most half their distance."""
     dims = np.asarray(dims)
     lower, upper = checker.layout.lower[dims], checker.layout.upper[dims]
+    reach = None
+    if local:
+        margin = np.where(checker.layout.revolute[dims], math.radians(DETOUR_DEG), DETOUR_M)
+        lower = np.maximum(lower, np.minimum(a[dims], b[dims]) - margin)
+        upper = np.minimum(upper, np.maximum(a[dims], b[dims]) + margin)
+        reach = 0.5 * float(np.linalg.norm((b[dims] - a[dims]) / checker.layout.scale(*step)[dims]))
     coarse = step
 
     def full(x: np.ndarray) -> np.ndarray:
@@ -315,7 +324,7 @@ def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range, cfg
         return None, "no time left"
     path, reason = plan_path(a[dims], b[dims], lower, upper, checker.layout.scale(*coarse)[dims],
                              lambda x, y: checker.first_collision(full(x), full(y), *coarse) is None,
-                             lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed)
+                             lambda x: bool(checker.clear(full(x)[None])[0]), left, cfg.seed, reach)
     if path is None:
         return None, reason
     return [full(x) for x in path], ""
