@@ -131,7 +131,7 @@ def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
          float(np.percentile(times, 95)) <= TARGETS["p95_s"]),
         (f"every motion re-checked clean: {sum(r.checked for r in rows)}/{sum(r.found for r in rows)}",
          all(r.checked == r.found for r in rows)),
-        (f"random arm problems: {random_row.found}/{random_row.solved} solved ones get a motion ({random_pct:.0f} %) "
+        (f"random arm problems: {random_row.found}/{random_row.solved} solved ones get a motion ({random_pct:.1f} %) "
          f">= {TARGETS['random_pct']:g} %", random_pct >= TARGETS["random_pct"])]
     numbers = {f"{r.group}/found": r.found for r in rows}
     numbers.update({f"{r.group}/solved": r.solved for r in rows})
