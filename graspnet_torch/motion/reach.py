@@ -57,7 +57,6 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
     where = f"{problem.source}: start"
     if not robot.has_body:
         raise ProblemError(f"{where}: robot '{robot.name}' has no body (a free hand's motion is its approach)")
-    layout = StateLayout.of(robot)
     body, fingers = home.body.clone(), home.fingers.clone()
     finger_slots = {name: (k, i) for k, f in enumerate(robot.fingers.values())
                     for i, name in enumerate(f.chain.joint_names)}
@@ -65,7 +64,8 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
     for name, value in problem.start.items():
         if name in kinds:
             k = robot.body_joint_names.index(name)
-            v = math.radians(value) if kinds[name] != "prismatic" else value
+            revolute = kinds[name] != "prismatic"
+            v = math.radians(value) if revolute else value
             lo, hi = robot.body_limits[0][k], robot.body_limits[1][k]
             body[k] = v
         elif name in finger_slots:
@@ -80,10 +80,9 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
             raise ProblemError(f"{where}: unknown joint '{name}' of robot '{robot.name}' (joints: "
                                f"{', '.join(known[:12])}{', ...' if len(known) > 12 else ''})")
         if not lo - 1e-9 <= v <= hi + 1e-9:
-            unit, scale = ("m", 1.0) if (name in kinds and kinds[name] == "prismatic") else ("deg", 180 / math.pi)
+            unit, scale = ("deg", 180 / math.pi) if revolute else ("m", 1.0)
             raise ProblemError(f"{where}.{name}: {value:g} lies outside its limits [{lo * scale:.4g}, "
                                f"{hi * scale:.4g}] {unit}")
-    del layout
     from graspnet_torch.robot.transforms import rt_to_pose
 
     return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=fingers, body=body)

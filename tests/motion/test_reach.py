@@ -141,3 +141,14 @@ def test_reach_true_adds_the_motion_to_the_result_and_a_gif(tmp_path):
                 assert last[name] == pytest.approx(v, abs=1e-6)
     assert motion["times"][0] == 0 and np.all(np.diff(motion["times"]) > 0)
     assert (tmp_path / "run" / "reach.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+
+
+def test_a_trajectory_reads_back_what_it_writes():
+    """to_dict (degrees for the angles) and from_dict are inverses."""
+    motion = gt.Trajectory(["a", "b"], np.array([0.0, 0.5]), np.array([[0.1, 0.2], [0.3, -0.4]]),
+                           np.array([True, False]), "RRTConnect", 0.25)
+    data = motion.to_dict()
+    assert data["positions"][1] == [pytest.approx(math.degrees(0.3)), -0.4]
+    back = gt.Trajectory.from_dict(json.loads(json.dumps(data)), np.array([True, False]))
+    assert np.allclose(back.positions, motion.positions) and np.allclose(back.times, motion.times)
+    assert (back.found, back.reason, back.planner) == (True, "", "RRTConnect")
