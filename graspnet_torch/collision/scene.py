@@ -14,17 +14,19 @@ problem's environment: its obstacles and the grasped object. For a posture it co
 and for a robot with a ``floor`` (a mobile base), the floor is an obstacle of every problem: a
 slab whose top lies 1 mm below that height (the platform stands on it without touching),
 
-with a broad phase (FCL's dynamic AABB tree over the links, one per environment element) and a
-narrow phase (FCL's primitive-primitive tests; penetration depth by GJK/EPA).
+with a broad phase (every shape's oriented box against every other's, all postures at once:
+collision/boxes.py; only pairs whose boxes meet go further) and a narrow phase (FCL's
+primitive-primitive tests; penetration depth by GJK/EPA).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from graspnet_torch.collision.boxes import boxes_apart, link_box, shape_box
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
@@ -44,18 +46,6 @@ def environment_obstacles(robot: Robot, problem: GraspProblem) -> list[Shape]:
         pose = np.array([0.0, 0.0, top - FLOOR_SIZE[2] / 2, 0.0, 0.0, 0.0])
         obstacles.append(Shape("box", FLOOR_SIZE, pose))
     return obstacles
-
-
-def _shape_extent(shape) -> np.ndarray:
-    """(8 or V, 3) points bounding a link shape, in its link's frame (a box's or a cylinder's
-    corners, a sphere's bounding box, a mesh's vertices)."""
-    if shape.kind == "mesh":
-        local = np.asarray(shape.mesh.vertices, dtype=np.float64)
-    else:
-        half = {"box": lambda d: np.asarray(d) / 2, "cylinder": lambda d: np.array([d[0], d[0], d[1] / 2]),
-                "sphere": lambda d: np.array([d[0]] * 3)}[shape.kind](shape.size)
-        local = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
-    return local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
 
 
 def has_environment(robot: Robot, problem: GraspProblem) -> bool:
@@ -213,19 +203,31 @@ class CollisionScene:
         self._mesh_object = mesh_query(problem.object) if problem.object is not None and \
             problem.object.kind == "mesh" else None
         self._points: dict[int, np.ndarray] = {}  # link shape index -> its points (shape frame)
-        self._objects_of: dict[str, list] | None = None  # link -> its collision objects (self-collision)
-        self._spheres: tuple | None = None  # the self-collision links' bounding spheres (their frames)
-        self._object_spheres: tuple | None = None  # the link shapes' and the object's bounding spheres
-        self._frames: dict[str, np.ndarray] = {}
-        self._owner = {id(o): k for k, o in enumerate(self.obstacles)}
-        self._link_of = {id(o): s.link for o, s in zip(self.link_objects, self.shapes, strict=True)}
-        self.links = fcl.DynamicAABBTreeCollisionManager()
-        self.links.registerObjects(self.link_objects)
-        self.links.setup()
-        self.environment = fcl.DynamicAABBTreeCollisionManager()
-        if self.obstacles:
-            self.environment.registerObjects(self.obstacles)
-        self.environment.setup()
+        self._shapes_of: dict[str, list[int]] = {}  # link -> its shapes' indices
+        for i, shape in enumerate(self.shapes):
+            self._shapes_of.setdefault(shape.link, []).append(i)
+        self._frame_of: np.ndarray | None = None  # shape -> its link's row in the frames (set on first use)
+        self._frame_names: list[str] = []
+        # the broad phase (collision/boxes.py): every shape's box, the obstacles', the object's, the
+        # self-collision pairs' shape pairs
+        boxes = [link_box(s) for s in self.shapes]
+        self._box_pose = np.stack([b[0] for b in boxes]) if boxes else np.zeros((0, 4, 4))
+        self._box_half = np.stack([b[1] for b in boxes]) if boxes else np.zeros((0, 3))
+        around = [shape_box(o) for o in elements]
+        self._obstacle_pose = np.stack([b[0] for b in around]) if around else np.zeros((0, 4, 4))
+        self._obstacle_half = np.stack([b[1] for b in around]) if around else np.zeros((0, 3))
+        self._object_box = shape_box(problem.object) if problem.object is not None else None
+        self._object_shapes = np.array([s.link not in self.touching for s in self.shapes], dtype=bool)
+        first, second, owner = [], [], []
+        for p, (la, lb) in enumerate(self.self_pairs):
+            for i in self._shapes_of.get(la, ()):
+                for j in self._shapes_of.get(lb, ()):
+                    first.append(i)
+                    second.append(j)
+                    owner.append(p)
+        self._pair_first, self._pair_second = np.asarray(first, dtype=int), np.asarray(second, dtype=int)
+        self._pair_owner = np.zeros((len(owner), len(self.self_pairs)))
+        self._pair_owner[np.arange(len(owner)), owner] = 1.0
 
     @staticmethod
     def distal_links(robot: Robot, shapes: list, fingers: tuple[str, ...]) -> set[str]:
@@ -240,123 +242,137 @@ class CollisionScene:
             out.add(link)
         return out
 
-    def place(self, posture: Posture) -> None:
-        """Move every link's geometry to the posture (forward kinematics in float64)."""
-        self._place(self.robot.link_frames(posture))
-
-    def _place(self, frames: dict[str, np.ndarray]) -> None:
-        for obj, shape in zip(self.link_objects, self.shapes, strict=True):
-            obj.setTransform(_transform(frames[shape.link] @ shape.origin))
-        self.links.update()
-        self._frames = frames
-
-    def _near_object(self) -> np.ndarray:
-        """(S,) which link shapes' bounding spheres reach the object's (only those can cross it or
-        lie inside it) where :meth:`place` put them."""
-        if self._object_spheres is None:
-            extents = [_shape_extent(s) for s in self.shapes]
-            centres = np.stack([(e.min(0) + e.max(0)) / 2 for e in extents])
-            radii = np.array([np.linalg.norm(e - c, axis=1).max() for e, c in zip(extents, centres, strict=True)])
-            vertices = np.asarray(self.problem.object.trimesh().vertices, dtype=np.float64)
-            middle = (vertices.min(0) + vertices.max(0)) / 2
-            reach = float(np.linalg.norm(vertices - middle, axis=1).max()) + 1e-3
-            self._object_spheres = (centres, radii + 1e-3, middle, reach)
-        centres, radii, middle, reach = self._object_spheres
-        frames = np.stack([self._frames[s.link] for s in self.shapes])
-        world = np.einsum("sij,sj->si", frames[:, :3, :3], centres) + frames[:, :3, 3]
-        return np.linalg.norm(world - middle, axis=1) <= radii + reach
-
-    def _near_pairs(self) -> list[tuple[str, str]]:
-        """The self-collision pairs whose links' bounding spheres (each link's shapes, in its
-        frame) overlap where :meth:`place` put them: only those can collide."""
-        if self._spheres is None:
-            links = sorted({name for pair in self.self_pairs for name in pair})
-            spheres = {}
-            for link in links:
-                points = [_shape_extent(s) for s in self.shapes if s.link == link]
-                if points:
-                    cloud = np.concatenate(points)
-                    centre = (cloud.min(0) + cloud.max(0)) / 2
-                    spheres[link] = (centre, float(np.linalg.norm(cloud - centre, axis=1).max()) + 1e-3)
-            pairs = [(a, b) for a, b in self.self_pairs if a in spheres and b in spheres]
-            names = sorted(spheres)
-            index = {name: k for k, name in enumerate(names)}
-            self._spheres = (names, np.stack([spheres[n][0] for n in names]) if names else np.zeros((0, 3)),
-                             np.array([spheres[n][1] for n in names]), pairs,
-                             np.array([index[a] for a, _ in pairs], dtype=int),
-                             np.array([index[b] for _, b in pairs], dtype=int))
-        names, centres, radii, pairs, ia, ib = self._spheres
-        if not pairs:
-            return []
-        frames = np.stack([self._frames[n] for n in names])  # (L, 4, 4)
-        world = np.einsum("lij,lj->li", frames[:, :3, :3], centres) + frames[:, :3, 3]
-        near = np.linalg.norm(world[ia] - world[ib], axis=1) <= radii[ia] + radii[ib]
-        return [pair for pair, ok in zip(pairs, near, strict=True) if ok]
-
     def check(self, posture: Posture) -> CollisionReport:
         """The collision count of a posture and what makes it up."""
         return self.check_many([posture])[0]
 
     def check_many(self, postures: Sequence[Posture]) -> list[CollisionReport]:
-        """:meth:`check` of several postures (their forward kinematics in one pass)."""
+        """:meth:`check` of several postures (their forward kinematics and broad phase in one pass)."""
+        frames = self.robot.link_frames_array(postures)
+        obstacle, near_object, own = self._broad_phase(*frames)
         out = []
-        for frames in self.robot.link_frames_many(postures):
-            self._place(frames)
-            out.append(self._check_placed())
+        for k in range(len(postures)):
+            pairs, depths, self_pairs = [], {}, []
+            for kind, a, b in self._collisions(frames[1][k], obstacle[k], near_object[k], own[k]):
+                if kind == "obstacle":
+                    pairs.append((a, b))
+                elif kind == "object":
+                    depths[a] = b
+                else:
+                    self_pairs.append((a, b))
+            out.append(CollisionReport(len(pairs) + len(depths) + len(self_pairs), sorted(pairs), depths, self_pairs))
         return out
 
-    def _check_placed(self) -> CollisionReport:
-        """The collision count of the posture :meth:`_place` put the links at."""
+    def collides_many(self, postures: Sequence[Posture]) -> np.ndarray:
+        """(B,) bool: which postures have a collision (``check(p).count > 0``)."""
+        return self.collides_at(*self.robot.link_frames_array(postures))
+
+    def collides_at(self, links: list[str], frames: np.ndarray) -> np.ndarray:
+        """(B,) bool: which of B placements of the links collide, each test stopping at its first
+        collision. links: the L link names; frames: (B, L, 4, 4) their world poses
+        (:meth:`Robot.link_frames_of <graspnet_torch.robot.robot.Robot.link_frames_of>`)."""
+        obstacle, near_object, own = self._broad_phase(links, frames)
+        out = np.zeros(len(frames), dtype=bool)
+        maybe = obstacle.any((1, 2)) | near_object.any(1) | own.any(1)
+        for k in np.nonzero(maybe)[0]:
+            out[k] = next(self._collisions(frames[k], obstacle[k], near_object[k], own[k]), None) is not None
+        return out
+
+    def _broad_phase(self, links: list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pairs whose boxes meet (collision/boxes.py) where the links (names; poses (B, L, 4, 4))
+        are: (B, S, O) link shape and obstacle, (B, S) link shape and object (the touching links
+        left out), (B, P) self-collision pair."""
+        if self._frame_of is None or self._frame_names != links:
+            row = {name: k for k, name in enumerate(links)}
+            self._frame_of, self._frame_names = np.array([row[s.link] for s in self.shapes], dtype=int), list(links)
+        B, S = len(frames), len(self.shapes)
+        world = frames[:, self._frame_of] @ self._box_pose  # (B, S, 4, 4): each shape's box
+        half = self._box_half
+        obstacle = ~boxes_apart(world[:, :, None], half[None, :, None], self._obstacle_pose[None, None],
+                                self._obstacle_half[None, None])
+        if self._object_box is not None:
+            near_object = ~boxes_apart(world, half[None], *self._object_box) & self._object_shapes
+        else:
+            near_object = np.zeros((B, S), dtype=bool)
+        if len(self._pair_first):
+            i, j = self._pair_first, self._pair_second
+            meet = ~boxes_apart(world[:, i], half[i][None], world[:, j], half[j][None])
+            own = meet.astype(np.float64) @ self._pair_owner > 0
+        else:
+            own = np.zeros((B, len(self.self_pairs)), dtype=bool)
+        return obstacle, near_object, own
+
+    def _collisions(self, frames: np.ndarray, obstacle: np.ndarray, near_object: np.ndarray, own: np.ndarray
+                    ) -> Iterator[tuple[str, str, object]]:
+        """The collisions of one posture, its link frames (L, 4, 4), among the pairs the broad
+        phase let through: ``("obstacle", link, obstacle index)``, ``("self", link, link)`` and
+        ``("object", link, depth)``; each link shape is placed (FCL) when first needed."""
         import fcl
 
-        pairs: set[tuple[str, int]] = set()
-        if self.obstacles:
-            data = fcl.CollisionData(request=fcl.CollisionRequest(num_max_contacts=100000, enable_contact=True))
-            self.links.collide(self.environment, data, fcl.defaultCollisionCallback)
-            for contact in data.result.contacts:
-                a, b = contact.o1, contact.o2
-                link = self._link_of.get(id(a)) or self._link_of.get(id(b))
-                owner = self._owner.get(id(b), self._owner.get(id(a)))
-                if link is not None and owner is not None:
-                    pairs.add((link, owner))
-            if not pairs and data.result.is_collision:  # contacts not reported: fall back to pairwise tests
-                pairs = self._pairwise()
-            for k, (query, pose) in self._mesh_obstacles.items():  # a link wholly inside a mesh obstacle
-                for i, shape in enumerate(self.shapes):
-                    if (shape.link, k) not in pairs and self._inside(i, query, pose, first=True):
-                        pairs.add((shape.link, k))
+        placed: set[int] = set()
+
+        def put(i: int) -> None:
+            if i not in placed:
+                placed.add(i)
+                self.link_objects[i].setTransform(_transform(frames[self._frame_of[i]] @ self.shapes[i].origin))
+
+        request = fcl.CollisionRequest()
+        found: set[tuple[str, int]] = set()
+        for i, k in zip(*np.nonzero(obstacle), strict=True):
+            link, k = self.shapes[i].link, int(k)
+            if (link, k) in found:
+                continue
+            put(i)
+            if fcl.collide(self.link_objects[i], self.obstacles[k], request, fcl.CollisionResult()) or \
+                    (k in self._mesh_obstacles and self._inside(i, *self._mesh_obstacles[k], first=True)):
+                found.add((link, k))
+                yield "obstacle", link, k
+        for p in np.nonzero(own)[0]:
+            a, b = self.self_pairs[p]
+            for i in self._shapes_of[a] + self._shapes_of[b]:
+                put(i)
+            if any(fcl.collide(self.link_objects[i], self.link_objects[j], request, fcl.CollisionResult())
+                   for i in self._shapes_of[a] for j in self._shapes_of[b]):
+                yield "self", a, b
+        if near_object.any():
+            indices = np.nonzero(near_object)[0]
+            for i in indices:
+                put(i)
+            for link, depth in self._object_depths(indices).items():
+                yield "object", link, depth
+
+    def _object_depths(self, indices: np.ndarray) -> dict[str, float]:
+        """The links among the (placed) shapes ``indices`` that go into the object deeper than the
+        tolerance, with a depth each reaches (m)."""
+        import fcl
+
         depths: dict[str, float] = {}
-        if self.object is not None:
-            request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
-            measured = []  # a mesh object: the links that cross its surface or may lie wholly inside
-            near = self._near_object()
-            for i, (obj, shape) in enumerate(zip(self.link_objects, self.shapes, strict=True)):
-                if shape.link in self.touching or not near[i]:
-                    continue
-                result = fcl.CollisionResult()
-                crossing = fcl.collide(obj, self.object, request, result)
-                if self._mesh_object is not None:
-                    measured.append((i, crossing))
-                elif crossing:
-                    depth = max((c.penetration_depth for c in result.contacts), default=0.0)
-                    if depth > self.object_tolerance:
-                        depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
-            if measured:  # the depth of each link's points below the mesh's surface (collision/mesh.py)
-                query, pose = self._mesh_object
-                points = [self._shape_points(i, pose) for i, _ in measured]
-                points = [p if crossing else p[:1] for p, (_, crossing) in zip(points, measured, strict=True)]
-                inside = [k for k, (_, crossing) in enumerate(measured)
-                          if not crossing and query.inside(points[k]).any()]
-                for k in inside:  # wholly inside: all its points
-                    points[k] = self._shape_points(measured[k][0], pose)
-                    measured[k] = (measured[k][0], True)
-                sets = [p if crossing else p[:0] for p, (_, crossing) in zip(points, measured, strict=True)]
-                for (i, _), depth in zip(measured, query.depths_beyond(sets, self.object_tolerance), strict=True):
-                    if depth > self.object_tolerance:
-                        link = self.shapes[i].link
-                        depths[link] = max(depth, depths.get(link, 0.0))
-        own = [(a, b) for a, b in self._near_pairs() if self._links_collide(a, b)] if self.self_pairs else []
-        return CollisionReport(len(pairs) + len(depths) + len(own), sorted(pairs), depths, own)
+        request = fcl.CollisionRequest(num_max_contacts=8, enable_contact=True)
+        measured = []  # a mesh object: the links that cross its surface or may lie wholly inside
+        for i in indices:
+            shape = self.shapes[i]
+            result = fcl.CollisionResult()
+            crossing = fcl.collide(self.link_objects[i], self.object, request, result)
+            if self._mesh_object is not None:
+                measured.append((i, crossing))
+            elif crossing:
+                depth = max((c.penetration_depth for c in result.contacts), default=0.0)
+                if depth > self.object_tolerance:
+                    depths[shape.link] = max(depth, depths.get(shape.link, 0.0))
+        if measured:  # the depth of each link's points below the mesh's surface (collision/mesh.py)
+            query, pose = self._mesh_object
+            points = [self._shape_points(i, pose) for i, _ in measured]
+            points = [p if crossing else p[:1] for p, (_, crossing) in zip(points, measured, strict=True)]
+            inside = [k for k, (_, crossing) in enumerate(measured) if not crossing and query.inside(points[k]).any()]
+            for k in inside:  # wholly inside: all its points
+                points[k] = self._shape_points(measured[k][0], pose)
+                measured[k] = (measured[k][0], True)
+            sets = [p if crossing else p[:0] for p, (_, crossing) in zip(points, measured, strict=True)]
+            for (i, _), depth in zip(measured, query.depths_beyond(sets, self.object_tolerance), strict=True):
+                if depth > self.object_tolerance:
+                    link = self.shapes[i].link
+                    depths[link] = max(depth, depths.get(link, 0.0))
+        return depths
 
     def _shape_points(self, i: int, pose: np.ndarray) -> np.ndarray:
         """Link shape i's points (:func:`~graspnet_torch.collision.mesh.shape_points`) placed where
@@ -375,27 +391,6 @@ class CollisionScene:
         does not cross the surface)."""
         points = self._shape_points(i, pose)
         return bool(query.inside(points[:1] if first else points).any())
-
-    def _links_collide(self, a: str, b: str) -> bool:
-        import fcl
-
-        if self._objects_of is None:  # each link's collision objects, gathered once
-            self._objects_of = {}
-            for obj, shape in zip(self.link_objects, self.shapes, strict=True):
-                self._objects_of.setdefault(shape.link, []).append(obj)
-        request = fcl.CollisionRequest()
-        return any(fcl.collide(oa, ob, request, fcl.CollisionResult())
-                   for oa in self._objects_of.get(a, ()) for ob in self._objects_of.get(b, ()))
-
-    def _pairwise(self) -> set[tuple[str, int]]:
-        import fcl
-
-        pairs = set()
-        for obj, shape in zip(self.link_objects, self.shapes, strict=True):
-            for k, obstacle in enumerate(self.obstacles):
-                if fcl.collide(obj, obstacle, fcl.CollisionRequest(), fcl.CollisionResult()):
-                    pairs.add((shape.link, k))
-        return pairs
 
     def count(self, posture: Posture) -> int:
         return self.check(posture).count

@@ -165,16 +165,27 @@ class MotionChecker:
             torch.zeros(0, dtype=torch.float64)
         return np.concatenate([head.numpy().astype(np.float64), fingers.numpy().astype(np.float64)])
 
+    def link_frames(self, states: np.ndarray) -> tuple[list[str], np.ndarray]:
+        """The links' names and world poses (B, L, 4, 4) in states (B, n)."""
+        robot, m = self.robot, self.layout.body
+        x = torch.as_tensor(np.asarray(states, dtype=np.float64))
+        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
+        if robot.n_fingers:
+            q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+        if robot.has_body:
+            return robot.link_frames_of(x[:, :m], q)
+        return robot.link_frames_of(None, q, x[:, :6])
+
     def clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear (module docstring)."""
         self.checks += len(states)
-        ok = np.array([r.count == 0 for r in self.scenes[False].check_many(self.postures(states))], dtype=bool)
+        links, frames = self.link_frames(states)
+        ok = ~self.scenes[False].collides_at(links, frames)
         if not ok.all():
             retry = np.nonzero(~ok)[0]
             retry = retry[self.arrived(states[retry])]
             if retry.size:
-                reports = self.scenes[True].check_many(self.postures(states[retry]))
-                ok[retry] = [r.count == 0 for r in reports]
+                ok[retry] = ~self.scenes[True].collides_at(links, frames[retry])
         return ok
 
     def first_collision(self, a: np.ndarray, b: np.ndarray, resolution_deg: float, resolution_mm: float,

@@ -452,20 +452,57 @@ class Robot:
 
     def link_frames_many(self, postures: Sequence[Posture]) -> list[dict[str, np.ndarray]]:
         """:meth:`link_frames` of several postures, in one pass of forward kinematics."""
+        names, frames = self.link_frames_array(postures)
+        return [dict(zip(names, frames[k], strict=True)) for k in range(len(postures))]
+
+    def link_frames_array(self, postures: Sequence[Posture]) -> tuple[list[str], np.ndarray]:
+        """The links' names and their world poses (B, L, 4, 4) float64 in B postures (one pass of
+        forward kinematics: :meth:`link_frames_of`)."""
+        fingers = torch.stack([p.fingers.to(torch.float64) for p in postures])
+        if self.body is not None:
+            return self.link_frames_of(torch.stack([p.body.to(torch.float64) for p in postures]), fingers)
+        return self.link_frames_of(None, fingers, torch.stack([p.palm_pose.to(torch.float64) for p in postures]))
+
+    def link_frames_of(self, body: Tensor | None, fingers: Tensor, palm_pose: Tensor | None = None
+                       ) -> tuple[list[str], np.ndarray]:
+        """The links' names and world poses (B, L, 4, 4) float64 from joints: body (B, m) (a robot
+        with a body; else None), fingers (B, F, n) free joints (padded), palm_pose (B, 6) (a free
+        hand's)."""
         chain = self.urdf.chain64
         names = chain.get_joint_parameter_names()
-        rows = [self.joint_values(p) for p in postures]
-        th = torch.tensor([[values.get(n, 0.0) for n in names] for values in rows], dtype=torch.float64)
-        frames = {name: T.get_matrix().numpy() for name, T in chain.forward_kinematics(th).items()}
+        if "_joint_columns" not in self.__dict__:  # where each URDF joint's value comes from, once
+            body_names = list(self.body_joint_names) if self.body is not None else []
+            sources = []
+            for name in names:
+                if name in body_names:
+                    sources.append(("body", body_names.index(name), 0))
+                    continue
+                for k, f in enumerate(self.fingers.values()):
+                    if name in f.chain.all_joint_names:
+                        sources.append(("finger", k, f.chain.all_joint_names.index(name)))
+                        break
+                else:
+                    sources.append(("none", 0, 0))
+            self._joint_columns = sources
+        B = fingers.shape[0]
+        q = fingers.detach().to(torch.float64).cpu().numpy()
+        expanded = [f.chain.expand(q[:, k, : f.n_joints]) for k, f in enumerate(self.fingers.values())]
+        th = np.zeros((B, len(names)))
+        for c, (kind, k, i) in enumerate(self._joint_columns):
+            if kind == "body":
+                th[:, c] = body[:, k].detach().cpu().numpy()
+            elif kind == "finger":
+                th[:, c] = expanded[k][:, i]
+        fk = chain.forward_kinematics(torch.as_tensor(th))
+        links = list(fk)
+        frames = torch.stack([fk[name].get_matrix().expand(B, 4, 4) for name in links], dim=1).numpy()
         if self.body is None:
             from graspnet_torch.robot.transforms import pose_to_matrix
 
-            poses = torch.stack([p.palm_pose.to(torch.float64) for p in postures])
             root_to_palm = self.urdf.fixed_transform(self.urdf.root_link, self.cfg.palm_link)
-            world = pose_to_matrix(poses).numpy() @ np.linalg.inv(root_to_palm)
-        else:
-            world = np.broadcast_to(np.eye(4), (len(postures), 4, 4))
-        return [{name: world[k] @ T[k] for name, T in frames.items()} for k in range(len(postures))]
+            world = pose_to_matrix(palm_pose.detach().to(torch.float64).cpu()).numpy() @ np.linalg.inv(root_to_palm)
+            frames = world[:, None] @ frames
+        return links, frames
 
     def __repr__(self) -> str:
         return (f"Robot('{self.name}': {len(self.urdf.links)} links, {len(self.urdf.movable_joint_names)} "

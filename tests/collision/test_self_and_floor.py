@@ -212,7 +212,7 @@ def test_self_collision_primitives_of_the_manus_links(manus):
 
 
 def test_self_collisions_agree_with_every_pair_tested_directly():
-    """The scene tests a self-collision pair only where its links' bounding spheres overlap; on 150
+    """The scene tests a self-collision pair only where its links' shapes' boxes meet; on 150
     random MANUS configurations it finds exactly the pairs that FCL finds when every pair's
     shapes are tested directly (placed from the URDF's link frames)."""
     import fcl
