@@ -267,11 +267,14 @@ class CollisionScene:
         """(B,) bool: which postures have a collision (``check(p).count > 0``)."""
         return self.collides_at(*self.robot.link_frames_array(postures))
 
-    def collides_at(self, links: list[str], frames: np.ndarray) -> np.ndarray:
+    def collides_at(self, links: list[str], frames: np.ndarray, touching: np.ndarray | None = None) -> np.ndarray:
         """(B,) bool: which of B placements of the links collide, each test stopping at its first
         collision. links: the L link names; frames: (B, L, 4, 4) their world poses
-        (:meth:`Robot.link_frames_of <graspnet_torch.robot.robot.Robot.link_frames_of>`)."""
+        (:meth:`Robot.link_frames_of <graspnet_torch.robot.robot.Robot.link_frames_of>`);
+        touching: (B, S) which link shapes (``self.shapes``) may also touch the object in each."""
         obstacle, near_object, own = self._broad_phase(links, frames)
+        if touching is not None:
+            near_object &= ~touching
         out = np.zeros(len(frames), dtype=bool)
         maybe = obstacle.any((1, 2)) | near_object.any(1) | own.any(1)
         for k in np.nonzero(maybe)[0]:

@@ -26,8 +26,10 @@ class ReachCfg:
             prismatic joint); the velocities are the URDF's ``<limit velocity>``.
         palm_speed: a free hand's palm: the largest speed (m/s; its angles rad/s), which a URDF
             does not give.
-        touch_mm: the contact fingertips (a gripper's marked points) may touch the object only
-            once every one of them is within this of its contact (the end of the motion).
+        touch_mm: a contact finger's distal link may touch the object only while its fingertip
+            is within this of its contact (the finger closing on it, at the end of the motion; about
+            the length of a distal link: the shipped hand's are about 25 mm); a gripper's jaws once both
+            marked points are.
         backoff_m: a free hand's pre-grasp: the palm backed off this far from the grasp, away from
             the contacts.
         approach_m: a robot with a body: the pre-grasp its planned motion ends at, the palm (a
@@ -44,7 +46,7 @@ class ReachCfg:
     resolution_mm: float = setting(1.0, lo=0.01, hi=100.0)
     acceleration: float = setting(4.0, lo=0.0, lo_open=True, hi=1000.0)
     palm_speed: float = setting(0.5, lo=0.0, lo_open=True, hi=100.0)
-    touch_mm: float = setting(20.0, lo=0.0, hi=1000.0)
+    touch_mm: float = setting(40.0, lo=0.0, hi=1000.0)
     backoff_m: float = setting(0.1, lo=0.0, lo_open=True, hi=2.0)
     approach_m: float = setting(0.05, lo=0.0, lo_open=True, hi=1.0)
     sample_hz: float = setting(50.0, lo=1.0, hi=10_000.0)

@@ -4,9 +4,9 @@
 A state is a vector x of the planned variables in internal units: a robot with a body, its body
 joints then its free finger joints (F, n) flattened; a free hand, its palm pose (x, y, z, rx,
 ry, rz) then its fingers. A state is clear when no link collides with an obstacle, the floor or
-another link and none enters the object by more than the tolerance; only where every contact
-fingertip (a gripper's two marked points) has arrived within ``touch_mm`` of its contact may the
-contact fingers' distal links (the jaws) touch the object, as in the reported grasp.
+another link and none enters the object by more than the tolerance; only where a contact
+fingertip has arrived within ``touch_mm`` of its contact may that finger's distal link touch the
+object, as in the reported grasp (a gripper: its jaws, once both marked points have arrived).
 """
 
 from __future__ import annotations
@@ -121,34 +121,42 @@ def _urdf_velocity(robot: Robot, joint: str) -> float:
 class MotionChecker:
     """FCL checks of states and straight motions of one robot in one problem's scene."""
 
-    def __init__(self, robot: Robot, problem: GraspProblem, layout: StateLayout, touch_mm: float = 20.0):
+    def __init__(self, robot: Robot, problem: GraspProblem, layout: StateLayout, touch_mm: float = 40.0):
         from graspnet_torch.collision.scene import CollisionScene
 
         self.robot, self.problem, self.layout, self.touch = robot, problem, layout, touch_mm / 1000.0
-        self.scenes = {True: CollisionScene(robot, problem, touching=True),
-                       False: CollisionScene(robot, problem, touching=False)}
+        self.scene = CollisionScene(robot, problem, touching=False)
         self.checks = 0
         if robot.n_fingers:
             self._rows = [robot.finger_index(f) for f in problem.fingers]
             self._targets = torch.as_tensor(np.asarray(problem.contacts_world(), dtype=np.float64))
+            groups = [(f,) for f in problem.fingers]
         else:
             self._targets = torch.as_tensor(problem.points_world(), dtype=torch.float64)
+            groups = [()]  # a gripper: its jaws, together
+        shapes = self.scene.shapes
+        self._distal = np.array([[s.link in CollisionScene.distal_links(robot, shapes, g) for s in shapes]
+                                 for g in groups], dtype=np.float64)  # (k, S): each finger's touching shapes
 
-    def arrived(self, states: np.ndarray) -> np.ndarray:
-        """(B,) whether every contact fingertip (a gripper's marked points, either pairing) lies
-        within ``touch_mm`` of its contact."""
+    def arrived_fingers(self, states: np.ndarray) -> np.ndarray:
+        """(B, k) whether each contact fingertip lies within ``touch_mm`` of its contact (a
+        gripper: one column, both marked points, either pairing)."""
         robot, m = self.robot, self.layout.body
         x = torch.as_tensor(np.asarray(states, dtype=np.float64))
         if robot.n_fingers == 0:
             points = robot.gripper_points(x[:, :m])
             d = torch.minimum((points - self._targets).norm(dim=-1).amax(-1),
                               (points - self._targets.flip(0)).norm(dim=-1).amax(-1))
-            return (d <= self.touch).numpy()
+            return (d <= self.touch).numpy()[:, None]
         q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
         q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
         tips = robot.fingertips_world_from_body(x[:, :m], q) if robot.has_body else \
             robot.fingertips_world(x[:, :6], q)
-        return ((tips[:, self._rows] - self._targets).norm(dim=-1).amax(-1) <= self.touch).numpy()
+        return ((tips[:, self._rows] - self._targets).norm(dim=-1) <= self.touch).numpy()
+
+    def arrived(self, states: np.ndarray) -> np.ndarray:
+        """(B,) whether every contact fingertip has arrived (:meth:`arrived_fingers`)."""
+        return self.arrived_fingers(states).all(1)
 
     def posture(self, x: np.ndarray) -> Posture:
         """The :class:`Posture` of a state (1-D, internal units)."""
@@ -179,14 +187,14 @@ class MotionChecker:
     def clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear (module docstring)."""
         self.checks += len(states)
-        links, frames = self.link_frames(states)
-        ok = ~self.scenes[False].collides_at(links, frames)
-        if not ok.all():
-            retry = np.nonzero(~ok)[0]
-            retry = retry[self.arrived(states[retry])]
-            if retry.size:
-                ok[retry] = ~self.scenes[True].collides_at(links, frames[retry])
-        return ok
+        touching = self.arrived_fingers(states).astype(np.float64) @ self._distal > 0
+        return ~self.scene.collides_at(*self.link_frames(states), touching)
+
+    def strictly_clear(self, states: np.ndarray) -> np.ndarray:
+        """(B,) which states (B, n) are clear with no link touching the object (not even the
+        contact fingertips where they have arrived)."""
+        self.checks += len(states)
+        return ~self.scene.collides_at(*self.link_frames(states))
 
     def first_collision(self, a: np.ndarray, b: np.ndarray, resolution_deg: float, resolution_mm: float,
                         batch: int = 32) -> int | None:

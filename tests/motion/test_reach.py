@@ -152,3 +152,33 @@ def test_a_trajectory_reads_back_what_it_writes():
     back = gt.Trajectory.from_dict(json.loads(json.dumps(data)), np.array([True, False]))
     assert np.allclose(back.positions, motion.positions) and np.allclose(back.times, motion.times)
     assert (back.found, back.reason, back.planner) == (True, "", "RRTConnect")
+
+
+def test_a_distal_link_may_touch_the_object_only_while_its_fingertip_is_near_its_contact(env2):
+    """At env2's grasp the contact fingers' distal links touch the object (as the result allows);
+    the checker takes that state as clear, but not with the object moved so that every contact
+    lies farther than reach.touch_mm from its fingertip while the links still cross it."""
+    robot, problem, result = env2
+    layout = StateLayout.of(robot)
+    goal = MotionChecker(robot, problem, layout).state(trial_posture(robot, result.best))
+    checker = MotionChecker(robot, problem, layout, touch_mm=40.0)
+    assert checker.arrived_fingers(goal[None]).all() and checker.clear(goal[None])[0]
+    assert not checker.strictly_clear(goal[None])[0]  # the links do touch the object
+    strict = MotionChecker(robot, problem, layout, touch_mm=0.0)  # no fingertip is ever near enough
+    assert not strict.clear(goal[None])[0]
+
+
+@pytest.mark.slow
+def test_the_fingers_open_clear_of_the_object_before_the_arm_moves(env2):
+    """The motion's second corner (the fingers open at the start) carries the opening its arm
+    brings to the grasp: there, no link touches the object."""
+    robot, problem, result = env2
+    motion = gt.plan_reach(problem, result)
+    assert motion.found, motion.reason
+    checker = MotionChecker(robot, problem, StateLayout.of(robot))
+    goal = checker.state(trial_posture(robot, result.best))
+    opened = goal.copy()
+    moving = np.nonzero(np.any(np.abs(np.diff(motion.positions[:, :7], axis=0)) > 0, axis=1))[0]
+    opened[7:] = motion.positions[moving[0], 7:]  # the fingers when the arm starts moving
+    assert not np.allclose(opened[7:], goal[7:])
+    assert checker.strictly_clear(opened[None])[0]
