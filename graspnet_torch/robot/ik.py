@@ -39,7 +39,9 @@ def damped_pinv_step(J: Tensor, err: Tensor, damping: float | Tensor = 0.0) -> T
 
     J: (..., k, n); err: (..., k); damping: a number or a tensor broadcastable to the batch (...)
     (one lambda per system) -> (..., n). Systems with fewer unknowns than equations (n < k) use the
-    equivalent ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular). 3x3 systems are
+    equivalent ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular; an undamped system that
+    is singular too gives a meaningless step, not an error: callers skip the rows they do not move,
+    such as a one-joint finger's at a singular posture). 3x3 systems are
     solved in closed form (:func:`solve3_symmetric`) for large batches.
     """
     k, n = J.shape[-2], J.shape[-1]
@@ -47,7 +49,7 @@ def damped_pinv_step(J: Tensor, err: Tensor, damping: float | Tensor = 0.0) -> T
     if n < k:
         A = Jt @ J
         _add_damping(A, damping)
-        return torch.linalg.solve(A, (Jt @ err.unsqueeze(-1))).squeeze(-1)
+        return torch.linalg.solve_ex(A, (Jt @ err.unsqueeze(-1)))[0].squeeze(-1)  # a singular system: no raise
     A = J @ Jt
     _add_damping(A, damping)
     if k != 3 or A.numel() <= SMALL_BATCH * 9:  # LAPACK is faster for a handful of 3x3 systems, the adjugate for many

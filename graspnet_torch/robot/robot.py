@@ -31,6 +31,7 @@ from graspnet_torch.robot.chain import ChainSpec, UrdfModel
 from graspnet_torch.robot.config import ChainCfg, PoseBounds, RobotCfg, load_robot_cfg
 from graspnet_torch.robot.fingers import FingerChain, FingerKernel
 from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.shared import SharedJoints, find_shared_joints
 from graspnet_torch.robot.transforms import pose_to_rt, transform_points, untransform_points
 
 __all__ = ["Finger", "Posture", "Robot", "load_robot"]
@@ -89,6 +90,7 @@ class Robot:
         src = cfg.source
         self.urdf.check_link(cfg.palm_link, f"{src}: palm_link")
 
+        self.shared = self._shared_joints()
         fingers = [self._finger(fname, chain) for fname, chain in cfg.fingers.items()]
         self.fingers: dict[str, Finger] = {f.name: f for f in fingers}
         self.finger_names: tuple[str, ...] = tuple(self.fingers)
@@ -125,19 +127,56 @@ class Robot:
             raise ConfigError(f"{src}: gripper_points need an arm")
         self._consts: dict[tuple, dict[str, Tensor]] = {}
 
+    def _shared_joints(self) -> SharedJoints:
+        """The joints that move more than one finger (:mod:`graspnet_torch.robot.shared`), among
+        the fingers whose chains start at the palm (the default base) and whose tips lie below it
+        (any other finger's config errors are :meth:`_finger`'s to report)."""
+        cfg, links = self.cfg, self.urdf.links
+
+        def below_palm(link: str) -> bool:
+            while link in self.urdf.parent_joint:
+                link = self.urdf.parent_joint[link].parent
+                if link == cfg.palm_link:
+                    return True
+            return False
+
+        tips = {f: c.tip for f, c in cfg.fingers.items()
+                if c.base == cfg.palm_link and c.tip in links and below_palm(c.tip)}
+        return find_shared_joints(self.urdf, cfg.palm_link, tips, cfg.source)
+
+    @cached_property
+    def shared_reference(self) -> np.ndarray:
+        """(S,) the values the shared joints are held at (the config's ``home``, else 0, within
+        their limits): they are not yet search variables of the solvers."""
+        sh, home = self.shared, self.cfg.home
+        out = []
+        for name, lo, hi in zip(sh.names, sh.lower, sh.upper, strict=True):
+            v = home.get(name, 0.0)
+            out.append(min(max(math.radians(v) if self.urdf.joints[name].type != "prismatic" else v, lo), hi))
+        return np.asarray(out, dtype=np.float64)
+
     def _finger(self, fname: str, chain: ChainCfg) -> Finger:
-        """A finger from its config: the chain from its base (on the palm) to its tip (offset
-        folded in), its mimic joints and free joints."""
+        """A finger from its config: the chain from its base (on the palm; after the joints it
+        shares with other fingers) to its tip (offset folded in), its mimic joints and free
+        joints."""
         cfg, what = self.cfg, f"{self.cfg.source}: finger '{fname}'"
         self.urdf.check_link(chain.base, f"{what} base")
         self.urdf.check_link(chain.tip, f"{what} tip")
+        if fname in self.shared.paths:  # its own chain starts after the shared joints
+            chain = replace(chain, base=self.shared.bases[fname])
+            s = torch.as_tensor(self.shared_reference, dtype=torch.float64)
+            base_in_palm = self.shared.base_frames(s)[fname].numpy()
+            return self._finger_chain(fname, chain, base_in_palm)
         for joint in self.urdf.path_joints(cfg.palm_link, chain.base, f"{what} base") if chain.base != cfg.palm_link \
                 else []:
             if joint.type != "fixed":
                 raise ConfigError(f"{what}: its chain must start at the palm, but joint '{joint.name}' between "
                                   f"palm_link '{cfg.palm_link}' and base '{chain.base}' is {joint.type}; set base "
                                   f"to '{cfg.palm_link}' (or leave it out) so that joint belongs to the finger")
-        base_in_palm = self.urdf.fixed_transform(cfg.palm_link, chain.base, f"{what} base")
+        return self._finger_chain(fname, chain, self.urdf.fixed_transform(cfg.palm_link, chain.base, f"{what} base"))
+
+    def _finger_chain(self, fname: str, chain: ChainCfg, base_in_palm: np.ndarray) -> Finger:
+        what = f"{self.cfg.source}: finger '{fname}'"
         spec = self.urdf.chain_spec(chain.base, chain.tip, what)
         if chain.tip_offset is not None:
             offsets = spec.offsets.copy()
@@ -440,8 +479,10 @@ class Robot:
 
     def joint_values(self, posture: Posture) -> dict[str, float]:
         """Every movable URDF joint's value in a posture (radians / metres), mimic joints at their
-        coupled values."""
+        coupled values, joints shared by several fingers where they are held
+        (:attr:`shared_reference`)."""
         out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
+        out.update(self.shared.joint_values(self.shared_reference))
         for name, values in self.finger_joint_values(posture.fingers).items():
             out.update(zip(self.fingers[name].chain.all_joint_names, values, strict=True))
         return out
@@ -470,6 +511,7 @@ class Robot:
         hand's)."""
         chain = self.urdf.chain64
         names = chain.get_joint_parameter_names()
+        shared = self.shared.joint_values(self.shared_reference)  # the shared joints, where they are held
         if "_joint_columns" not in self.__dict__:  # where each URDF joint's value comes from, once
             body_names = list(self.body_joint_names) if self.body is not None else []
             sources = []
@@ -482,7 +524,7 @@ class Robot:
                         sources.append(("finger", k, f.chain.all_joint_names.index(name)))
                         break
                 else:
-                    sources.append(("none", 0, 0))
+                    sources.append(("shared", 0, 0) if name in shared else ("none", 0, 0))
             self._joint_columns = sources
         B = fingers.shape[0]
         q = fingers.detach().to(torch.float64).cpu().numpy()
@@ -493,6 +535,8 @@ class Robot:
                 th[:, c] = body[:, k].detach().cpu().numpy()
             elif kind == "finger":
                 th[:, c] = expanded[k][:, i]
+            elif kind == "shared":
+                th[:, c] = shared[names[c]]
         fk = chain.forward_kinematics(torch.as_tensor(th))
         links = list(fk)
         frames = torch.stack([fk[name].get_matrix().expand(B, 4, 4) for name in links], dim=1).numpy()

@@ -1,0 +1,176 @@
+"""Hands whose fingers share joints (graspnet_torch/robot/shared.py): found from the URDF alone,
+each finger's own chain starting after them, base frames against pytorch-kinematics."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+import graspnet_torch as gt
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.paths import repo_root
+from graspnet_torch.robot.chain import UrdfModel
+from graspnet_torch.robot.shared import find_shared_joints
+
+TIPS = {"a": "a_tip", "b": "b_tip", "c": "c_tip", "d": "d_tip", "e": "e_tip"}
+
+
+def _joint(name, kind, parent, child, xyz="0 0 0", rpy="0 0 0", axis="1 0 0", lim=(-1.0, 1.0), mimic=None):
+    s = f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+    s += f'<origin xyz="{xyz}" rpy="{rpy}"/>'
+    if kind != "fixed":
+        s += f'<axis xyz="{axis}"/><limit lower="{lim[0]}" upper="{lim[1]}" effort="1" velocity="1"/>'
+    if mimic:
+        s += f'<mimic joint="{mimic[0]}" multiplier="{mimic[1]}" offset="{mimic[2]}"/>'
+    return s + "</joint>"
+
+
+def coupled_hand_urdf(bad: bool = False) -> str:
+    """palm; a hub joint carrying fingers a and b (a joint on two chains); a spread joint on finger
+    c's chain whose mimic (x0.5) turns finger d's base (a leader driving another finger); finger e
+    independent. ``bad``: finger f's own joint comes before a mimic of the spread."""
+    cyl = '<collision><origin xyz="0 0 0.01"/><geometry><cylinder radius="0.005" length="0.02"/></geometry></collision>'
+    links = ["palm", "hub", "a1", "a2", "a_tip", "b1", "b2", "b_tip", "c0", "c1", "c2", "c_tip",
+             "d0", "d1", "d2", "d_tip", "e1", "e2", "e_tip"] + (["f1", "f2", "f_tip"] if bad else [])
+    joints = [
+        _joint("hub", "revolute", "palm", "hub", "0.02 0 0.05", axis="0 1 0", lim=(-0.4, 0.6)),
+        _joint("a_mcp", "revolute", "hub", "a1", "0.01 0 0.01", lim=(0, 1.5)),
+        _joint("a_pip", "revolute", "a1", "a2", "0 0 0.04", lim=(0, 1.5)),
+        _joint("a_tip_joint", "fixed", "a2", "a_tip", "0 0 0.03"),
+        _joint("b_mcp", "revolute", "hub", "b1", "-0.01 0 0.01", lim=(0, 1.5)),
+        _joint("b_pip", "revolute", "b1", "b2", "0 0 0.04", lim=(0, 1.5)),
+        _joint("b_tip_joint", "fixed", "b2", "b_tip", "0 0 0.03"),
+        _joint("spread", "revolute", "palm", "c0", "-0.02 0 0.05", "0.2 0 0", axis="0 1 0", lim=(0, 0.6)),
+        _joint("c_mcp", "revolute", "c0", "c1", lim=(0, 1.5)),
+        _joint("c_pip", "revolute", "c1", "c2", "0 0 0.04", lim=(0, 1.5)),
+        _joint("c_tip_joint", "fixed", "c2", "c_tip", "0 0 0.03"),
+        _joint("d_spread", "revolute", "palm", "d0", "-0.04 0 0.05", axis="0 1 0", lim=(0, 0.3),
+               mimic=("spread", 0.5, 0.0)),
+        _joint("d_mcp", "revolute", "d0", "d1", lim=(0, 1.5)),
+        _joint("d_pip", "revolute", "d1", "d2", "0 0 0.04", lim=(0, 1.5), mimic=("d_mcp", 1.2, 0.0)),
+        _joint("d_tip_joint", "fixed", "d2", "d_tip", "0 0 0.03"),
+        _joint("e_cmc", "revolute", "palm", "e1", "0.03 0.02 0.01", "0 0.5 0", axis="0 0 1", lim=(-0.5, 0.5)),
+        _joint("e_mcp", "revolute", "e1", "e2", "0 0 0.03", lim=(0, 1.2)),
+        _joint("e_tip_joint", "fixed", "e2", "e_tip", "0 0 0.03"),
+    ]
+    if bad:
+        joints += [_joint("f_own", "revolute", "palm", "f1", "0 0.03 0.05", lim=(0, 1)),
+                   _joint("f_spread", "revolute", "f1", "f2", "0 0 0.03", lim=(0, 0.6), mimic=("spread", 1.0, 0.0)),
+                   _joint("f_tip_joint", "fixed", "f2", "f_tip", "0 0 0.03")]
+    body = [f'<link name="{n}">{cyl}</link>' for n in links]
+    return '<robot name="coupled">\n' + "\n".join(body + joints) + "\n</robot>\n"
+
+
+def write_coupled_hand(folder: Path, bad: bool = False) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "coupled.urdf").write_text(coupled_hand_urdf(bad))
+    fingers = {f: {"tip": tip} for f, tip in TIPS.items()}
+    if bad:
+        fingers["f"] = {"tip": "f_tip"}
+    cfg = {"name": "coupled", "urdf": "coupled.urdf", "palm_link": "palm", "fingers": fingers,
+           "home": {"hub": 10.0, "spread": 20.0}}
+    path = folder / "coupled.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
+def test_shared_joints_are_found_from_the_urdf(tmp_path):
+    write_coupled_hand(tmp_path)
+    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", TIPS)
+    assert shared.names == ("hub", "spread")
+    assert shared.followers == {"d_spread": ("spread", 0.5, 0.0)}
+    assert shared.bases == {"a": "hub", "b": "hub", "c": "c0", "d": "d0", "e": "palm"}
+    np.testing.assert_allclose(shared.lower, [-0.4, 0.0])
+    np.testing.assert_allclose(shared.upper, [0.6, 0.6])  # d_spread's 0.3 limit at x0.5 allows 0.6
+
+
+def test_a_finger_own_joint_before_a_shared_one_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="finger 'f': its own joint 'f_own' comes before joint 'f_spread'"):
+        gt.load_robot(write_coupled_hand(tmp_path, bad=True))
+
+
+def test_base_frames_agree_with_pytorch_kinematics(tmp_path):
+    """Each finger's base in the palm, for random shared joints (followers from the URDF's own
+    numbers), against pytorch-kinematics on the whole URDF."""
+    import pytorch_kinematics as pk
+
+    write_coupled_hand(tmp_path)
+    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", TIPS)
+    g = torch.Generator().manual_seed(0)
+    s = shared.lower + (shared.upper - shared.lower) * torch.rand(16, 2, generator=g, dtype=torch.float64).numpy()
+    frames = shared.base_frames(torch.as_tensor(s))
+    chain = pk.build_chain_from_urdf((tmp_path / "coupled.urdf").read_bytes()).to(dtype=torch.float64)
+    names = chain.get_joint_parameter_names()
+    th = torch.zeros(16, len(names), dtype=torch.float64)
+    th[:, names.index("hub")] = torch.as_tensor(s[:, 0])
+    th[:, names.index("spread")] = torch.as_tensor(s[:, 1])
+    th[:, names.index("d_spread")] = 0.5 * torch.as_tensor(s[:, 1])
+    fk = chain.forward_kinematics(th)
+    assert set(frames) == {"a", "b", "c", "d"}
+    for finger, base in shared.bases.items():
+        if finger in frames:
+            want = torch.linalg.solve(fk["palm"].get_matrix(), fk[base].get_matrix())
+            torch.testing.assert_close(frames[finger], want, atol=1e-7, rtol=0)  # pk parses origins in float32
+
+
+def test_the_robot_holds_shared_joints_at_home_and_its_fingertips_agree_with_the_urdf(tmp_path):
+    """Each finger's own chain starts after the shared joints (its free joints only); with the
+    shared joints at their home (10 and 20 degrees), the fingertips from the robot's finger
+    kinematics equal pytorch-kinematics on the whole URDF (mimic joints from the URDF), and the
+    Jacobians equal finite differences."""
+    import pytorch_kinematics as pk
+
+    robot = gt.load_robot(write_coupled_hand(tmp_path))
+    assert robot.shared.names == ("hub", "spread")
+    np.testing.assert_allclose(robot.shared_reference, np.radians([10.0, 20.0]))
+    assert {f.name: f.chain.joint_names for f in robot.fingers.values()} == {
+        "a": ("a_mcp", "a_pip"), "b": ("b_mcp", "b_pip"), "c": ("c_mcp", "c_pip"), "d": ("d_mcp",),
+        "e": ("e_cmc", "e_mcp")}
+    lo, hi = (torch.as_tensor(x) for x in robot.finger_limits)
+    q = lo + (hi - lo) * torch.rand(8, *lo.shape, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    got = robot.fingertips_palm(q)
+    chain = pk.build_chain_from_urdf((tmp_path / "coupled.urdf").read_bytes()).to(dtype=torch.float64)
+    names = chain.get_joint_parameter_names()
+    th = torch.zeros(8, len(names), dtype=torch.float64)
+    values = {"hub": np.radians(10.0), "spread": np.radians(20.0), "d_spread": 0.5 * np.radians(20.0)}
+    for name, v in values.items():
+        th[:, names.index(name)] = v
+    for k, f in enumerate(robot.fingers.values()):
+        for i, name in enumerate(f.chain.joint_names):
+            th[:, names.index(name)] = q[:, k, i]
+    th[:, names.index("d_pip")] = 1.2 * th[:, names.index("d_mcp")]
+    fk = chain.forward_kinematics(th)
+    want = torch.stack([torch.linalg.solve(fk["palm"].get_matrix(), fk[f.chain.tip].get_matrix())[:, :3, 3]
+                        for f in robot.fingers.values()], dim=1)
+    torch.testing.assert_close(got, want, atol=1e-7, rtol=0)  # pk parses origins in float32
+    _, J = robot.fingertips_base_jacobian(q)
+    eps = 1e-6
+    for i in range(robot.joints_per_finger):
+        dq = torch.zeros_like(q)
+        dq[..., i] = eps
+        fd = (robot.fingertips_base(q + dq) - robot.fingertips_base(q - dq)) / (2 * eps)
+        torch.testing.assert_close(J[..., i], fd, atol=1e-7, rtol=0)
+    values = robot.joint_values(robot.home_posture())  # results and pictures see the shared joints where held
+    assert values["hub"] == pytest.approx(np.radians(10.0)) and values["d_spread"] == pytest.approx(np.radians(10.0))
+
+
+@pytest.mark.parametrize("name", ["hand", "arm_hand", "manus", "examples/trifinger/trifinger.yaml"])
+def test_robots_without_shared_joints_have_none(name):
+    robot = gt.load_robot(name if "/" not in name else repo_root() / name)
+    assert robot.shared.names == () and robot.shared.paths == {}
+
+
+SVH = repo_root() / "examples/schunk_svh/dex-urdf/robots/hands/schunk_hand/schunk_svh_hand_right.urdf"
+
+
+@pytest.mark.skipif(not SVH.is_file(), reason="the Schunk SVH URDF is not fetched (examples/schunk_svh/*.yaml)")
+def test_the_schunk_svh_loads_by_config_alone():
+    robot = gt.load_robot(repo_root() / "examples/schunk_svh/schunk_svh_right.yaml")
+    assert robot.shared.names == ("right_hand_Thumb_Opposition", "right_hand_Finger_Spread")
+    assert robot.shared.bases["little"] == "right_hand_virtual_i" and robot.shared.bases["middle"] == \
+        "right_hand_base_link"
+    assert [f.n_joints for f in robot.fingers.values()] == [1, 2, 2, 1, 1]
