@@ -8,8 +8,9 @@ check every result from the URDF alone.
    joint) into a temporary folder (the exported checkpoint goes there too, unless ``--export``
    writes it beside the config, where ``scripts/solve_grasp.py robot=PATH`` reads it); prints the
    wall time and the closing accuracy table (10,000 held-out reachable targets per finger).
-2. Solves ``--problems`` random reachable problems (``gt.random_reachable_problem``, 2 or 3
-   contact fingers) with 20 trials, side by side in one run: the default solver (SRV with the
+2. Solves ``--problems`` random reachable problems (``gt.random_reachable_problem``: every joint
+   drawn within its limits, the joints fingers share included; ``--fingers`` contact fingers,
+   default 2 or 3) with 20 trials, side by side in one run: the default solver (SRV with the
    whole polish) and the paper's protocol (``solver=paper``: the palm pose as the network chose it,
    the fingers refined); success = total error (E, eq. 3) < 1 mm, median error, median
    wall time per problem.
@@ -200,6 +201,8 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--epochs", type=int, default=None, help="override fcnn.epochs (default: configs/fcnn)")
     ap.add_argument("--problems", type=int, default=40)
+    ap.add_argument("--fingers", type=int, nargs=2, default=(2, 3), metavar=("LO", "HI"),
+                    help="contact fingers per problem, drawn uniformly from LO..HI (default 2 3)")
     ap.add_argument("--export", action="store_true",
                     help="write the trained checkpoint beside the config (default: a temporary folder)")
     ap.add_argument("--check", action="store_true")
@@ -208,9 +211,14 @@ def main() -> int:
     robot = load_robot(args.robot)
     print(f"{robot!r} from {args.robot}; torch threads: {torch.get_num_threads()}")
     for f in robot.fingers.values():
+        every = robot.finger_all_joint_names(f.name)
         mimic = [n for n in f.chain.all_joint_names if n not in f.joint_names]
-        print(f"  {f.name:>7s}: {len(f.chain.all_joint_names)} joints {', '.join(f.chain.all_joint_names)}"
+        shared = every[: len(every) - len(f.chain.all_joint_names)]
+        print(f"  {f.name:>7s}: {len(every)} joints {', '.join(every)}"
+              f"{' (shared: ' + ', '.join(shared) + ')' if shared else ''}"
               f"{' (mimic: ' + ', '.join(mimic) + ')' if mimic else ''}, tip {f.chain.tip}")
+    if robot.shared.names:
+        print(f"  shared joints searched with the palm pose: {', '.join(robot.shared.names)}")
 
     with tempfile.TemporaryDirectory() as tmp:
         export = robot.cfg.checkpoint if args.export and robot.cfg.checkpoint else Path(tmp) / "fcnn.pt"
@@ -222,7 +230,8 @@ def main() -> int:
 
     checker = UrdfChecker(robot.cfg.urdf, robot.cfg)
     variants = {"default": None, "solver=paper": paper_protocol()}
-    problems = [gt.random_reachable_problem(robot, seed, n_fingers=(2, 3)) for seed in range(args.problems)]
+    problems = [gt.random_reachable_problem(robot, seed, n_fingers=tuple(args.fingers))
+                for seed in range(args.problems)]
     gt.solve(problems[0], trials=TRIALS, seed=0, robot=robot, finger_ik=ik)  # warm-up
     err = {v: [] for v in variants}
     wall = {v: [] for v in variants}
@@ -239,8 +248,9 @@ def main() -> int:
                 verify[v][key] += c[key]
             verify[v]["worst_tip_m"] = max(verify[v]["worst_tip_m"], c["worst_tip_m"])
     n_contacts = [len(p.contacts) for p in problems]
-    print(f"\n{args.problems} random reachable problems ({n_contacts.count(2)} with 2 contact fingers, "
-          f"{n_contacts.count(3)} with 3), {TRIALS} trials each, side by side:")
+    counts = ", ".join(f"{n_contacts.count(k)} with {k}" for k in range(args.fingers[0], args.fingers[1] + 1))
+    print(f"\n{args.problems} random reachable problems ({counts} contact fingers), {TRIALS} trials each, "
+          f"side by side:")
     table = []
     for v in variants:
         e, w, c = np.asarray(err[v]), np.asarray(wall[v]), verify[v]

@@ -198,6 +198,9 @@ def prepare_train_posture(cfg: Mapping[str, Any] | TrainPostureJobCfg, run_dir: 
     if robot.kind != "gripper" and robot.n_fingers < 2:
         raise ConfigError(f"robot '{robot_cfg.name}' needs at least two fingers (or gripper points) for posture "
                           f"proposals")
+    if robot.shared.names:
+        raise ConfigError(f"robot '{robot_cfg.name}': its fingers share joints ({', '.join(robot.shared.names)}); "
+                          f"posture proposals do not propose them yet (its trials start at random)")
     target = export_target(job, robot_cfg)
     if target is not None:
         check_output_path(str(target), "export", ConfigError)

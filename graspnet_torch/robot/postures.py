@@ -19,7 +19,8 @@ __all__ = ["build_home_posture", "reference_posture", "trial_posture"]
 
 def trial_posture(robot: Robot, trial: TrialResult | Mapping[str, Any]) -> Posture:
     """The :class:`~graspnet_torch.robot.Posture` of a reported trial (its degrees -> radians):
-    palm pose, every finger's joints and, for robots with a body, the body joints by name."""
+    palm pose, every finger's joints (and the joints fingers share, as listed) and, for robots
+    with a body, the body joints by name."""
     get = trial.get if isinstance(trial, Mapping) else lambda k: getattr(trial, k)
     d = math.pi / 180
     palm = get("palm_pose")
@@ -27,7 +28,8 @@ def trial_posture(robot: Robot, trial: TrialResult | Mapping[str, Any]) -> Postu
     joints = get("joints") or {}
     q = robot.finger_joints_from_file(joints) if robot.n_fingers else torch.zeros(0, 0, dtype=torch.float64)
     body = robot.body_joints_from_file(get("arm_joints")) if robot.has_body else torch.zeros(0, dtype=torch.float64)
-    return Posture(palm_pose=pose, fingers=q, body=body)
+    shared = robot.shared_joints_of(robot.finger_values_from_file(joints)) if robot.shared.n else None
+    return Posture(palm_pose=pose, fingers=q, body=body, shared=shared)
 
 
 def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:

@@ -70,11 +70,14 @@ class Posture:
             the pose the body's forward kinematics gives.
         fingers: (F, n) finger joints.
         body: (m,) body joints (empty for the hand).
+        shared: (S,) the joints several fingers share (:attr:`Robot.shared`); None: where the robot
+            holds them (:attr:`Robot.shared_reference`).
     """
 
     palm_pose: Tensor
     fingers: Tensor
     body: Tensor
+    shared: Tensor | None = None
 
 
 class Robot:
@@ -249,9 +252,9 @@ class Robot:
 
     @property
     def dof(self) -> int:
-        """Degrees of freedom the solver controls: finger joints + body joints, or + 6 palm-pose
-        DOF for a free-floating hand."""
-        return self.n_finger_joints + (len(self.body_joint_names) if self.has_body else 6)
+        """Degrees of freedom: finger joints + body joints, or + 6 palm-pose DOF for a
+        free-floating hand, + the joints the fingers share."""
+        return self.n_finger_joints + (len(self.body_joint_names) if self.has_body else 6) + self.shared.n
 
     @property
     def n_chains(self) -> int:
@@ -345,18 +348,34 @@ class Robot:
         c = self._const(points.dtype, points.device)
         return untransform_points(c["base_R"], c["base_t"], points)
 
-    def fingertips_palm(self, q: Tensor) -> Tensor:
-        """Fingertips in the palm frame. q: (..., F, n) -> (..., F, 3)."""
-        return self.base_to_palm(self.fingertips_base(q))
+    def base_frames(self, shared: Tensor) -> tuple[Tensor, Tensor]:
+        """Every finger's base in the palm frame with the shared joints at ``shared`` (..., S):
+        R (..., F, 3, 3), t (..., F, 3) (the fingers they do not move: their fixed base)."""
+        c = self._const(shared.dtype, shared.device)
+        lead = shared.shape[:-1]
+        R = c["base_R"].expand(*lead, -1, -1, -1).clone()
+        t = c["base_t"].expand(*lead, -1, -1).clone()
+        for name, T in self.shared.base_frames(shared).items():
+            k = self.finger_index(name)
+            R[..., k, :, :], t[..., k, :] = T[..., :3, :3], T[..., :3, 3]
+        return R, t
 
-    def fingertips_world(self, palm_pose: Tensor, q: Tensor) -> Tensor:
+    def fingertips_palm(self, q: Tensor, shared: Tensor | None = None) -> Tensor:
+        """Fingertips in the palm frame. q: (..., F, n) -> (..., F, 3); shared: (..., S) the joints
+        the fingers share (None: where they are held)."""
+        if shared is None or not self.shared.n:
+            return self.base_to_palm(self.fingertips_base(q))
+        R, t = self.base_frames(shared)
+        return transform_points(R, t, self.fingertips_base(q))
+
+    def fingertips_world(self, palm_pose: Tensor, q: Tensor, shared: Tensor | None = None) -> Tensor:
         """Fingertips in the world for a palm pose.
 
-        palm_pose: (..., 6); q: (..., F, n) -> (..., F, 3).
+        palm_pose: (..., 6); q: (..., F, n); shared: (..., S) (None: where they are held) -> (..., F, 3).
         """
         self._check_pose(palm_pose)
         R, t = pose_to_rt(palm_pose)
-        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.fingertips_palm(q))
+        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.fingertips_palm(q, shared))
 
     def world_to_bases(self, points: Tensor, palm_pose: Tensor) -> Tensor:
         """Points in the world, one per finger, -> each in its finger's base frame.
@@ -420,48 +439,114 @@ class Robot:
             cached = self._homes[dtype] = build_home_posture(self, dtype)
         return Posture(cached.palm_pose.clone(), cached.fingers.clone(), cached.body.clone())
 
-    def finger_joint_values(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
-        """Every movable joint of each finger, mimic joints at their coupled values, in chain order.
+    def finger_all_joint_names(self, name: str) -> tuple[str, ...]:
+        """Every movable joint on a finger's URDF chain from the palm to its tip, in chain order:
+        the joints it shares with other fingers (:attr:`shared`), then its own (mimic joints
+        included)."""
+        path = self.shared.paths.get(name)
+        return (path.joint_names if path is not None else ()) + self.fingers[name].chain.all_joint_names
 
-        q: (F, n) free joints (padded) -> finger name -> values (rad or m), ``chain.all_joint_names`` order.
+    def _shared_rows(self, shared: Tensor | np.ndarray | None, T: int) -> np.ndarray:
+        """(T, S) shared joint values: as given ((S,) or (T, S)), else where they are held."""
+        if shared is None:
+            return np.broadcast_to(self.shared_reference, (T, self.shared.n))
+        s = np.asarray(shared.detach().cpu() if isinstance(shared, Tensor) else shared, dtype=np.float64)
+        return np.broadcast_to(s.reshape(-1, self.shared.n), (T, self.shared.n))
+
+    def _prefix(self, name: str, s: np.ndarray) -> np.ndarray:
+        """(T, P) the values of the joints finger ``name`` shares, at shared values s (T, S)."""
+        path = self.shared.paths.get(name)
+        if path is None:
+            return np.zeros((s.shape[0], 0))
+        index = {n: k for k, n in enumerate(self.shared.names)}
+        columns = []
+        for joint in path.joint_names:
+            leader, m, b = self.shared.followers.get(joint, (joint, 1.0, 0.0))
+            columns.append(m * s[:, index[leader]] + b)
+        return np.stack(columns, axis=1)
+
+    def finger_joint_values(self, q: Tensor | np.ndarray, shared: Tensor | np.ndarray | None = None
+                            ) -> dict[str, list[float]]:
+        """Every movable joint of each finger (:meth:`finger_all_joint_names`: the shared ones at
+        ``shared`` (S,), default where they are held; mimic joints at their coupled values).
+
+        q: (F, n) free joints (padded) -> finger name -> values (rad or m).
         """
         q = np.asarray(q.detach().cpu() if isinstance(q, Tensor) else q, dtype=np.float64)
-        return {f.name: f.chain.expand(q[k, : f.n_joints]).tolist() for k, f in enumerate(self.fingers.values())}
+        s = self._shared_rows(shared, 1)
+        return {f.name: self._prefix(f.name, s)[0].tolist() + f.chain.expand(q[k, : f.n_joints]).tolist()
+                for k, f in enumerate(self.fingers.values())}
 
     def free_finger_joints(self, values: dict[str, Sequence[float]], dtype: torch.dtype = torch.float64) -> Tensor:
-        """The inverse of :meth:`finger_joint_values`: every finger's listed joints (chain order,
-        mimic joints included) -> (F, n) free joints, padded."""
+        """The inverse of :meth:`finger_joint_values`: every finger's listed joints (palm to tip,
+        shared and mimic joints included) -> (F, n) free joints, padded (the shared joints:
+        :meth:`shared_joints_of`)."""
         q = torch.zeros(self.n_fingers, self.joints_per_finger, dtype=dtype)
         for k, f in enumerate(self.fingers.values()):
             row = list(values[f.name])
-            if len(row) != f.chain.spec.n_joints:
-                raise ValueError(f"finger '{f.name}' has {f.chain.spec.n_joints} joints "
-                                 f"({', '.join(f.chain.all_joint_names)}), got {len(row)} values")
-            q[k, : f.n_joints] = torch.tensor([row[i] for i in f.chain.free], dtype=dtype)
+            names = self.finger_all_joint_names(f.name)
+            if len(row) != len(names):
+                raise ValueError(f"finger '{f.name}' has {len(names)} joints ({', '.join(names)}), got {len(row)} "
+                                 f"values")
+            own = row[len(names) - f.chain.spec.n_joints:]
+            q[k, : f.n_joints] = torch.tensor([own[i] for i in f.chain.free], dtype=dtype)
         return q
 
-    def finger_joints_to_file(self, q: Tensor | np.ndarray) -> dict[str, list[float]]:
-        """:meth:`finger_joint_values` in file units: degrees (revolute), metres (prismatic)."""
-        return self.finger_joints_to_file_many(q[None])[0]
+    def shared_joints_of(self, values: dict[str, Sequence[float]]) -> Tensor:
+        """The shared joints (S,) float64 (rad or m) from every finger's listed joints (as
+        :meth:`free_finger_joints` takes them): each from the first finger whose chain holds it,
+        else from a follower (q = m s + b); where no listed finger has either, where it is held."""
+        out = torch.as_tensor(self.shared_reference.copy())
+        found = set()
+        for f in self.fingers:
+            path = self.shared.paths.get(f)
+            if path is None or f not in values:
+                continue
+            for joint, v in zip(path.joint_names, values[f], strict=False):
+                leader, m, b = self.shared.followers.get(joint, (joint, 1.0, 0.0))
+                k = self.shared.names.index(leader)
+                if k in found and joint != leader:
+                    continue
+                out[k] = (v - b) / m
+                found.add(k)
+        return out
 
-    def finger_joints_to_file_many(self, q: Tensor | np.ndarray) -> list[dict[str, list[float]]]:
-        """:meth:`finger_joints_to_file` of T postures at once. q: (T, F, n) free joints (padded)."""
+    def finger_joints_to_file(self, q: Tensor | np.ndarray, shared: Tensor | np.ndarray | None = None
+                              ) -> dict[str, list[float]]:
+        """:meth:`finger_joint_values` in file units: degrees (revolute), metres (prismatic)."""
+        return self.finger_joints_to_file_many(q[None], None if shared is None else np.asarray(shared)[None])[0]
+
+    def finger_joints_to_file_many(self, q: Tensor | np.ndarray, shared: Tensor | np.ndarray | None = None
+                                   ) -> list[dict[str, list[float]]]:
+        """:meth:`finger_joints_to_file` of T postures at once. q: (T, F, n) free joints (padded);
+        shared: (T, S) (default: where they are held)."""
         q = np.asarray(q.detach().cpu() if isinstance(q, Tensor) else q, dtype=np.float64)
+        s = self._shared_rows(shared, q.shape[0])
         columns = {}
         for k, f in enumerate(self.fingers.values()):
-            to_file = np.array([180.0 / math.pi if t == "revolute" else 1.0 for t in f.chain.spec.joint_types])
-            columns[f.name] = (f.chain.expand(q[:, k, : f.n_joints]) * to_file).tolist()  # as math.degrees
+            types = self._joint_types(f.name)
+            to_file = np.array([180.0 / math.pi if t == "revolute" else 1.0 for t in types])
+            every = np.concatenate([self._prefix(f.name, s), f.chain.expand(q[:, k, : f.n_joints])], axis=1)
+            columns[f.name] = (every * to_file).tolist()  # as math.degrees
         return [{name: rows[t] for name, rows in columns.items()} for t in range(q.shape[0])]
+
+    def _joint_types(self, name: str) -> tuple[str, ...]:
+        path = self.shared.paths.get(name)
+        return (path.joint_types if path is not None else ()) + self.fingers[name].chain.spec.joint_types
 
     def finger_joints_from_file(self, values: dict[str, Sequence[float]], dtype: torch.dtype = torch.float64) -> Tensor:
         """The inverse of :meth:`finger_joints_to_file`: (F, n) free joints (rad or m), padded."""
+        return self.free_finger_joints(self.finger_values_from_file(values), dtype)
+
+    def finger_values_from_file(self, values: dict[str, Sequence[float]]) -> dict[str, list[float]]:
+        """Every finger's listed joints in file units -> in radians / metres (as listed)."""
         si = {}
-        for name, f in self.fingers.items():
-            types = f.chain.spec.joint_types
+        for name in self.fingers:
+            types = self._joint_types(name)
             row = list(values[name])
             si[name] = [math.radians(v) if t == "revolute" else v for v, t in zip(row, types, strict=False)] + \
                 row[len(types):]
-        return self.free_finger_joints(si, dtype)
+        return si
 
     def body_joints_to_file(self, q: Tensor) -> dict[str, float]:
         """(m,) body joints (rad or m) -> by URDF joint name in chain order, in file units: degrees
@@ -482,9 +567,9 @@ class Robot:
         coupled values, joints shared by several fingers where they are held
         (:attr:`shared_reference`)."""
         out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
-        out.update(self.shared.joint_values(self.shared_reference))
-        for name, values in self.finger_joint_values(posture.fingers).items():
-            out.update(zip(self.fingers[name].chain.all_joint_names, values, strict=True))
+        out.update(self.shared.joint_values(self._shared_rows(posture.shared, 1)[0]))
+        for name, values in self.finger_joint_values(posture.fingers, posture.shared).items():
+            out.update(zip(self.finger_all_joint_names(name), values, strict=True))
         return out
 
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
@@ -500,18 +585,22 @@ class Robot:
         """The links' names and their world poses (B, L, 4, 4) float64 in B postures (one pass of
         forward kinematics: :meth:`link_frames_of`)."""
         fingers = torch.stack([p.fingers.to(torch.float64) for p in postures])
+        shared = None
+        if self.shared.n and any(p.shared is not None for p in postures):
+            shared = np.stack([self._shared_rows(p.shared, 1)[0] for p in postures])
         if self.body is not None:
-            return self.link_frames_of(torch.stack([p.body.to(torch.float64) for p in postures]), fingers)
-        return self.link_frames_of(None, fingers, torch.stack([p.palm_pose.to(torch.float64) for p in postures]))
+            return self.link_frames_of(torch.stack([p.body.to(torch.float64) for p in postures]), fingers,
+                                       shared=shared)
+        return self.link_frames_of(None, fingers, torch.stack([p.palm_pose.to(torch.float64) for p in postures]),
+                                   shared)
 
-    def link_frames_of(self, body: Tensor | None, fingers: Tensor, palm_pose: Tensor | None = None
-                       ) -> tuple[list[str], np.ndarray]:
+    def link_frames_of(self, body: Tensor | None, fingers: Tensor, palm_pose: Tensor | None = None,
+                       shared: Tensor | np.ndarray | None = None) -> tuple[list[str], np.ndarray]:
         """The links' names and world poses (B, L, 4, 4) float64 from joints: body (B, m) (a robot
         with a body; else None), fingers (B, F, n) free joints (padded), palm_pose (B, 6) (a free
-        hand's)."""
+        hand's), shared (B, S) (default: where they are held)."""
         chain = self.urdf.chain64
         names = chain.get_joint_parameter_names()
-        shared = self.shared.joint_values(self.shared_reference)  # the shared joints, where they are held
         if "_joint_columns" not in self.__dict__:  # where each URDF joint's value comes from, once
             body_names = list(self.body_joint_names) if self.body is not None else []
             sources = []
@@ -524,9 +613,12 @@ class Robot:
                         sources.append(("finger", k, f.chain.all_joint_names.index(name)))
                         break
                 else:
-                    sources.append(("shared", 0, 0) if name in shared else ("none", 0, 0))
+                    sources.append(("shared", 0, 0) if name in self.shared.names or name in self.shared.followers
+                                   else ("none", 0, 0))
             self._joint_columns = sources
         B = fingers.shape[0]
+        s = self._shared_rows(shared, B)
+        index = {n: k for k, n in enumerate(self.shared.names)}
         q = fingers.detach().to(torch.float64).cpu().numpy()
         expanded = [f.chain.expand(q[:, k, : f.n_joints]) for k, f in enumerate(self.fingers.values())]
         th = np.zeros((B, len(names)))
@@ -536,7 +628,8 @@ class Robot:
             elif kind == "finger":
                 th[:, c] = expanded[k][:, i]
             elif kind == "shared":
-                th[:, c] = shared[names[c]]
+                leader, m, b = self.shared.followers.get(names[c], (names[c], 1.0, 0.0))
+                th[:, c] = m * s[:, index[leader]] + b
         fk = chain.forward_kinematics(torch.as_tensor(th))
         links = list(fk)
         frames = torch.stack([fk[name].get_matrix().expand(B, 4, 4) for name in links], dim=1).numpy()

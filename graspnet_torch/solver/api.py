@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from functools import lru_cache
@@ -176,6 +177,13 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
     fingers' refinement and the whole polish; a gripper's polish); the wall time includes it."""
     import time
 
+    shared = env.robot.shared
+    if shared.names and not env.shared_slots and env.robot.name not in _SAID_SHARED:
+        _SAID_SHARED.add(env.robot.name)
+        held = ", ".join(f"{n} {math.degrees(v):.3g} deg" for n, v in zip(shared.names, env.robot.shared_reference,
+                                                                           strict=True))
+        warnings.warn(f"robot '{env.robot.name}': the joints its fingers share are held where its config's home "
+                      f"puts them ({held}); a hand on an arm does not search them yet", stacklevel=3)
     t0 = time.perf_counter()
     if solver.method == "dls":
         from graspnet_torch.solver.dls import run_dls
@@ -201,6 +209,7 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
 
 _SAID_NO_MODEL: set[str] = set()
+_SAID_SHARED: set[str] = set()  # robots whose held shared joints a search has named
 NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: their own stream
 
 
@@ -219,9 +228,9 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     a trained posture proposal model starts at random, and its first such search says so."""
     from graspnet_torch.collision.scene import has_environment
 
-    if solver.start == "random" or (solver.start == "auto" and any(has_environment(env.robot, p)
-                                                                   for p in env.problems)):
-        return None
+    if solver.start == "random" or env.shared_slots or (
+            solver.start == "auto" and any(has_environment(env.robot, p) for p in env.problems)):
+        return None  # (a hand whose fingers share joints: its proposals do not give them)
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
 
     model = proposal_of(env.robot)

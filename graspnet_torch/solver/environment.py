@@ -140,9 +140,12 @@ class Environment(ABC):
         counts_collisions: its evaluations count collisions (the reward shapes them and the
             problem has something to collide with).
         error_key: the result field (JSON key) of the error a trial is ranked by.
+        shared_slots: how many of the configuration's last columns are joints several fingers
+            share (a free hand's; 0: the robot holds them, or has none).
     """
 
     error_key: ClassVar[str] = "total_error_mm"
+    shared_slots: int = 0
     robot: Robot
     problems: list[GraspProblem]
     world_problems: list[GraspProblem]

@@ -148,7 +148,20 @@ class FingerEnvironment(Environment):
 
         R, t = palm if palm is not None else self.palm_frame(config)
         in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self._rows(self.contacts, rows))
-        return untransform_points(self.base_R, self.base_t, in_palm)
+        return untransform_points(*self.bases(config), in_palm)
+
+    def bases(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """The contact fingers' bases in the palm frame: (F, 3, 3), (F, 3) fixed, or per row (B, F,
+        3, 3), (B, F, 3) where the configuration carries the joints the fingers share (its last
+        :attr:`shared_slots` columns)."""
+        if not self.shared_slots:
+            return (self.base_R, self.base_t) if config.dtype == self.base_R.dtype else self._base64
+        R, t = self.robot.base_frames(config[:, -self.shared_slots:])
+        return R[:, self.idx], t[:, self.idx]
+
+    def shared_of(self, config: Tensor) -> Tensor | None:
+        """The shared joints (B, S) of configurations (None: the robot holds them)."""
+        return config[:, -self.shared_slots:] if self.shared_slots else None
 
     def finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
                       ) -> tuple[Tensor, Tensor]:
@@ -298,11 +311,20 @@ class FingerEnvironment(Environment):
         R, t, Jc = self.palm_frame_jacobian(x[:, :n])
         kernel = self.ik._bank(tuple(self.fingers), torch.float64, torch.device("cpu")).kernel
         local, Jq = kernel.position_jacobian(x[:, n:].reshape(B, F, j))  # (B, F, 3), (B, F, 3, j)
-        base_R, base_t = self._base64
+        base_R, base_t = self.bases(x[:, :n])
         in_palm = transform_points(base_R, base_t, local)
         tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
-        palm = frame_point_jacobian(R, Jc, in_palm)  # (B, F, 3, n)
-        fingers = torch.einsum("nab,nfbj->nfaj", R, torch.einsum("fab,nfbj->nfaj", base_R, Jq))  # R B_R dk/dq
+        palm = frame_point_jacobian(R, Jc, in_palm)  # (B, F, 3, n); zero in the shared joints' columns
+        if self.shared_slots:  # the bases move with the shared joints: central differences, d in_palm / d s
+            S, h = self.shared_slots, 1e-6
+            for k in range(S):
+                step = torch.zeros_like(x[:, :n])
+                step[:, n - S + k] = h
+                moved = [transform_points(*self.bases(x[:, :n] + sign * step), local) for sign in (1.0, -1.0)]
+                palm[..., n - S + k] = (R.unsqueeze(1) @ ((moved[0] - moved[1]) / (2 * h)).unsqueeze(-1)).squeeze(-1)
+            fingers = torch.einsum("nab,nfbc,nfcj->nfaj", R, base_R, Jq)  # R B_R(s) dk/dq
+        else:
+            fingers = torch.einsum("nab,nfbj->nfaj", R, torch.einsum("fab,nfbj->nfaj", base_R, Jq))  # R B_R dk/dq
         mask = self._rows(self.mask, rows)
         if mask is not None:
             mask = mask.to(tips).cpu().unsqueeze(-1)
@@ -410,13 +432,14 @@ class FingerEnvironment(Environment):
             G_R, G_t = (self._rows(g, rows) if g.shape[0] > 1 else g for g in self.frame64)
             R, t = compose(G_R, G_t, R, t)
             contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
-        tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q))[:, self.idx]
+        shared = self.shared_of(exact)
+        tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q, shared))[:, self.idx]
         err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
         palm = rt_to_pose(R, t).tolist()
         deg = 180.0 / math.pi
         column = {f: k for k, f in enumerate(self.fingers)}
         err_rows = err.tolist()
-        joints = robot.finger_joints_to_file_many(q)  # every joint, mimic joints at their coupled values
+        joints = robot.finger_joints_to_file_many(q, shared)  # every joint, mimic and shared joints included
         pid = None if self.problem_index is None else self._rows(self.problem_index, rows).tolist()
         out, total = [], []
         for k in range(T):

@@ -62,6 +62,11 @@ class HandEnvironment(FingerEnvironment):
         frames = np.stack([s.frame for s in self.spaces])
         lo = np.stack([s.lower for s in self.spaces])
         hi = np.stack([s.upper for s in self.spaces])
+        shared = robot.shared
+        if shared.n:  # the joints the fingers share join the palm pose (robot/shared.py)
+            self.n, self.shared_slots = 6 + shared.n, shared.n
+            lo = np.concatenate([lo, np.broadcast_to(shared.lower, (len(lo), shared.n))], axis=1)
+            hi = np.concatenate([hi, np.broadcast_to(shared.upper, (len(hi), shared.n))], axis=1)
         if len(self.problems) > 1:
             lo, hi = np.repeat(lo, runs, axis=0), np.repeat(hi, runs, axis=0)  # (T, 6)
             frames = np.repeat(frames, runs, axis=0)
@@ -134,13 +139,17 @@ class HandEnvironment(FingerEnvironment):
             self._proposal = (frames[:, :3, :3], frames[:, :3, 3])
         return self._proposal
 
-    def palm_frame(self, palm_pose: Tensor) -> tuple[Tensor, Tensor]:
-        """The configuration is the palm pose. (T, 6) -> R (T, 3, 3), t (T, 3)."""
-        return pose_to_rt(palm_pose)
+    def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """The configuration's first 6 columns are the palm pose. (T, n) -> R (T, 3, 3), t (T, 3)."""
+        return pose_to_rt(config[..., :6])
 
-    def palm_frame_jacobian(self, palm_pose: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """(T, 6) -> R (T, 3, 3), t (T, 3), J (T, 6, 6) (:func:`~graspnet_torch.robot.transforms.pose_jacobian`)."""
-        return pose_jacobian(palm_pose)
+    def palm_frame_jacobian(self, config: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """(T, n) -> R (T, 3, 3), t (T, 3), J (T, 6, n) (:func:`~graspnet_torch.robot.transforms.pose_jacobian`;
+        zero in the shared joints' columns: they do not move the palm)."""
+        R, t, J = pose_jacobian(config[..., :6])
+        if self.shared_slots:
+            J = torch.cat([J, J.new_zeros(*J.shape[:-1], self.shared_slots)], dim=-1)
+        return R, t, J
 
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
@@ -154,9 +163,12 @@ class HandEnvironment(FingerEnvironment):
         R, t = pose_to_rt(posture.palm_pose.to(torch.float64).reshape(1, 6))
         G_R, G_t = (f[:1] for f in self.frame64)
         pose = rt_to_pose(G_R.transpose(-1, -2) @ R, ((t - G_t).unsqueeze(1) @ G_R).squeeze(1))
-        lo, hi = (b.reshape(-1, 6)[0] for b in self._bounds64)
-        middle = (lo[3:] + hi[3:]) / 2
+        lo, hi = (b.reshape(-1, self.n)[0] for b in self._bounds64)
+        middle = (lo[3:6] + hi[3:6]) / 2
         pose[:, 3:] += 2 * math.pi * torch.round((middle - pose[:, 3:]) / (2 * math.pi))
+        if self.shared_slots:  # the posture's shared joints (where it holds them: the robot's)
+            shared = posture.shared if posture.shared is not None else torch.as_tensor(self.robot.shared_reference)
+            pose = torch.cat([pose, shared.to(pose).reshape(1, -1)], dim=1)
         return pose
 
     @classmethod

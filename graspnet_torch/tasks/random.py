@@ -64,8 +64,8 @@ def _finger_joints(robot: Robot, g: torch.Generator) -> Tensor:
 def random_hand_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None) -> GraspProblem:
     """A free hand's problem whose contacts are the fingertips of a random posture: the palm pose
     uniform within the robot's ``palm_bounds`` (without them: at the origin, turned uniformly at
-    random), every free finger joint uniform within its limits, ``n_fingers`` fingers (see
-    :func:`random_reachable_problem`)."""
+    random), every free finger joint uniform within its limits, the joints the fingers share
+    (:attr:`Robot.shared`) too, ``n_fingers`` fingers (see :func:`random_reachable_problem`)."""
     if robot.has_body:
         raise ValueError(f"robot '{robot.name}' has an arm: use random_arm_problem")
     g = torch.Generator().manual_seed(seed)
@@ -82,7 +82,8 @@ def random_hand_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] 
 
         rng = np.random.default_rng(int(torch.randint(2**31, (1,), generator=g)))
         pose = matrix_to_pose(torch.as_tensor(random_pose(rng, radius=0.0)))
-    return _fingers_problem(robot, robot.fingertips_world(pose, q), g, seed, n_fingers)
+    shared = _uniform((robot.shared.lower, robot.shared.upper), g) if robot.shared.n else None
+    return _fingers_problem(robot, robot.fingertips_world(pose, q, shared), g, seed, n_fingers)
 
 
 def random_arm_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None) -> GraspProblem:

@@ -174,3 +174,43 @@ def test_the_schunk_svh_loads_by_config_alone():
     assert robot.shared.bases["little"] == "right_hand_virtual_i" and robot.shared.bases["middle"] == \
         "right_hand_base_link"
     assert [f.n_joints for f in robot.fingers.values()] == [1, 2, 2, 1, 1]
+
+
+@pytest.mark.slow
+def test_a_solve_searches_the_shared_joints_and_checks_from_the_urdf_alone(tmp_path):
+    """Contacts from a random posture of the whole coupled hand (its shared joints away from
+    home): solved to < 1 mm by searching the shared joints with the palm pose; the reported joint
+    lists (palm to tip, shared and mimic joints included) placed into pytorch-kinematics on the
+    URDF alone give the reported fingertip errors, every follower at multiplier x leader (1e-9)."""
+    import pytorch_kinematics as pk
+
+    from graspnet_torch.fcnn.train import FCNNTrainCfg
+    from graspnet_torch.jobs.train_fcnn import train_fcnn
+    from graspnet_torch.tasks.shapes import pose_matrix
+
+    robot = gt.load_robot(write_coupled_hand(tmp_path))
+    tiny = FCNNTrainCfg(epochs=3, targets_per_epoch=64, train_steps=10, batch_size=64, val_targets=200, val_every=2)
+    ik, _ = train_fcnn(robot, tiny, tmp_path / "run", progress=False, eval_targets=100)
+    problem = gt.random_reachable_problem(robot, 3, n_fingers=4)
+    result = gt.solve(problem, trials=8, seed=0, robot=robot, finger_ik=ik)
+    assert result.success, result.best.total_error_mm
+    out = result.to_dict()
+    chain = pk.build_chain_from_urdf((tmp_path / "coupled.urdf").read_bytes()).to(dtype=torch.float64)
+    names = chain.get_joint_parameter_names()
+    values = {}
+    for finger, row in out["joints"].items():
+        listed = robot.finger_all_joint_names(finger)
+        assert len(row) == len(listed)
+        for name, v in zip(listed, row, strict=True):
+            assert values.setdefault(name, np.radians(v)) == pytest.approx(np.radians(v), abs=1e-12)  # once per chain
+    assert values["d_spread"] == pytest.approx(0.5 * values["spread"], abs=1e-9)
+    assert values["d_pip"] == pytest.approx(1.2 * values["d_mcp"], abs=1e-9)
+    assert abs(values["hub"] - np.radians(10.0)) > 1e-3 or abs(values["spread"] - np.radians(20.0)) > 1e-3
+    th = torch.tensor([[values.get(n, 0.0) for n in names]], dtype=torch.float64)
+    fk = chain.forward_kinematics(th)
+    pose = np.asarray(out["palm_pose"], dtype=np.float64)
+    world = pose_matrix(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(fk["palm"].get_matrix()[0].numpy())
+    for contact, target in zip(problem.contacts, problem.contacts_world(), strict=True):
+        tip = (world @ fk[TIPS[contact.finger]].get_matrix()[0].numpy())[:3, 3]
+        assert np.linalg.norm(tip - target) * 1000 == pytest.approx(out["fingertip_error_mm"][contact.finger],
+                                                                    abs=1e-3)  # 1e-6 m (pk: float32 origins)
