@@ -11,9 +11,9 @@ check every result from the URDF alone.
 2. Solves ``--problems`` random reachable problems (``gt.random_reachable_problem``: every joint
    drawn within its limits, the joints fingers share included; ``--fingers`` contact fingers,
    default 2 or 3) with 20 trials, side by side in one run: the default solver (SRV with the
-   whole polish) and the paper's protocol (``solver=paper``: the palm pose as the network chose it,
-   the fingers refined); success = total error (E, eq. 3) < 1 mm, median error, median
-   wall time per problem.
+   whole polish), the paper's protocol (``solver=paper``: the palm pose as the network chose it,
+   the fingers refined) and the baselines CMA-ES and damped least squares (100 iterations);
+   success = total error (E, eq. 3) < 1 mm, median error, median wall time per problem.
 3. Checks every trial of every result independently: a float64 pytorch-kinematics chain built from
    the URDF's bytes, every joint read from the result JSON (mimic joints included), palm_link
    placed at the reported pose (R = Rz Ry Rx); the fingertips (tip link plus the config's offset)
@@ -229,7 +229,8 @@ def main() -> int:
           f"target: under {TRAIN_TARGET_S / 60:.0f} min")
 
     checker = UrdfChecker(robot.cfg.urdf, robot.cfg)
-    variants = {"default": None, "solver=paper": paper_protocol()}
+    variants = {"default": None, "solver=paper": paper_protocol(), "cmaes": {"method": "cmaes"},
+                "dls": {"method": "dls", "max_iterations": 100}}  # the baselines beside, on the same problems
     problems = [gt.random_reachable_problem(robot, seed, n_fingers=tuple(args.fingers))
                 for seed in range(args.problems)]
     gt.solve(problems[0], trials=TRIALS, seed=0, robot=robot, finger_ik=ik)  # warm-up
@@ -261,7 +262,9 @@ def main() -> int:
                         "tip fail", "mimic fail", "limit fail", "joint count fail", "worst |d err| m"], table,
                        floatfmt=".4g"))
     ratio = np.median(wall["default"]) / np.median(wall["solver=paper"])
-    print(f"\nwall time default / solver=paper (medians): {ratio:.2f}")
+    print(f"\nwall time default / solver=paper (medians): {ratio:.2f}; default / dls: "
+          f"{np.median(wall['default']) / np.median(wall['dls']):.2f}; default / cmaes: "
+          f"{np.median(wall['default']) / np.median(wall['cmaes']):.2f}")
 
     solved = table[0][1]
     failures = sum(verify[v][k] for v in variants for k in ("tip", "mimic", "limits", "shape"))
