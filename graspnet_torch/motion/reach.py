@@ -93,6 +93,7 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
 def check_start(robot: Robot, problem: GraspProblem) -> None:
     """Refuse (:class:`ProblemError`, before any work) a reach start with an unknown joint, outside
     its limits, or colliding (FCL, with the fingers as given)."""
+    _refuse_shared(robot, problem)
     posture = start_posture(robot, problem)
     if not robot.has_body:
         return
@@ -108,6 +109,12 @@ def check_start(robot: Robot, problem: GraspProblem) -> None:
             raise ProblemError(f"{problem.source}: start: {named} collides ({', '.join(what)})")
 
 
+def _refuse_shared(robot: Robot, problem: GraspProblem) -> None:
+    if robot.shared.names:
+        raise ProblemError(f"{problem.source}: reach: robot '{robot.name}' has joints its fingers share "
+                           f"({', '.join(robot.shared.names)}); reach motions do not move them yet")
+
+
 def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: ReachCfg | None = None,
                robot: Robot | None = None) -> Trajectory:
     """The reach motion to a result's grasp (its best trial, or the trial given): collision-free
@@ -119,6 +126,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
 
     cfg = cfg or ReachCfg()
     robot = robot or robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    _refuse_shared(robot, problem)
     trial = result.best if hasattr(result, "best") else result  # a GraspResult or one of its trials
     t0 = time.perf_counter()
     layout = StateLayout.of(robot, cfg.palm_speed)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Sequence
 from functools import lru_cache
@@ -177,13 +176,6 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
     fingers' refinement and the whole polish; a gripper's polish); the wall time includes it."""
     import time
 
-    shared = env.robot.shared
-    if shared.names and not env.shared_slots and env.robot.name not in _SAID_SHARED:
-        _SAID_SHARED.add(env.robot.name)
-        held = ", ".join(f"{n} {math.degrees(v):.3g} deg" for n, v in zip(shared.names, env.robot.shared_reference,
-                                                                           strict=True))
-        warnings.warn(f"robot '{env.robot.name}': the joints its fingers share are held where its config's home "
-                      f"puts them ({held}); a hand on an arm does not search them yet", stacklevel=3)
     t0 = time.perf_counter()
     if solver.method == "dls":
         from graspnet_torch.solver.dls import run_dls
@@ -209,7 +201,6 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
 
 _SAID_NO_MODEL: set[str] = set()
-_SAID_SHARED: set[str] = set()  # robots whose held shared joints a search has named
 NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: their own stream
 
 

@@ -48,7 +48,8 @@ class ArmHandEnvironment(FingerEnvironment):
     """Evaluates arm configurations for one problem, batched over trials.
 
     Attributes:
-        n: arm joints (7 for ``arm_hand``).
+        n: arm joints (7 for ``arm_hand``), then the joints the fingers share (if any).
+        m: arm joints.
         lower, upper: (n,) search bounds (radians / metres).
         fingers: the contact fingers, in problem order.
     """
@@ -60,10 +61,15 @@ class ArmHandEnvironment(FingerEnvironment):
             first = problem if isinstance(problem, GraspProblem) else problem[0]
             raise ProblemError(f"{first.source}: robot '{robot.name}' is not an arm with fingers")
         super().__init__(robot, problem, solver, ik, dtype, device, collisions, runs)
-        self.n = len(robot.body_joint_names)
+        self.m = self.n = len(robot.body_joint_names)
         bounds = [arm_bounds(robot, p) for p in self.problems]
         lo = np.stack([b[0] for b in bounds])
         hi = np.stack([b[1] for b in bounds])
+        shared = robot.shared
+        if shared.n:  # the joints the fingers share join the arm's (robot/shared.py)
+            self.n, self.shared_slots = self.m + shared.n, shared.n
+            lo = np.concatenate([lo, np.broadcast_to(shared.lower, (len(lo), shared.n))], axis=1)
+            hi = np.concatenate([hi, np.broadcast_to(shared.upper, (len(hi), shared.n))], axis=1)
         if len(self.problems) > 1:
             lo, hi = np.repeat(lo, runs, axis=0), np.repeat(hi, runs, axis=0)  # (T, n)
         else:
@@ -72,13 +78,18 @@ class ArmHandEnvironment(FingerEnvironment):
         self.lower = torch.as_tensor(lo, dtype=dtype, device=device)
         self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
 
-    def palm_frame(self, q_arm: Tensor) -> tuple[Tensor, Tensor]:
-        """The arm's forward kinematics. (T, n) -> R (T, 3, 3), t (T, 3)."""
-        return self.robot.palm_frame(q_arm)
+    def palm_frame(self, config: Tensor) -> tuple[Tensor, Tensor]:
+        """The arm's forward kinematics of the configuration's first m columns (the arm joints).
+        (T, n) -> R (T, 3, 3), t (T, 3)."""
+        return self.robot.palm_frame(config[..., : self.m])
 
-    def palm_frame_jacobian(self, q_arm: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """The arm's forward kinematics and geometric Jacobian. (T, n) -> R (T, 3, 3), t (T, 3), J (T, 6, n)."""
-        return self.robot.palm_frame_jacobian(q_arm)
+    def palm_frame_jacobian(self, config: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """The arm's forward kinematics and geometric Jacobian. (T, n) -> R (T, 3, 3), t (T, 3), J (T, 6, n)
+        (zero in the shared joints' columns: they do not move the palm)."""
+        R, t, J = self.robot.palm_frame_jacobian(config[..., : self.m])
+        if self.shared_slots:
+            J = torch.cat([J, J.new_zeros(*J.shape[:-1], self.shared_slots)], dim=-1)
+        return R, t, J
 
     def bounds64(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
@@ -87,20 +98,24 @@ class ArmHandEnvironment(FingerEnvironment):
         """With a collision proxy, its arm chain gives the palm too (one pass of forward kinematics)."""
         if self.proxy is None:
             return self.palm_frame(config), None
-        levels, palm = self.proxy.body_levels_and_palm(config)
+        levels, palm = self.proxy.body_levels_and_palm(config[:, : self.m])
         return palm, levels
 
     def body(self, config: Tensor) -> Tensor:
-        return config
+        return config[:, : self.m]
 
     def config_of(self, posture: Posture) -> Tensor:
-        """The posture's arm joints (1, n)."""
-        return posture.body.to(torch.float64).reshape(1, -1)
+        """The posture's arm joints (1, n) (then the shared joints, where they are)."""
+        config = posture.body.to(torch.float64).reshape(1, -1)
+        if self.shared_slots:
+            shared = posture.shared if posture.shared is not None else torch.as_tensor(self.robot.shared_reference)
+            config = torch.cat([config, shared.to(config).reshape(1, -1)], dim=1)
+        return config
 
     def add_fields(self, fields: list[dict], config: Tensor) -> None:
         """``arm_joints`` by URDF joint name in chain order (degrees; metres for prismatic joints)."""
         for k, f in enumerate(fields):
-            f["arm_joints"] = self.robot.body_joints_to_file(config[k])
+            f["arm_joints"] = self.robot.body_joints_to_file(config[k, : self.m])
 
     @classmethod
     def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:

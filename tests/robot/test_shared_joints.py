@@ -209,8 +209,62 @@ def test_a_solve_searches_the_shared_joints_and_checks_from_the_urdf_alone(tmp_p
     th = torch.tensor([[values.get(n, 0.0) for n in names]], dtype=torch.float64)
     fk = chain.forward_kinematics(th)
     pose = np.asarray(out["palm_pose"], dtype=np.float64)
-    world = pose_matrix(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(fk["palm"].get_matrix()[0].numpy())
+    palm = fk["palm"].get_matrix()[0].numpy()
+    world = pose_matrix(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(palm)
     for contact, target in zip(problem.contacts, problem.contacts_world(), strict=True):
         tip = (world @ fk[TIPS[contact.finger]].get_matrix()[0].numpy())[:3, 3]
         assert np.linalg.norm(tip - target) * 1000 == pytest.approx(out["fingertip_error_mm"][contact.finger],
                                                                     abs=1e-3)  # 1e-6 m (pk: float32 origins)
+
+
+def write_coupled_arm(folder: Path) -> Path:
+    """The coupled hand on a 3-joint arm (torso -> palm), in one URDF."""
+    folder.mkdir(parents=True, exist_ok=True)
+    hand = coupled_hand_urdf()
+    body = hand[hand.index("<link"):hand.rindex("</robot>")]
+    arm = ['<link name="torso"/>', '<link name="upper"/>', '<link name="fore"/>',
+           _joint("shoulder", "revolute", "torso", "upper", "0 0 0.5", axis="0 0 1", lim=(-1.5, 1.5)),
+           _joint("elbow", "revolute", "upper", "fore", "0 0 0.3", axis="0 1 0", lim=(-1.5, 1.5)),
+           _joint("wrist", "revolute", "fore", "palm", "0 0 0.25", axis="1 0 0", lim=(-1.5, 1.5))]
+    (folder / "coupled_arm.urdf").write_text('<robot name="coupled_arm">\n' + "\n".join(arm) + body + "</robot>\n")
+    cfg = {"name": "coupled_arm", "urdf": "coupled_arm.urdf", "palm_link": "palm",
+           "fingers": {f: {"tip": tip} for f, tip in TIPS.items()}, "arm": {"base": "torso", "tip": "palm"}}
+    path = folder / "coupled_arm.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
+@pytest.mark.slow
+def test_an_arm_searches_the_shared_joints_with_its_own(tmp_path):
+    """The coupled hand on an arm: contacts from a random posture (arm, fingers and shared joints
+    drawn within their limits) are reached, the arm joints and the shared joints reported, and the
+    fingertips of the reported posture (forward kinematics of every listed joint) are the
+    reported errors."""
+    from graspnet_torch.fcnn.train import FCNNTrainCfg
+    from graspnet_torch.jobs.train_fcnn import train_fcnn
+    from graspnet_torch.robot.postures import trial_posture
+
+    robot = gt.load_robot(write_coupled_arm(tmp_path))
+    tiny = FCNNTrainCfg(epochs=3, targets_per_epoch=64, train_steps=10, batch_size=64, val_targets=200, val_every=2)
+    ik, _ = train_fcnn(robot, tiny, tmp_path / "run", progress=False, eval_targets=100)
+    g = torch.Generator().manual_seed(4)
+    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+    body = lo + (hi - lo) * torch.rand(lo.shape, generator=g, dtype=torch.float64)
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    q = flo + (fhi - flo) * torch.rand(flo.shape, generator=g, dtype=torch.float64)
+    s = torch.as_tensor(robot.shared.lower + (robot.shared.upper - robot.shared.lower) * np.array([0.8, 0.9]))
+    R, t = robot.palm_frame(body)
+    tips = (R @ robot.fingertips_palm(q, s).unsqueeze(-1)).squeeze(-1) + t
+    problem = gt.GraspProblem.from_mapping(
+        {"robot": "coupled_arm", "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()}
+                                              for f in ("a", "c", "d")]},
+        robot_cfg=robot.cfg, source="coupled arm problem")
+    result = gt.solve(problem, trials=8, seed=0, robot=robot, finger_ik=ik)
+    assert result.success, result.best.total_error_mm
+    posture = trial_posture(robot, result.best)
+    assert posture.shared is not None and set(result.best.arm_joints) == {"shoulder", "elbow", "wrist"}
+    R, t = robot.palm_frame(posture.body)
+    got = (R @ robot.fingertips_palm(posture.fingers, posture.shared).unsqueeze(-1)).squeeze(-1) + t
+    for contact, target in zip(problem.contacts, problem.contacts_world(), strict=True):
+        err = float(np.linalg.norm(got[robot.finger_index(contact.finger)].numpy() - target)) * 1000
+        assert err == pytest.approx(result.best.fingertip_error_mm[contact.finger], abs=1e-6)
