@@ -201,17 +201,28 @@ def _attachment(robot: Robot, link: str, frames: dict[str, np.ndarray]) -> Attac
         return sum(urdf.parent_joint[child].type != "fixed" for child in path[:path.index(upto)])
 
     palm = robot.cfg.palm_link
-    for f, finger in enumerate(robot.fingers.values()):
-        if finger.chain.root in path:
-            k = movable(finger.chain.root)
-            P = np.eye(4)
-            for i in range(k):
-                P = P @ finger.chain.spec.offsets[i]
-            frame = frames[palm] @ finger.base_in_palm @ P
-            return Attachment("finger", k, f, np.linalg.inv(frame) @ frames[link])
+    for x in path:  # the nearest link up the tree that lies on a finger's chain (below its root)
+        owner = next((f for f, finger in enumerate(robot.fingers.values()) if x in _chain_links(robot, finger)), None)
+        if owner is None:
+            continue
+        if movable(x):  # moved by joints on no finger's own chain (the ones fingers share): see below
+            break
+        finger = list(robot.fingers.values())[owner]
+        k = movable(finger.chain.root)
+        spec = finger.chain.spec
+        A, B, rev = motion_terms(spec.axes, spec.joint_types)
+        q = finger.chain.coupling_offset  # every joint where ``frames`` has it: the free ones at 0, mimic ones at c
+        P = np.eye(4)
+        for i in range(k):  # level k: F_0 M_1(q_1) ... F_{k-1} M_k(q_k)
+            s, c = (np.sin(q[i]), 1 - np.cos(q[i])) if rev[i] else (q[i], 0.0)
+            P = P @ spec.offsets[i] @ (np.eye(4) + s * A[i] + c * B[i])
+        frame = frames[palm] @ finger.base_in_palm @ P
+        return Attachment("finger", k, owner, np.linalg.inv(frame) @ frames[link])
     if palm in path:
-        if movable(palm):
+        moved = {urdf.parent_joint[c].name for c in path[:path.index(palm)] if urdf.parent_joint[c].type != "fixed"}
+        if moved - set(robot.shared.names) - set(robot.shared.followers):
             raise ConfigError(f"{robot.cfg.source}: link '{link}' moves with the palm but is on no finger chain")
+        # moved by joints the fingers share only: placed where the robot holds them
         return Attachment("palm", 0, 0, np.linalg.inv(frames[palm]) @ frames[link])
     if robot.body is None:  # above the palm of a free hand: rigid with it
         return Attachment("palm", 0, 0, np.linalg.inv(frames[palm]) @ frames[link])
@@ -223,6 +234,18 @@ def _attachment(robot: Robot, link: str, frames: dict[str, np.ndarray]) -> Attac
     for i in range(k):
         P = P @ robot.body.offsets[i]
     return Attachment("body", k, 0, np.linalg.inv(P) @ frames[link])
+
+
+def _chain_links(robot: Robot, finger) -> set[str]:
+    """The links on a finger's chain below its root (its base), down to its tip."""
+    cached = robot.__dict__.setdefault("_finger_chain_links", {})
+    if finger.name not in cached:
+        links, link = set(), finger.chain.tip
+        while link != finger.chain.root and link in robot.urdf.parent_joint:
+            links.add(link)
+            link = robot.urdf.parent_joint[link].parent
+        cached[finger.name] = links
+    return cached[finger.name]
 
 
 def riding_base_links(robot: Robot, attachments: dict[str, Attachment]) -> set[str]:

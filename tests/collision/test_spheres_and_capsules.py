@@ -87,3 +87,44 @@ def test_capsules_and_boxes_hit_within_their_radii_and_the_clearance():
     assert model.unchecked == [("c", "d"), ("a", "b")]
     hits = model.hits(_frames(shift)).numpy()
     assert not hits[:, 0].any() and hits[:, 1].any()
+
+
+@pytest.mark.parametrize("which", ["oddhand", "coupled"])
+def test_attachments_place_every_link_where_forward_kinematics_does(tmp_path, which):
+    """Each link's attachment (its level frame, then its pose there) gives the link's frame of
+    the URDF's forward kinematics at random postures: the odd hand, whose middle finger has no
+    base of its own before the ring finger's chain (its links are the ring's, not the middle's),
+    and a hand whose fingers share joints (held where the robot holds them)."""
+    import sys
+    from pathlib import Path
+
+    from graspnet_torch.robot.frames import RobotLevels
+    from graspnet_torch.robot.robot import Posture
+    from graspnet_torch.robot.transforms import pose_to_rt
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    if which == "oddhand":
+        from odd_hands import write_oddhand
+
+        robot = gt.load_robot(write_oddhand(tmp_path))
+    else:
+        from robot.test_shared_joints import write_coupled_hand
+
+        robot = gt.load_robot(write_coupled_hand(tmp_path))
+    links = list(dict.fromkeys(s.link for s in link_shapes(robot.urdf, "collision")))
+    attach = link_attachments(robot, links)
+    levels = RobotLevels(robot, torch.float64)
+    g = torch.Generator().manual_seed(2)
+    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
+    top = max(a.level for a in attach.values())
+    for _ in range(5):
+        pose = torch.rand(6, generator=g, dtype=torch.float64) - 0.5
+        q = lo + (hi - lo) * torch.rand(lo.shape, generator=g, dtype=torch.float64)
+        frames = robot.link_frames(Posture(pose, q, torch.zeros(0, dtype=torch.float64)))
+        R, t = pose_to_rt(pose)
+        W = torch.cat([R, t[:, None]], 1)
+        finger = levels.finger_levels(W[None], q[None], top)
+        for link, a in attach.items():
+            F = W if a.kind == "palm" else finger[a.level][0, a.finger]
+            F4 = torch.cat([F, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
+            np.testing.assert_allclose(F4.numpy() @ a.pose, frames[link], atol=1e-6, rtol=0, err_msg=link)
