@@ -151,7 +151,7 @@ class CollisionProxy:
         return self.robot_levels.body_levels_and_palm(body)
 
     def frames(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
-               body_levels: list[Tensor] | None = None) -> Tensor:
+               body_levels: list[Tensor] | None = None, bases: tuple[Tensor, Tensor] | None = None) -> Tensor:
         """Every frame spheres hang from. palm: R (T, 3, 3), t (T, 3); fingers: (T, F_all, j) every
         finger's joints; body: (T, m) the body joints (robots with an arm), or ``body_levels`` from
         :meth:`body_levels_and_palm` -> (n_frames, T, 3, 4)."""
@@ -167,7 +167,7 @@ class CollisionProxy:
         frames.append(W)
         stacked = torch.stack(frames)  # (n, T, 3, 4)
         if self.robot.n_fingers:
-            levels = self.robot_levels.finger_levels(W, fingers, self.finger_levels)
+            levels = self.robot_levels.finger_levels(W, fingers, self.finger_levels, bases)
             stacked = torch.cat([stacked, torch.stack(levels, dim=2).flatten(1, 2).transpose(0, 1)])
         return stacked
 
@@ -241,14 +241,17 @@ class CollisionProxy:
         return out
 
     def count(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
-              body_levels: list[Tensor] | None = None, problem_index: Tensor | None = None) -> Tensor:
+              body_levels: list[Tensor] | None = None, problem_index: Tensor | None = None,
+              bases: tuple[Tensor, Tensor] | None = None) -> Tensor:
         """(T,) collision counts (long): distinct (link, obstacle) pairs + links in the object +
-        colliding pairs of the robot's own links."""
+        colliding pairs of the robot's own links. ``bases``: every finger's base in the palm per
+        configuration (:meth:`Robot.base_frames <graspnet_torch.robot.robot.Robot.base_frames>`),
+        where the joints the fingers share move them."""
         T = palm[0].shape[0]
         out = torch.zeros(T, dtype=torch.long, device=palm[0].device)
         if not self.n_elements and not self._self.tested:
             return out
-        frames = self.frames(palm, fingers, body, body_levels)  # once for both tests
+        frames = self.frames(palm, fingers, body, body_levels, bases)  # once for both tests
         if self.n_elements:
             out = self._pairs(frames, problem_index).sum(dim=(1, 2))
         if self._self.tested:

@@ -141,14 +141,21 @@ class RobotLevels:
         end = torch.matmul(levels[-1], self.palm_offset) if levels else self.palm_offset.expand(body.shape[0], 4, 4)
         return levels, (end[:, :3, :3], end[:, :3, 3])
 
-    def finger_levels(self, palm: Tensor, fingers: Tensor, upto: int) -> list[Tensor]:
-        """palm: W (T, 3, 4) the palm in the world; fingers: (T, F, n) every finger's free joints ->
-        [every finger's base in the world, its level 1, ..., level ``upto``], each (T, F, 3, 4)."""
+    def finger_levels(self, palm: Tensor, fingers: Tensor, upto: int, bases: tuple[Tensor, Tensor] | None = None
+                      ) -> list[Tensor]:
+        """palm: W (T, 3, 4) the palm in the world; fingers: (T, F, n) every finger's free joints;
+        bases: every finger's base in the palm, R (T, F, 3, 3), t (T, F, 3), where the joints the
+        fingers share move them (None: the fixed ones) -> [every finger's base in the world, its
+        level 1, ..., level ``upto``], each (T, F, 3, 4)."""
         T = palm.shape[0]
         if self._finger_map is not None:  # free joints (padded) -> every joint (mimic, padded)
             fingers = torch.einsum("fan,tfn->tfa", self._finger_map[0], fingers) + self._finger_map[1]
-        # base_f = W B_f for every finger at once: (T, 3, 4) @ (4, 4F)
-        base = (palm @ self._base_cols).view(T, 3, self.n_fingers, 4).transpose(1, 2)  # (T, F, 3, 4)
+        if bases is None:  # base_f = W B_f for every finger at once: (T, 3, 4) @ (4, 4F)
+            base = (palm @ self._base_cols).view(T, 3, self.n_fingers, 4).transpose(1, 2)  # (T, F, 3, 4)
+        else:
+            R, t = bases
+            Wr = palm[:, None, :, :3]
+            base = torch.cat([Wr @ R, (Wr @ t.unsqueeze(-1)) + palm[:, None, :, 3:]], -1)  # (T, F, 3, 4)
         levels = [base]
         if upto:
             base4 = torch.cat([base, self._bottom.expand(T, self.n_fingers, 1, 4)], -2).reshape(-1, 4, 4)
@@ -237,13 +244,16 @@ def _attachment(robot: Robot, link: str, frames: dict[str, np.ndarray]) -> Attac
 
 
 def _chain_links(robot: Robot, finger) -> set[str]:
-    """The links on a finger's chain below its root (its base), down to its tip."""
+    """The links on a finger's chain from its root (its base) down to its tip (the palm excluded:
+    several fingers may start there)."""
     cached = robot.__dict__.setdefault("_finger_chain_links", {})
     if finger.name not in cached:
         links, link = set(), finger.chain.tip
         while link != finger.chain.root and link in robot.urdf.parent_joint:
             links.add(link)
             link = robot.urdf.parent_joint[link].parent
+        if finger.chain.root != robot.cfg.palm_link:
+            links.add(finger.chain.root)
         cached[finger.name] = links
     return cached[finger.name]
 

@@ -159,6 +159,11 @@ class FingerEnvironment(Environment):
         R, t = self.robot.base_frames(config[:, -self.shared_slots:])
         return R[:, self.idx], t[:, self.idx]
 
+    def _all_bases(self, config: Tensor) -> tuple[Tensor, Tensor] | None:
+        """Every finger's base in the palm per configuration (the collision proxy's), where the
+        configuration carries the joints the fingers share; else None (the fixed ones)."""
+        return self.robot.base_frames(config[:, -self.shared_slots:]) if self.shared_slots else None
+
     def shared_of(self, config: Tensor) -> Tensor | None:
         """The shared joints (B, S) of configurations (None: the robot holds them)."""
         return config[:, -self.shared_slots:] if self.shared_slots else None
@@ -198,7 +203,8 @@ class FingerEnvironment(Environment):
         q, errors = self.finger_joints(config, palm, trials)
         collisions = None
         if self.proxy is not None:
-            collisions = self.proxy.count(palm, self._every(q, trials), self.body(config), levels, self._pid(trials))
+            collisions = self.proxy.count(palm, self._every(q, trials), self.body(config), levels, self._pid(trials),
+                                          self._all_bases(config))
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions,
                           config=config)
 
@@ -340,7 +346,7 @@ class FingerEnvironment(Environment):
         config = x[:, : self.n].to(self.lower)
         q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
         return self.proxy.count(self.palm_frame(config), self._every(q, rows), self.body(config), None,
-                                self._pid(rows)).cpu()
+                                self._pid(rows), self._all_bases(config)).cpu()
 
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
                     trace: list[Tensor] | None = None, rows: Tensor | None = None,

@@ -94,7 +94,8 @@ def test_attachments_place_every_link_where_forward_kinematics_does(tmp_path, wh
     """Each link's attachment (its level frame, then its pose there) gives the link's frame of
     the URDF's forward kinematics at random postures: the odd hand, whose middle finger has no
     base of its own before the ring finger's chain (its links are the ring's, not the middle's),
-    and a hand whose fingers share joints (held where the robot holds them)."""
+    and a hand whose fingers share joints (at random values: the finger bases they move given
+    per posture, as the solver gives them to the collision proxy)."""
     import sys
     from pathlib import Path
 
@@ -120,10 +121,15 @@ def test_attachments_place_every_link_where_forward_kinematics_does(tmp_path, wh
     for _ in range(5):
         pose = torch.rand(6, generator=g, dtype=torch.float64) - 0.5
         q = lo + (hi - lo) * torch.rand(lo.shape, generator=g, dtype=torch.float64)
-        frames = robot.link_frames(Posture(pose, q, torch.zeros(0, dtype=torch.float64)))
+        shared = bases = None
+        if robot.shared.n:
+            u = torch.rand(robot.shared.n, generator=g, dtype=torch.float64).numpy()
+            shared = torch.as_tensor(robot.shared.lower + (robot.shared.upper - robot.shared.lower) * u)
+            bases = tuple(b[None] for b in robot.base_frames(shared))
+        frames = robot.link_frames(Posture(pose, q, torch.zeros(0, dtype=torch.float64), shared))
         R, t = pose_to_rt(pose)
         W = torch.cat([R, t[:, None]], 1)
-        finger = levels.finger_levels(W[None], q[None], top)
+        finger = levels.finger_levels(W[None], q[None], top, bases)
         for link, a in attach.items():
             F = W if a.kind == "palm" else finger[a.level][0, a.finger]
             F4 = torch.cat([F, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
