@@ -10,6 +10,9 @@
 - ``ring``: a revolute joint then a prismatic one (a sliding fingertip).
 
 The file starts with an XML encoding declaration, as many exported URDFs do.
+
+``coupled`` (:func:`write_coupled_hand`): fingers that share joints: a hub joint carrying fingers a
+and b, a spread joint on finger c whose mimic turns finger d's base, and an independent finger e.
 """
 
 from __future__ import annotations
@@ -155,3 +158,76 @@ def write_odd_arm(folder: Path, checkpoint: str | None = None) -> Path:
     path = folder / "oddarm.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
+
+
+# ---------------------------------------------------------------- a hand whose fingers share joints
+COUPLED_TIPS = {"a": "a_tip", "b": "b_tip", "c": "c_tip", "d": "d_tip", "e": "e_tip"}
+
+
+def urdf_joint(name, kind, parent, child, xyz="0 0 0", rpy="0 0 0", axis="1 0 0", lim=(-1.0, 1.0), mimic=None):
+    s = f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+    s += f'<origin xyz="{xyz}" rpy="{rpy}"/>'
+    if kind != "fixed":
+        s += f'<axis xyz="{axis}"/><limit lower="{lim[0]}" upper="{lim[1]}" effort="1" velocity="1"/>'
+    if mimic:
+        s += f'<mimic joint="{mimic[0]}" multiplier="{mimic[1]}" offset="{mimic[2]}"/>'
+    return s + "</joint>"
+
+
+def coupled_hand_urdf(bad: bool = False) -> str:
+    """palm; a hub joint carrying fingers a and b (a joint on two chains); a spread joint on finger
+    c's chain whose mimic (x0.5) turns finger d's base (a leader driving another finger); finger e
+    independent. ``bad``: finger f's own joint comes before a mimic of the spread."""
+    cyl = '<collision><origin xyz="0 0 0.01"/><geometry><cylinder radius="0.005" length="0.02"/></geometry></collision>'
+    links = ["palm", "hub", "a1", "a2", "a_tip", "b1", "b2", "b_tip", "c0", "c1", "c2", "c_tip",
+             "d0", "d1", "d2", "d_tip", "e1", "e2", "e_tip"] + (["f1", "f2", "f_tip"] if bad else [])
+    joints = [
+        urdf_joint("hub", "revolute", "palm", "hub", "0.02 0 0.05", axis="0 1 0", lim=(-0.4, 0.6)),
+        urdf_joint("a_mcp", "revolute", "hub", "a1", "0.01 0 0.01", lim=(0, 1.5)),
+        urdf_joint("a_pip", "revolute", "a1", "a2", "0 0 0.04", lim=(0, 1.5)),
+        urdf_joint("a_tip_joint", "fixed", "a2", "a_tip", "0 0 0.03"),
+        urdf_joint("b_mcp", "revolute", "hub", "b1", "-0.01 0 0.01", lim=(0, 1.5)),
+        urdf_joint("b_pip", "revolute", "b1", "b2", "0 0 0.04", lim=(0, 1.5)),
+        urdf_joint("b_tip_joint", "fixed", "b2", "b_tip", "0 0 0.03"),
+        urdf_joint("spread", "revolute", "palm", "c0", "-0.02 0 0.05", "0.2 0 0", axis="0 1 0", lim=(0, 0.6)),
+        urdf_joint("c_mcp", "revolute", "c0", "c1", lim=(0, 1.5)),
+        urdf_joint("c_pip", "revolute", "c1", "c2", "0 0 0.04", lim=(0, 1.5)),
+        urdf_joint("c_tip_joint", "fixed", "c2", "c_tip", "0 0 0.03"),
+        urdf_joint("d_spread", "revolute", "palm", "d0", "-0.04 0 0.05", axis="0 1 0", lim=(0, 0.3),
+               mimic=("spread", 0.5, 0.0)),
+        urdf_joint("d_mcp", "revolute", "d0", "d1", lim=(0, 1.5)),
+        urdf_joint("d_pip", "revolute", "d1", "d2", "0 0 0.04", lim=(0, 1.5), mimic=("d_mcp", 1.2, 0.0)),
+        urdf_joint("d_tip_joint", "fixed", "d2", "d_tip", "0 0 0.03"),
+        urdf_joint("e_cmc", "revolute", "palm", "e1", "0.03 0.02 0.01", "0 0.5 0", axis="0 0 1", lim=(-0.5, 0.5)),
+        urdf_joint("e_mcp", "revolute", "e1", "e2", "0 0 0.03", lim=(0, 1.2)),
+        urdf_joint("e_tip_joint", "fixed", "e2", "e_tip", "0 0 0.03"),
+    ]
+    if bad:
+        joints += [urdf_joint("f_own", "revolute", "palm", "f1", "0 0.03 0.05", lim=(0, 1)),
+                   urdf_joint("f_spread", "revolute", "f1", "f2", "0 0 0.03", lim=(0, 0.6), mimic=("spread", 1.0, 0.0)),
+                   urdf_joint("f_tip_joint", "fixed", "f2", "f_tip", "0 0 0.03")]
+    body = [f'<link name="{n}">{cyl}</link>' for n in links]
+    return '<robot name="coupled">\n' + "\n".join(body + joints) + "\n</robot>\n"
+
+
+def write_coupled_hand(folder: Path, bad: bool = False) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "coupled.urdf").write_text(coupled_hand_urdf(bad))
+    fingers = {f: {"tip": tip} for f, tip in COUPLED_TIPS.items()}
+    if bad:
+        fingers["f"] = {"tip": "f_tip"}
+    cfg = {"name": "coupled", "urdf": "coupled.urdf", "palm_link": "palm", "fingers": fingers,
+           "home": {"hub": 10.0, "spread": 20.0}}
+    path = folder / "coupled.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
+def assert_jacobian_matches_fd(robot, q, atol: float, h: float = 1e-6) -> None:
+    """The fingertips' Jacobian in the base frames against central differences of their positions."""
+    _, J = robot.fingertips_base_jacobian(q)
+    for i in range(robot.joints_per_finger):
+        dq = torch.zeros_like(q)
+        dq[..., i] = h
+        fd = (robot.fingertips_base(q + dq) - robot.fingertips_base(q - dq)) / (2 * h)
+        torch.testing.assert_close(J[..., i], fd, atol=atol, rtol=0)

@@ -96,22 +96,12 @@ def test_attachments_place_every_link_where_forward_kinematics_does(tmp_path, wh
     base of its own before the ring finger's chain (its links are the ring's, not the middle's),
     and a hand whose fingers share joints (at random values: the finger bases they move given
     per posture, as the solver gives them to the collision proxy)."""
-    import sys
-    from pathlib import Path
-
     from graspnet_torch.robot.frames import RobotLevels
     from graspnet_torch.robot.robot import Posture
     from graspnet_torch.robot.transforms import pose_to_rt
+    from tests.odd_hands import write_coupled_hand, write_oddhand
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    if which == "oddhand":
-        from odd_hands import write_oddhand
-
-        robot = gt.load_robot(write_oddhand(tmp_path))
-    else:
-        from robot.test_shared_joints import write_coupled_hand
-
-        robot = gt.load_robot(write_coupled_hand(tmp_path))
+    robot = gt.load_robot(write_oddhand(tmp_path) if which == "oddhand" else write_coupled_hand(tmp_path))
     links = list(dict.fromkeys(s.link for s in link_shapes(robot.urdf, "collision")))
     attach = link_attachments(robot, links)
     levels = RobotLevels(robot, torch.float64)

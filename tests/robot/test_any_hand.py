@@ -16,7 +16,7 @@ from graspnet_torch.fcnn.checkpoint import chain_fingerprint
 from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.kernel import ChainKernel
 from tests.conftest import uniform
-from tests.odd_hands import MIMIC, oddhand_config, pk_fingertips_palm, write_oddhand
+from tests.odd_hands import MIMIC, assert_jacobian_matches_fd, oddhand_config, pk_fingertips_palm, write_oddhand
 
 
 @pytest.fixture(scope="module")
@@ -49,12 +49,7 @@ def test_fingertips_match_pytorch_kinematics_with_mimic_and_offset(odd, gen):
 def test_jacobian_matches_finite_differences_and_padding_is_inert(odd, gen):
     q = uniform(*odd.finger_limits, 16, gen)
     p, J = odd.fingertips_base_jacobian(q)
-    h = 1e-6
-    for i in range(odd.joints_per_finger):
-        dq = torch.zeros_like(q)
-        dq[..., i] = h
-        fd = (odd.fingertips_base(q + dq) - odd.fingertips_base(q - dq)) / (2 * h)
-        np.testing.assert_allclose(J[..., i].numpy(), fd.numpy(), atol=1e-8)
+    assert_jacobian_matches_fd(odd, q, atol=1e-8)
     assert torch.all(J.permute(0, 1, 3, 2)[:, torch.as_tensor(~odd.finger_mask)] == 0)  # padding moves nothing
     moved = q.clone()
     moved[:, torch.as_tensor(~odd.finger_mask)] = 0.7

@@ -15,72 +15,12 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.paths import repo_root
 from graspnet_torch.robot.chain import UrdfModel
 from graspnet_torch.robot.shared import find_shared_joints
-
-TIPS = {"a": "a_tip", "b": "b_tip", "c": "c_tip", "d": "d_tip", "e": "e_tip"}
-
-
-def _joint(name, kind, parent, child, xyz="0 0 0", rpy="0 0 0", axis="1 0 0", lim=(-1.0, 1.0), mimic=None):
-    s = f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-    s += f'<origin xyz="{xyz}" rpy="{rpy}"/>'
-    if kind != "fixed":
-        s += f'<axis xyz="{axis}"/><limit lower="{lim[0]}" upper="{lim[1]}" effort="1" velocity="1"/>'
-    if mimic:
-        s += f'<mimic joint="{mimic[0]}" multiplier="{mimic[1]}" offset="{mimic[2]}"/>'
-    return s + "</joint>"
-
-
-def coupled_hand_urdf(bad: bool = False) -> str:
-    """palm; a hub joint carrying fingers a and b (a joint on two chains); a spread joint on finger
-    c's chain whose mimic (x0.5) turns finger d's base (a leader driving another finger); finger e
-    independent. ``bad``: finger f's own joint comes before a mimic of the spread."""
-    cyl = '<collision><origin xyz="0 0 0.01"/><geometry><cylinder radius="0.005" length="0.02"/></geometry></collision>'
-    links = ["palm", "hub", "a1", "a2", "a_tip", "b1", "b2", "b_tip", "c0", "c1", "c2", "c_tip",
-             "d0", "d1", "d2", "d_tip", "e1", "e2", "e_tip"] + (["f1", "f2", "f_tip"] if bad else [])
-    joints = [
-        _joint("hub", "revolute", "palm", "hub", "0.02 0 0.05", axis="0 1 0", lim=(-0.4, 0.6)),
-        _joint("a_mcp", "revolute", "hub", "a1", "0.01 0 0.01", lim=(0, 1.5)),
-        _joint("a_pip", "revolute", "a1", "a2", "0 0 0.04", lim=(0, 1.5)),
-        _joint("a_tip_joint", "fixed", "a2", "a_tip", "0 0 0.03"),
-        _joint("b_mcp", "revolute", "hub", "b1", "-0.01 0 0.01", lim=(0, 1.5)),
-        _joint("b_pip", "revolute", "b1", "b2", "0 0 0.04", lim=(0, 1.5)),
-        _joint("b_tip_joint", "fixed", "b2", "b_tip", "0 0 0.03"),
-        _joint("spread", "revolute", "palm", "c0", "-0.02 0 0.05", "0.2 0 0", axis="0 1 0", lim=(0, 0.6)),
-        _joint("c_mcp", "revolute", "c0", "c1", lim=(0, 1.5)),
-        _joint("c_pip", "revolute", "c1", "c2", "0 0 0.04", lim=(0, 1.5)),
-        _joint("c_tip_joint", "fixed", "c2", "c_tip", "0 0 0.03"),
-        _joint("d_spread", "revolute", "palm", "d0", "-0.04 0 0.05", axis="0 1 0", lim=(0, 0.3),
-               mimic=("spread", 0.5, 0.0)),
-        _joint("d_mcp", "revolute", "d0", "d1", lim=(0, 1.5)),
-        _joint("d_pip", "revolute", "d1", "d2", "0 0 0.04", lim=(0, 1.5), mimic=("d_mcp", 1.2, 0.0)),
-        _joint("d_tip_joint", "fixed", "d2", "d_tip", "0 0 0.03"),
-        _joint("e_cmc", "revolute", "palm", "e1", "0.03 0.02 0.01", "0 0.5 0", axis="0 0 1", lim=(-0.5, 0.5)),
-        _joint("e_mcp", "revolute", "e1", "e2", "0 0 0.03", lim=(0, 1.2)),
-        _joint("e_tip_joint", "fixed", "e2", "e_tip", "0 0 0.03"),
-    ]
-    if bad:
-        joints += [_joint("f_own", "revolute", "palm", "f1", "0 0.03 0.05", lim=(0, 1)),
-                   _joint("f_spread", "revolute", "f1", "f2", "0 0 0.03", lim=(0, 0.6), mimic=("spread", 1.0, 0.0)),
-                   _joint("f_tip_joint", "fixed", "f2", "f_tip", "0 0 0.03")]
-    body = [f'<link name="{n}">{cyl}</link>' for n in links]
-    return '<robot name="coupled">\n' + "\n".join(body + joints) + "\n</robot>\n"
-
-
-def write_coupled_hand(folder: Path, bad: bool = False) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "coupled.urdf").write_text(coupled_hand_urdf(bad))
-    fingers = {f: {"tip": tip} for f, tip in TIPS.items()}
-    if bad:
-        fingers["f"] = {"tip": "f_tip"}
-    cfg = {"name": "coupled", "urdf": "coupled.urdf", "palm_link": "palm", "fingers": fingers,
-           "home": {"hub": 10.0, "spread": 20.0}}
-    path = folder / "coupled.yaml"
-    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
-    return path
+from tests.odd_hands import COUPLED_TIPS, assert_jacobian_matches_fd, coupled_hand_urdf, urdf_joint, write_coupled_hand
 
 
 def test_shared_joints_are_found_from_the_urdf(tmp_path):
     write_coupled_hand(tmp_path)
-    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", TIPS)
+    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", COUPLED_TIPS)
     assert shared.names == ("hub", "spread")
     assert shared.followers == {"d_spread": ("spread", 0.5, 0.0)}
     assert shared.bases == {"a": "hub", "b": "hub", "c": "c0", "d": "d0", "e": "palm"}
@@ -99,7 +39,7 @@ def test_base_frames_agree_with_pytorch_kinematics(tmp_path):
     import pytorch_kinematics as pk
 
     write_coupled_hand(tmp_path)
-    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", TIPS)
+    shared = find_shared_joints(UrdfModel(tmp_path / "coupled.urdf"), "palm", COUPLED_TIPS)
     g = torch.Generator().manual_seed(0)
     s = shared.lower + (shared.upper - shared.lower) * torch.rand(16, 2, generator=g, dtype=torch.float64).numpy()
     frames = shared.base_frames(torch.as_tensor(s))
@@ -147,13 +87,7 @@ def test_the_robot_holds_shared_joints_at_home_and_its_fingertips_agree_with_the
     want = torch.stack([torch.linalg.solve(fk["palm"].get_matrix(), fk[f.chain.tip].get_matrix())[:, :3, 3]
                         for f in robot.fingers.values()], dim=1)
     torch.testing.assert_close(got, want, atol=1e-7, rtol=0)  # pk parses origins in float32
-    _, J = robot.fingertips_base_jacobian(q)
-    eps = 1e-6
-    for i in range(robot.joints_per_finger):
-        dq = torch.zeros_like(q)
-        dq[..., i] = eps
-        fd = (robot.fingertips_base(q + dq) - robot.fingertips_base(q - dq)) / (2 * eps)
-        torch.testing.assert_close(J[..., i], fd, atol=1e-7, rtol=0)
+    assert_jacobian_matches_fd(robot, q, atol=1e-7)
     values = robot.joint_values(robot.home_posture())  # results and pictures see the shared joints where held
     assert values["hub"] == pytest.approx(np.radians(10.0)) and values["d_spread"] == pytest.approx(np.radians(10.0))
 
@@ -212,7 +146,7 @@ def test_a_solve_searches_the_shared_joints_and_checks_from_the_urdf_alone(tmp_p
     palm = fk["palm"].get_matrix()[0].numpy()
     world = pose_matrix(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(palm)
     for contact, target in zip(problem.contacts, problem.contacts_world(), strict=True):
-        tip = (world @ fk[TIPS[contact.finger]].get_matrix()[0].numpy())[:3, 3]
+        tip = (world @ fk[COUPLED_TIPS[contact.finger]].get_matrix()[0].numpy())[:3, 3]
         assert np.linalg.norm(tip - target) * 1000 == pytest.approx(out["fingertip_error_mm"][contact.finger],
                                                                     abs=1e-3)  # 1e-6 m (pk: float32 origins)
 
@@ -223,12 +157,12 @@ def write_coupled_arm(folder: Path) -> Path:
     hand = coupled_hand_urdf()
     body = hand[hand.index("<link"):hand.rindex("</robot>")]
     arm = ['<link name="torso"/>', '<link name="upper"/>', '<link name="fore"/>',
-           _joint("shoulder", "revolute", "torso", "upper", "0 0 0.5", axis="0 0 1", lim=(-1.5, 1.5)),
-           _joint("elbow", "revolute", "upper", "fore", "0 0 0.3", axis="0 1 0", lim=(-1.5, 1.5)),
-           _joint("wrist", "revolute", "fore", "palm", "0 0 0.25", axis="1 0 0", lim=(-1.5, 1.5))]
+           urdf_joint("shoulder", "revolute", "torso", "upper", "0 0 0.5", axis="0 0 1", lim=(-1.5, 1.5)),
+           urdf_joint("elbow", "revolute", "upper", "fore", "0 0 0.3", axis="0 1 0", lim=(-1.5, 1.5)),
+           urdf_joint("wrist", "revolute", "fore", "palm", "0 0 0.25", axis="1 0 0", lim=(-1.5, 1.5))]
     (folder / "coupled_arm.urdf").write_text('<robot name="coupled_arm">\n' + "\n".join(arm) + body + "</robot>\n")
     cfg = {"name": "coupled_arm", "urdf": "coupled_arm.urdf", "palm_link": "palm",
-           "fingers": {f: {"tip": tip} for f, tip in TIPS.items()}, "arm": {"base": "torso", "tip": "palm"}}
+           "fingers": {f: {"tip": tip} for f, tip in COUPLED_TIPS.items()}, "arm": {"base": "torso", "tip": "palm"}}
     path = folder / "coupled_arm.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
