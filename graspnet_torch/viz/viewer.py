@@ -1,0 +1,224 @@
+"""An interactive 3D view of a result in the browser (viser): the robot at any trial's posture,
+the object, the obstacles, the contacts (a gripper: the object's points and its own), colliding
+links red, and a slider that replays the reach motion when the result has one.
+
+``python scripts/view.py outputs/demo`` (a run folder, or a result JSON) serves the page on
+localhost and runs until stopped. The robot is drawn from the same shapes as ``posture.png``
+(collision geometry, else visual); what a link collides with is FCL's verdict on the posture
+shown (:class:`~graspnet_torch.collision.CollisionScene`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.tasks.problem import GraspProblem
+
+if TYPE_CHECKING:
+    import viser
+
+    from graspnet_torch.motion.trajectory import Trajectory
+
+__all__ = ["ResultView", "load_view", "serve"]
+
+ROBOT_RGB, RED, OBJECT_RGB, OBSTACLE_RGB, MARK_RGB = (170, 180, 200), (230, 40, 40), (90, 150, 230), (150, 150, 150), \
+    (240, 30, 30)
+
+
+@dataclass
+class ResultView:
+    """What the viewer shows: a result (its JSON), its problem, robot, every trial's posture, the
+    index of the reported (best) trial and, when the result has one, its reach motion."""
+
+    path: Path
+    result: dict[str, Any]
+    problem: GraspProblem
+    robot: Robot
+    postures: list[Posture]
+    best: int
+    motion: Trajectory | None
+
+
+def load_view(path: str | Path) -> ResultView:
+    """A run folder (its ``result.json``) or a result JSON -> :class:`ResultView`. Refuses
+    (:class:`ProblemError`, one line) a missing file, one that is not a result, a result without
+    its problem."""
+    from graspnet_torch.files import read_document
+    from graspnet_torch.robot.postures import trial_posture
+    from graspnet_torch.solver.api import as_problem, robot_and_ik
+
+    path = Path(path)
+    file = path / "result.json" if path.is_dir() else path
+    if not file.is_file():
+        raise ProblemError(f"{path}: no result here (a run folder with result.json, or a result JSON file)")
+    result = read_document(file, "result", ProblemError)
+    if not isinstance(result, dict) or not isinstance(result.get("trials"), list) or not result["trials"]:
+        raise ProblemError(f"{file}: not a result of solve_grasp.py (no 'trials')")
+    if not result.get("problem"):
+        raise ProblemError(f"{file}: the result does not name its problem ('problem'), so there is nothing to place")
+    source = str(result["problem"])
+    candidate = file.parent / source
+    problem = as_problem(candidate if not Path(source).is_absolute() and candidate.is_file() else source)
+    robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    try:
+        postures = [trial_posture(robot, t) for t in result["trials"]]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ProblemError(f"{file}: a trial does not fit robot '{robot.name}' ({exc})") from None
+    best = next((k for k, t in enumerate(result["trials"]) if t.get("palm_pose") == result.get("palm_pose")
+                 and t.get("joints") == result.get("joints") and t.get("arm_joints") == result.get("arm_joints")), 0)
+    motion = None
+    if isinstance(result.get("trajectory"), dict) and result["trajectory"].get("found"):
+        from graspnet_torch.motion.trajectory import Trajectory
+
+        motion = Trajectory.from_dict(result["trajectory"])
+    return ResultView(file, result, problem, robot, postures, best, motion)
+
+
+def _shape_mesh(shape):
+    """A link shape as a trimesh in its own frame."""
+    import trimesh
+
+    if shape.kind == "box":
+        return trimesh.creation.box(extents=shape.size)
+    if shape.kind == "cylinder":
+        return trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[1], sections=24)
+    if shape.kind == "sphere":
+        return trimesh.creation.icosphere(subdivisions=2, radius=shape.size[0])
+    mesh = shape.mesh
+    if len(mesh.faces) > 4000:  # as the pictures do: a light mesh for the browser
+        mesh = mesh.simplify_quadric_decimation(face_count=4000) if hasattr(mesh, "simplify_quadric_decimation") \
+            else mesh
+    return mesh
+
+
+def _wxyz(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return np.array([w, x, y, z])
+
+
+class _Scene:
+    """The viser scene of one view: one mesh per link shape, moved per posture."""
+
+    def __init__(self, server: viser.ViserServer, view: ResultView):
+        from graspnet_torch.collision.scene import has_environment
+        from graspnet_torch.viz.robot import drawable_shapes
+
+        self.server, self.view = server, view
+        self.shapes, _errors = drawable_shapes(view.robot)
+        self.handles = []
+        for i, shape in enumerate(self.shapes):
+            mesh = _shape_mesh(shape)
+            self.handles.append(server.scene.add_mesh_simple(
+                f"/robot/{i:03d}_{shape.link}", np.asarray(mesh.vertices, dtype=np.float32),
+                np.asarray(mesh.faces, dtype=np.uint32), color=ROBOT_RGB))
+        problem = view.problem
+        if problem.object is not None:
+            mesh = problem.object.trimesh()
+            server.scene.add_mesh_simple("/object", np.asarray(mesh.vertices, dtype=np.float32),
+                                         np.asarray(mesh.faces, dtype=np.uint32), color=OBJECT_RGB, opacity=0.6)
+        for k, obstacle in enumerate(problem.obstacles):
+            mesh = obstacle.trimesh()
+            server.scene.add_mesh_simple(f"/obstacles/{k}", np.asarray(mesh.vertices, dtype=np.float32),
+                                         np.asarray(mesh.faces, dtype=np.uint32), color=OBSTACLE_RGB, opacity=0.8)
+        self.marks: list = []
+        self.collisions = None
+        if has_environment(view.robot, problem):
+            from graspnet_torch.collision import CollisionScene
+
+            self.collisions = CollisionScene(view.robot, problem)
+
+    def show(self, posture: Posture, trial: dict[str, Any] | None) -> list[str]:
+        """Place every link at the posture, its contacts marked; returns the colliding links (red)."""
+        from graspnet_torch.solver.environments import environment_class
+
+        frames = self.view.robot.link_frames(posture)
+        red: set[str] = set()
+        if self.collisions is not None:
+            report = self.collisions.check(posture)
+            red = {link for link, _ in report.obstacle_pairs} | set(report.object_links) | \
+                {link for pair in report.self_pairs for link in pair}
+        for shape, handle in zip(self.shapes, self.handles, strict=True):
+            T = frames[shape.link] @ shape.origin
+            handle.position, handle.wxyz = T[:3, 3], _wxyz(T[:3, :3])
+            handle.color = RED if shape.link in red else ROBOT_RGB
+        if trial is not None:
+            marks = environment_class(self.view.robot).marks(self.view.problem, SimpleNamespace(**trial))
+            for handle in self.marks:
+                handle.remove()
+            self.marks = [self.server.scene.add_icosphere(f"/marks/{k}", radius=0.004, color=MARK_RGB, position=p)
+                          for k, p in enumerate(np.asarray(marks))]
+        return sorted(red)
+
+
+def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.ViserServer:
+    """Serve the view (module docstring) at http://host:port; returns the running server (stop it
+    with ``server.stop()``)."""
+    import viser
+
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.scene.set_up_direction("+z")
+    scene = _Scene(server, view)
+    result, trials = view.result, view.result["trials"]
+    info = server.gui.add_markdown("")
+    labels = [f"{k}{' (reported)' if k == view.best else ''}: {_summary(t)}" for k, t in enumerate(trials)]
+    pick = server.gui.add_dropdown("trial", labels, initial_value=labels[view.best])
+
+    def show_trial(k: int) -> None:
+        red = scene.show(view.postures[k], trials[k])
+        info.content = (f"**{view.robot.name}** on **{result.get('problem')}** - trial {k} of {len(trials)}: "
+                        f"{_summary(trials[k])}" + (f"; colliding (red): {', '.join(red)}" if red else ""))
+
+    @pick.on_update
+    def _(_event) -> None:
+        show_trial(labels.index(pick.value))
+
+    show_trial(view.best)
+    _frame_camera(server, scene, view)
+    if view.motion is not None:
+        motion = view.motion
+        from graspnet_torch.motion.validity import StateLayout, state_postures
+
+        layout = StateLayout.of(view.robot)
+        slider = server.gui.add_slider("reach motion (s)", 0.0, float(motion.times[-1]), 0.02,
+                                       float(motion.times[-1]))
+
+        @slider.on_update
+        def _(_event) -> None:
+            row = int(np.clip(np.searchsorted(motion.times, slider.value), 0, len(motion.times) - 1))
+            scene.show(state_postures(view.robot, layout, motion.positions[row: row + 1])[0], None)
+
+    return server
+
+
+def _frame_camera(server: viser.ViserServer, scene: _Scene, view: ResultView) -> None:
+    """The first view: looking at the box around the robot's links, the object, the obstacles and
+    the marks, from the front-left and above, far enough to hold it all."""
+    points = [np.asarray(h.position, dtype=np.float64) for h in scene.handles + scene.marks]
+    for shape in ((view.problem.object,) if view.problem.object is not None else ()) + view.problem.obstacles:
+        points += list(np.asarray(shape.trimesh().bounds, dtype=np.float64))
+    cloud = np.stack(points) if points else np.zeros((1, 3))
+    lo, hi = cloud.min(0), cloud.max(0)
+    centre, size = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)), 0.1)
+    direction = np.array([1.0, -1.4, 0.8]) / np.linalg.norm([1.0, -1.4, 0.8])
+    server.initial_camera.look_at = centre
+    server.initial_camera.position = centre + 1.3 * size * direction
+    server.initial_camera.up = (0.0, 0.0, 1.0)
+    server.initial_camera.near = 0.005
+
+
+def _summary(trial: dict[str, Any]) -> str:
+    error = trial.get("total_error_mm", trial.get("distance_mm"))
+    ok = "solved" if trial.get("success") else "not solved"
+    text = f"{ok}, error {error:.3g} mm" if isinstance(error, (int, float)) and math.isfinite(error) else ok
+    return text + f", {trial.get('collisions', 0)} collision(s)"
+
