@@ -21,6 +21,8 @@ install: $(STAMP)  ## create .venv if missing (torch first, pinned) and install 
 
 demo: $(STAMP)  ## solve the default problem (glass3, 20 trials, R3: no finger through the glass) -> outputs/demo/
 	$(PY) scripts/solve_grasp.py task=glass3 reward=r3 hydra.run.dir=outputs/demo
+	@echo "next: look at outputs/demo/posture.png and learning.png; turn the grasp in 3D with"
+	@echo "      $(PY) scripts/view.py outputs/demo   (then open the address it prints); curves: tensorboard --logdir outputs/demo/tb"
 
 robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
 	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots
