@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-proposal bench-solvers report-arm report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-retarget bench-proposal bench-solvers report-arm report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -45,6 +45,9 @@ EXPERIMENT_RUN = $(PY) scripts/reproduce.py check=true out=outputs/experiment/$(
 experiment: $(STAMP)  ## one experiment with its targets checked, E=<name> (configs/experiment/) -> outputs/experiment/<name>/
 	@test -n "$(E)" || { echo "usage: make experiment E=<name> (configs/experiment/)"; exit 2; }
 	$(call EXPERIMENT_RUN,$(E))
+
+docs: $(STAMP)  ## the documentation site from docs/ (mkdocs --strict: a broken link or reference fails) -> outputs/site/
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict
 
 lint: $(STAMP)  ## ruff check
 	$(PY) -m ruff check .

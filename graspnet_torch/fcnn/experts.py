@@ -42,8 +42,10 @@ class ExpertSet(nn.Module):
 
     Args:
         n_joints: joints of the finger (outputs per expert).
-        x_center, x_scale: (3,) affine normalisation of fingertip positions.
-        q_lower, q_upper: (n,) joint limits; outputs are normalised to their range.
+        x_center: (3,) affine normalisation of fingertip positions: its centre,
+        x_scale: (3,) and its scale.
+        q_lower: (n,) lower joint limits; outputs are normalised to the range,
+        q_upper: (n,) upper joint limits.
         cfg: sizes.
     """
 

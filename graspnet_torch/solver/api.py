@@ -145,10 +145,14 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         trials: independent learners run as one batch; the result reports each and the best.
         seed: all randomness (initial weights, random starts, exploration, sensor noise).
         max_iterations: overrides ``solver.max_iterations``.
-        solver, srv, reward, noise: settings; ``None``: the robot's (its config's
+        solver: settings (so are srv, reward, noise); ``None``: the robot's (its config's
             ``solver_defaults``: the paper's section 5.1 for the hand, 6.3 for the arm) over the
-            paper's defaults; ``noise`` may be sigma_n.
-        robot, finger_ik: override the shipped robot and its trained FCNN.
+            paper's defaults.
+        srv: the SRV network's settings.
+        reward: the reward's settings.
+        noise: the sensor noise's settings, or sigma_n.
+        robot: overrides the shipped robot.
+        finger_ik: overrides its trained FCNN.
     """
     problem = as_problem(problem)
     noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())

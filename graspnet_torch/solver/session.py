@@ -51,8 +51,15 @@ class Solver:
 
     Args:
         robot: a shipped robot's name, a robot config (or its YAML path), or a built robot.
-        trials, seed, max_iterations, solver, srv, reward, noise, device: as :func:`gt.solve`
-            (None: the robot's ``solver_defaults`` over the paper's).
+        trials: as :func:`gt.solve` (so are the next ones; None: the robot's ``solver_defaults``
+            over the paper's).
+        seed: as :func:`gt.solve`.
+        max_iterations: as :func:`gt.solve`.
+        solver: as :func:`gt.solve`.
+        srv: as :func:`gt.solve`.
+        reward: as :func:`gt.solve`.
+        noise: as :func:`gt.solve`.
+        device: as :func:`gt.solve`.
         finger_ik: the FCNN to use instead of the robot's trained one.
 
     Collision models of a problem's scene are built once per distinct geometry
