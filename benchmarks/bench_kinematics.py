@@ -68,7 +68,7 @@ def main() -> int:
     print(format_table(["chain", "batch", "FK ours", "FK pk", "ratio", "FK+J ours", "FK+J pk", "ratio"], rows,
                        floatfmt=".3g"))
     # target: faster than pytorch-kinematics everywhere except one chain at batch 1, where the long
-    # arm chain's traced program costs more than its loop (README, "Kinematics": about 0.7x)
+    # arm chain's traced program costs more than its loop (docs/robots.md, "Kinematics": about 0.7x)
     checks = [(f"{r[0]}, B={r[1]}: FK {r[4]:.3g}x, FK+J {r[7]:.3g}x pytorch-kinematics >= 1x",
                r[4] >= 1 and r[7] >= 1) for r in rows if not (r[1] == 1 and "11 joints" in r[0])]
     return check_targets(checks, args.check)

@@ -64,7 +64,7 @@ def main() -> int:
                 best[threads] = min(best[threads], time.perf_counter() - t0)
         print(f"{name:36s} {best[1]:11.2f} {best[2]:12.2f} {best[2] / best[1]:7.2f}", flush=True)
         # the default of 1 thread trades at most ~2x on an idle 2-core machine (the cores it leaves
-        # unused) against the 10-90x that 2 threads lost on a busy one (README, "Threads")
+        # unused) against the 10-90x that 2 threads lost on a busy one (docs/solvers.md, "Threads")
         checks.append((f"{name}: 1 thread {best[1]:.2f} s within 3x of 2 threads ({best[2]:.2f} s)",
                        best[1] <= 3 * best[2]))
     return check_targets(checks, args.check)

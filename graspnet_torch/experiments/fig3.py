@@ -28,7 +28,7 @@ SAME_ORDER = 2.0  # "of the same order": the final error at the largest noise wi
 @dataclass(frozen=True)
 class NoiseStudyCfg:
     """``+experiment=fig3``; ``a``, ``s`` and ``scale``: the reinforcement's slope (eq. 14) and
-    s(r_hat) (eq. 11), the paper's open choices (README "Open choices")."""
+    s(r_hat) (eq. 11), the paper's open choices (docs/hcnn.md)."""
 
     trials: int = setting(20, lo=1, hi=100_000)
     steps: int = setting(2000, lo=600, hi=1_000_000)  # the table reads the error 500 steps before the end

@@ -219,7 +219,7 @@ def run_manus(cfg: ManusCfg, out: Path) -> ExperimentReport:
     else:
         mismatches.append(f"MANUS: our mean d ({ours['mean_d']:.2f} +- {ours['std_d']:.2f} mm) is far below the "
                           f"paper's {PAPER_D[0]} +- {PAPER_D[1]} mm: our default adds a damped least-squares polish "
-                          "after the SRV loop (README \"Which solver?\"); the paper's network alone stops at r > 0.99.")
+                          "after the SRV loop (docs/solvers.md); the paper's network alone stops at r > 0.99.")
     return ExperimentReport("manus", "MANUS: the two-point grasp over a workspace (section 7.2), and Fig. 12",
                             "\n".join(body), figures=figs, tables=["The workspace protocol"], numbers=numbers,
                             timings={"protocol seconds": t_protocol}, mismatches=mismatches, results=results,

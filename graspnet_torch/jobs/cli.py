@@ -256,7 +256,7 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
 
     global _job_started
     _job_started = False  # a new command (a test may run several in one process)
-    # the checks run on one thread (a busy machine, README "Threads"); every job sets its own count
+    # the checks run on one thread (a busy machine, docs/solvers.md, "Threads"); every job sets its own count
     torch.set_num_threads(1)
     if argv is None:
         sys.argv[1:] = robot_path_overrides(sys.argv[1:])  # Hydra's main reads sys.argv

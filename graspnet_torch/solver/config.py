@@ -68,11 +68,12 @@ class PolishCfg:
             reinforcement first exceeds this (and each time it betters it) has its best
             configuration polished inside the loop; where the polish lands, the trial has
             succeeded, else it learns on (``None``: the polish only after the loop). 0.9 with a = 1:
-            E < 100 mm, measured on random reachable hand problems (README, "Which solver?").
+            E < 100 mm, measured on random reachable hand problems (docs/solvers.md).
         from_r_free: ``from_r`` where the search counts no collision (nothing to collide with, or
             a reward that ignores collisions): -1 polishes every trial from the first iteration
             on (the learner proposes, the polish lands), which on random reachable problems is
-            about 3x faster than 0.9 at the same success (README, "Many calls"). None: ``from_r``.
+            about 3x faster than 0.9 at the same success (docs/interface.md, "Many calls, and
+            sequences"). None: ``from_r``.
             Near an object a polish from far lands against it, within tolerance but less exact:
             there ``from_r`` applies. With ``from_r: null`` (the polish after the loop only) neither.
         min_gain: a polished (or ``dls``) trial whose kept step lowers its error by less than this
@@ -86,7 +87,7 @@ class PolishCfg:
             warm start did not land) is moved, its contacts held, toward the middle of its
             fingers' joint ranges (a prior of this weight per range, faded out in six steps of five
             iterations), so the frames after it start away from the limits, where a warm start
-            gets stuck (README, "Sequences", measures both settings). None: not moved.
+            gets stuck (docs/interface.md, "Many calls, and sequences", measures both settings). None: not moved.
     """
 
     mode: str = setting("whole", choices=("fingers", "whole"))

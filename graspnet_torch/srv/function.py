@@ -29,7 +29,7 @@ the default) or ``scale * max(1 - r_hat, 0)^2`` ('quadratic'), then ``max(., flo
 keeps exploring (and gives up s(1) = 0). The default scale 3 was chosen on the hand tasks: with
 the paper's learning rates (0.01) and a = 1, scale 1 explores too little once r_hat nears 1
 (mean errors 4-23 mm after the Table 2 budgets) and scale 10 so much that the trajectory never
-settles; scale 3 gives mean errors of 0.2-1 mm (README, "HCNN").
+settles; scale 3 gives mean errors of 0.2-1 mm (docs/hcnn.md).
 """
 
 from __future__ import annotations
