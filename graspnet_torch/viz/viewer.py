@@ -125,7 +125,7 @@ class _Scene:
         if problem.object is not None:
             mesh = problem.object.trimesh()
             server.scene.add_mesh_simple("/object", np.asarray(mesh.vertices, dtype=np.float32),
-                                         np.asarray(mesh.faces, dtype=np.uint32), color=OBJECT_RGB, opacity=0.6)
+                                         np.asarray(mesh.faces, dtype=np.uint32), color=OBJECT_RGB, opacity=0.85)
         for k, obstacle in enumerate(problem.obstacles):
             mesh = obstacle.trimesh()
             server.scene.add_mesh_simple(f"/obstacles/{k}", np.asarray(mesh.vertices, dtype=np.float32),

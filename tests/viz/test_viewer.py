@@ -78,4 +78,5 @@ def test_a_real_browser_shows_the_robot_and_the_object(tmp_path, task, port):
     grey = (np.abs(middle - np.array([170, 180, 200])).max(1) < 60) & (middle.sum(1) < 700)
     blue = (middle[:, 2] > middle[:, 0] + 40)
     print(f"{task}: grey {grey.mean():.3f}, blue {blue.mean():.3f}")
-    assert grey.mean() > 0.01 and blue.mean() > 0.0005  # measured: grey 0.13-0.14, blue 0.001-0.06
+    # measured: grey 0.13-0.14; blue 0.0003-0.06 with an object (the MANUS cube is small), 0.0 without one
+    assert grey.mean() > 0.01 and blue.mean() > 1e-4
