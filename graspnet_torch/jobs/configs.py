@@ -136,7 +136,7 @@ BASE_BYTES = 768 << 20  # torch, the robot, the FCNN (measured: 300-530 MB)
 
 
 def estimate_solve_memory(trials: int, iterations: int, fingers: int, n: int = 6, history: bool = True,
-                          itemsize: int = 4, hidden: tuple[int, int] = (20, 20)) -> int:
+                          itemsize: int = 4, hidden: tuple[int, int] = (20, 20), postures: bool = False) -> int:
     """Peak bytes of a solve of ``trials`` x ``iterations`` (an upper estimate; see the constants);
     each trial's network (weights, their updates and the layers' activations) counts 4 times."""
     h1, h2 = hidden
@@ -144,6 +144,8 @@ def estimate_solve_memory(trials: int, iterations: int, fingers: int, n: int = 6
     per_trial += 4 * itemsize * (2 * n * h1 + h1 * h2 + h2 * n + h1 + h2 + n)
     if history:
         per_trial += iterations * HISTORY_FACTOR * itemsize * (3 + 2 * n + fingers)
+        if postures:  # each iteration's configuration and finger joints (4 per finger)
+            per_trial += iterations * itemsize * (n + 4 * fingers)
     return BASE_BYTES + trials * per_trial
 
 
@@ -181,9 +183,10 @@ def available_memory() -> int:
 
 
 def check_solve_memory(trials: int, iterations: int, fingers: int, history: bool, itemsize: int,
-                       device=None, hidden: tuple[int, int] = (20, 20)) -> int:
+                       device=None, hidden: tuple[int, int] = (20, 20), postures: bool = False) -> int:
     """Refuse a solve that cannot fit in memory, naming the estimate; returns the estimate."""
-    need = estimate_solve_memory(trials, iterations, fingers, history=history, itemsize=itemsize, hidden=hidden)
+    need = estimate_solve_memory(trials, iterations, fingers, history=history, itemsize=itemsize, hidden=hidden,
+                                 postures=postures)
     if device is not None and getattr(device, "type", "cpu") == "cuda":
         import torch
 

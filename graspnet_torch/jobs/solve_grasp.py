@@ -8,6 +8,7 @@ curves (like the paper's Fig. 3).
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -24,9 +25,9 @@ from graspnet_torch.motion import ReachCfg, StateLayout, Trajectory, check_start
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
-from graspnet_torch.solver.api import robot_and_ik, solve, trial_posture
+from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
-from graspnet_torch.solver.environments import environment_class
+from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
@@ -215,7 +216,7 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     job, solver = with_robot_defaults(job, groups, problem.robot_cfg)
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
-                       4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
+                       4 if solver.dtype == "float32" else 8, device, job.srv.hidden, solver.history_postures)
     check_problem(problem, solver)
     if job.reach.enabled or problem.start:
         check_start(robot_and_ik(problem.robot_cfg)[0], problem)  # a known joint, within limits, clear
@@ -271,7 +272,35 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
         _warn_on_failure("TensorBoard hparams", log_hparams, run_dir / "tb", result, overrides)
     if job.pictures:
         _warn_on_failure("pictures", write_pictures, robot, problem, result, run_dir)
+    history = result.outcome.history if result.outcome is not None else None
+    if history is not None and "config" in history:
+        _warn_on_failure("replay.json", write_replay, robot, problem, result,
+                         build_environment(robot, problem, ik, solver, DTYPES[solver.dtype], device, job.reward),
+                         run_dir / "replay.json")
     return result
+
+
+def write_replay(robot, problem: GraspProblem, result: GraspResult, env, path: Path, frames: int = 60) -> Path:
+    """``replay.json``: every trial's result fields (:meth:`Environment.report`: palm pose, joints,
+    errors recomputed in float64) at up to ``frames`` iterations spread over the search, from the
+    configurations and finger joints the loop recorded (``solver.history_postures``), for
+    ``scripts/view.py``. ``env``: the problem's environment, built with the solve's settings."""
+    from graspnet_torch.io import atomic_write_text
+    from graspnet_torch.solver.environment import Evaluation
+
+    history = result.outcome.history
+    K = history["config"].shape[0]
+    steps = sorted(set(np.linspace(0, K - 1, min(frames, K)).round().astype(int).tolist()))
+    iterations = history["iteration"].tolist() if "iteration" in history else list(range(1, K + 1))
+    out = {"problem": result.problem, "iterations": [], "trials": []}
+    for k in steps:
+        config = history["config"][k].to(torch.float64)
+        joints = history["joints"][k].to(torch.float64) if "joints" in history else None
+        report = env.report(config, Evaluation(error=history["total"][k].to(torch.float64), joints=joints))
+        out["iterations"].append(int(iterations[k]))
+        out["trials"].append([{key: value for key, value in fields.items() if key != "trials"}
+                              for fields in report.fields])
+    return atomic_write_text(path, json.dumps(out))
 
 
 def reach_motion(robot, problem: GraspProblem, result: GraspResult, cfg: ReachCfg) -> Trajectory:

@@ -229,6 +229,9 @@ class SolverCfg:
             exactly; the arm's config sets 'proposal'). srv only.
         history: record per-iteration curves (reinforcement, expected reinforcement, sigma,
             errors, time) for logs and plots.
+        history_postures: with ``history``, also every iteration's configurations and finger
+            joints (the SRV loop): ``solve_grasp.py`` then writes ``replay.json``, which
+            ``scripts/view.py`` replays over the iterations.
         dtype: 'float32' (hot path) or 'float64'.
         polish, cmaes, fingers, gripper: the groups above.
     """
@@ -245,6 +248,7 @@ class SolverCfg:
     report: str = setting("best", choices=("best", "final"))
     start: str = setting("auto", choices=("auto", "random", "proposal"))
     history: bool = True
+    history_postures: bool = False
     dtype: str = setting("float32", choices=("float32", "float64"))
     polish: PolishCfg = PolishCfg()
     cmaes: CmaesCfg = CmaesCfg()

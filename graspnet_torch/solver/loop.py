@@ -239,6 +239,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             net.reinforce(observed[live], best.active[live])
         best.rescore(k + 1)
         best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
+        shown = config  # each trial's configuration this iteration (a landed one: where the polish put it)
         if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
             near = best.active & (observed > (first_from if k == 0 else polish_from)) & (observed > polished_at)
             polished_at = torch.where(near, observed, polished_at)
@@ -253,12 +254,17 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
                 r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
                 ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
+                shown = torch.where(landed.unsqueeze(1), best.config, shown)
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", r_hat),
                                ("sigma", sigma), ("total", ev.error), ("errors", ev.finger_errors),
                                ("collisions", ev.collisions), ("alignment", ev.alignment)):
                 if value is not None:
                     hist.setdefault(key, []).append(value)
+            if solver.history_postures:  # each trial's configuration and finger joints: the viewer's replay
+                hist.setdefault("config", []).append(shown.clone())
+                if ev.joints is not None:
+                    hist.setdefault("joints", []).append(ev.joints.clone())
             hist.setdefault("time", []).append(time.perf_counter() - t0)
         o_new = o if best.all_active else torch.where(best.active.unsqueeze(1), o, o_prev)
         o_prev2, o_prev = o_prev, o_new

@@ -1,6 +1,8 @@
 """An interactive 3D view of a result in the browser (viser): the robot at any trial's posture,
 the object, the obstacles, the contacts (a gripper: the object's points and its own), colliding
-links red, and a slider that replays the reach motion when the result has one.
+links red, a slider that replays a trial over its iterations when the run kept them
+(``solver.history_postures=true``: ``replay.json``), and one that replays the reach motion when
+the result has one.
 
 ``python scripts/view.py outputs/demo`` (a run folder, or a result JSON) serves the page on
 localhost and runs until stopped. The robot is drawn from the same shapes as ``posture.png``
@@ -36,7 +38,9 @@ ROBOT_RGB, RED, OBJECT_RGB, OBSTACLE_RGB, MARK_RGB = (170, 180, 200), (230, 40, 
 @dataclass
 class ResultView:
     """What the viewer shows: a result (its JSON), its problem, robot, every trial's posture, the
-    index of the reported (best) trial and, when the result has one, its reach motion."""
+    index of the reported (best) trial and, when the result has one, its reach motion; with a
+    ``replay.json`` beside the result (``solver.history_postures=true``), every trial's posture
+    over the iterations (``iterations``, and ``trials``: per iteration, per trial, its fields)."""
 
     path: Path
     result: dict[str, Any]
@@ -45,6 +49,7 @@ class ResultView:
     postures: list[Posture]
     best: int
     motion: Trajectory | None
+    replay: dict[str, Any] | None = None
 
 
 def load_view(path: str | Path) -> ResultView:
@@ -79,7 +84,14 @@ def load_view(path: str | Path) -> ResultView:
         from graspnet_torch.motion.trajectory import Trajectory
 
         motion = Trajectory.from_dict(result["trajectory"])
-    return ResultView(file, result, problem, robot, postures, best, motion)
+    replay = None
+    if (file.parent / "replay.json").is_file():
+        replay = read_document(file.parent / "replay.json", "replay", ProblemError)
+        if not isinstance(replay, dict) or len(replay.get("iterations", ())) != len(replay.get("trials", ())) or \
+                any(len(row) != len(postures) for row in replay.get("trials", ())):
+            raise ProblemError(f"{file.parent / 'replay.json'}: not the replay of this result (iterations x "
+                               f"{len(postures)} trials)")
+    return ResultView(file, result, problem, robot, postures, best, motion, replay)
 
 
 def _shape_mesh(shape):
@@ -184,6 +196,21 @@ def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.
 
     show_trial(view.best)
     _frame_camera(server, scene, view)
+    if view.replay is not None:
+        steps = view.replay["iterations"]
+        iteration = server.gui.add_slider("iteration (replay)", 0, len(steps) - 1, 1, len(steps) - 1,
+                                          hint=f"the search at {len(steps)} iterations, {steps[0]} to {steps[-1]}")
+
+        @iteration.on_update
+        def _(_event) -> None:
+            from graspnet_torch.robot.postures import trial_posture
+
+            k = labels.index(pick.value)
+            fields = view.replay["trials"][int(iteration.value)][k]
+            red = scene.show(trial_posture(view.robot, fields), None)
+            info.content = (f"trial {k} at iteration {steps[int(iteration.value)]}: error "
+                            f"{fields.get('total_error_mm', fields.get('distance_mm', float('nan'))):.3g} mm"
+                            + (f"; colliding (red): {', '.join(red)}" if red else ""))
     if view.motion is not None:
         motion = view.motion
         from graspnet_torch.motion.validity import StateLayout, state_postures

@@ -80,3 +80,25 @@ def test_a_real_browser_shows_the_robot_and_the_object(tmp_path, task, port):
     print(f"{task}: grey {grey.mean():.3f}, blue {blue.mean():.3f}")
     # measured: grey 0.13-0.14; blue 0.0003-0.06 with an object (the MANUS cube is small), 0.0 without one
     assert grey.mean() > 0.01 and blue.mean() > 1e-4
+
+
+def test_a_run_that_keeps_its_postures_is_replayed_over_its_iterations(tmp_path):
+    """solver.history_postures=true: replay.json holds every trial at iterations spread over the
+    search, its errors recomputed in float64 from the recorded configurations and joints, which
+    agree with the loop's own errors at those iterations; the viewer loads it. Without the
+    setting, no replay.json."""
+    from graspnet_torch.jobs.solve_grasp import solve_grasp
+
+    base = {"task": "glass3", "trials": 3, "max_iterations": 40, "tensorboard": False, "pictures": False,
+            "threads": 1}
+    plain = solve_grasp({**base, "out": str(tmp_path / "plain" / "result.json")}, tmp_path / "plain")
+    assert plain.outcome.history is not None and not (tmp_path / "plain" / "replay.json").exists()
+    result = solve_grasp({**base, "out": str(tmp_path / "kept" / "result.json"),
+                          "solver": {"history_postures": True}}, tmp_path / "kept")
+    replay = json.loads((tmp_path / "kept" / "replay.json").read_text())
+    total = result.outcome.history["total"].double().numpy() * 1000  # (K, T) mm, the loop's float32 errors
+    assert 2 <= len(replay["iterations"]) <= 60 and all(len(row) == 3 for row in replay["trials"])
+    for it, row in zip(replay["iterations"], replay["trials"], strict=True):
+        np.testing.assert_allclose([t["total_error_mm"] for t in row], total[it - 1], rtol=1e-3, atol=0.05)
+    view = load_view(tmp_path / "kept")
+    assert view.replay is not None and view.replay["iterations"] == replay["iterations"]
