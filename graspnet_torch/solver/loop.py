@@ -254,7 +254,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
                 r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
                 ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
-                shown = torch.where(landed.unsqueeze(1), best.config, shown)
+                if solver.history_postures:
+                    shown = torch.where(landed.unsqueeze(1), best.config, shown)
         if solver.history:
             for key, value in (("reinforcement", r), ("observed", observed), ("expected", r_hat),
                                ("sigma", sigma), ("total", ev.error), ("errors", ev.finger_errors),
