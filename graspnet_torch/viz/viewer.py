@@ -104,11 +104,9 @@ def _shape_mesh(shape):
         return trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[1], sections=24)
     if shape.kind == "sphere":
         return trimesh.creation.icosphere(subdivisions=2, radius=shape.size[0])
-    mesh = shape.mesh
-    if len(mesh.faces) > 4000:  # as the pictures do: a light mesh for the browser
-        mesh = mesh.simplify_quadric_decimation(face_count=4000) if hasattr(mesh, "simplify_quadric_decimation") \
-            else mesh
-    return mesh
+    from graspnet_torch.robot.meshes import decimate
+
+    return decimate(shape.mesh)  # as the pictures draw it
 
 
 def _wxyz(R: np.ndarray) -> np.ndarray:

@@ -102,3 +102,19 @@ def test_a_run_that_keeps_its_postures_is_replayed_over_its_iterations(tmp_path)
         np.testing.assert_allclose([t["total_error_mm"] for t in row], total[it - 1], rtol=1e-3, atol=0.05)
     view = load_view(tmp_path / "kept")
     assert view.replay is not None and view.replay["iterations"] == replay["iterations"]
+
+
+def test_a_hand_by_config_with_mesh_links_is_served(tmp_path):
+    """The TriFinger (any hand by config; its links are large meshes, decimated as the pictures
+    decimate them): served, every link shape in the scene."""
+    problem = repo_root() / "examples" / "trifinger" / "cube.yaml"
+    result = gt.solve(str(problem), trials=1, seed=0)
+    data = result.to_dict()
+    data["problem"] = str(problem)
+    path = tmp_path / "tri.json"
+    path.write_text(json.dumps(data))
+    server = view_result([str(path), "--port", "8135"], block=False)
+    try:
+        assert b"<html" in urllib.request.urlopen("http://127.0.0.1:8135", timeout=10).read().lower()
+    finally:
+        server.stop()
