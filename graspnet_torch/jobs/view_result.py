@@ -18,15 +18,16 @@ def view_result(argv: Sequence[str] | None = None, *, block: bool = True):
     parser = argparse.ArgumentParser(prog="view.py", description="A result in the browser (viser).")
     parser.add_argument("path", help="a run folder (with result.json) or a result JSON file")
     parser.add_argument("--host", default="127.0.0.1", help="the address to bind (default: this machine only)")
-    parser.add_argument("--port", type=int, default=8080, help="the port (default 8080)")
+    parser.add_argument("--port", default="8080", help="the port (default 8080)")
     args = parser.parse_args(argv)
-    if not 0 < args.port < 65536:
-        raise ConfigError(f"--port: {args.port} is not a port (1-65535)")
+    port = int(args.port) if args.port.isdigit() else -1
+    if not 0 < port < 65536:
+        raise ConfigError(f"--port: '{args.port}' is not a port (1-65535)")
     from graspnet_torch.viz.viewer import load_view, serve
 
     t0 = time.perf_counter()
     view = load_view(args.path)
-    server = serve(view, args.host, args.port)
+    server = serve(view, args.host, port)
     print(f"viewing {view.path} ({view.robot.name}, {len(view.postures)} trials"
           f"{', a reach motion' if view.motion is not None else ''}) at http://{args.host}:{server.get_port()} "
           f"(ready in {time.perf_counter() - t0:.1f} s; Ctrl-C stops)", flush=True)

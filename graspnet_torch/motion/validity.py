@@ -97,9 +97,7 @@ def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> lis
     body by one batched forward kinematics."""
     m = layout.body
     x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-    q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
-    if robot.n_fingers:
-        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+    q = _finger_joints(robot, x, m)
     if robot.has_body:
         from graspnet_torch.robot.transforms import rt_to_pose
 
@@ -108,6 +106,14 @@ def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> lis
         return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
     none = torch.zeros(0, dtype=torch.float64)
     return [Posture(palm_pose=x[k, :6], fingers=q[k], body=none) for k in range(x.shape[0])]
+
+
+def _finger_joints(robot: Robot, x: torch.Tensor, m: int) -> torch.Tensor:
+    """States (B, n) -> every finger's free joints (B, F, j), padded: the columns after the first m."""
+    q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
+    if robot.n_fingers:
+        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+    return q
 
 
 def _urdf_velocity(robot: Robot, joint: str) -> float:
@@ -148,8 +154,7 @@ class MotionChecker:
             d = torch.minimum((points - self._targets).norm(dim=-1).amax(-1),
                               (points - self._targets.flip(0)).norm(dim=-1).amax(-1))
             return (d <= self.touch).numpy()[:, None]
-        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
-        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+        q = _finger_joints(robot, x, m)
         tips = robot.fingertips_world_from_body(x[:, :m], q) if robot.has_body else \
             robot.fingertips_world(x[:, :6], q)
         return ((tips[:, self._rows] - self._targets).norm(dim=-1) <= self.touch).numpy()
@@ -177,9 +182,7 @@ class MotionChecker:
         """The links' names and world poses (B, L, 4, 4) in states (B, n)."""
         robot, m = self.robot, self.layout.body
         x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-        q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
-        if robot.n_fingers:
-            q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+        q = _finger_joints(robot, x, m)
         if robot.has_body:
             return robot.link_frames_of(x[:, :m], q)
         return robot.link_frames_of(None, q, x[:, :6])

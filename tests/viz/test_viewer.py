@@ -118,3 +118,26 @@ def test_a_hand_by_config_with_mesh_links_is_served(tmp_path):
         assert b"<html" in urllib.request.urlopen("http://127.0.0.1:8135", timeout=10).read().lower()
     finally:
         server.stop()
+
+
+def test_a_bad_port_or_a_replay_of_another_run_is_refused_in_one_line(tmp_path):
+    path = _result(tmp_path, "glass3")
+    run = subprocess.run([sys.executable, str(repo_root() / "scripts" / "view.py"), path, "--port", "http"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and run.stderr == "error: --port: 'http' is not a port (1-65535)\n"
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "result.json").write_text((tmp_path / "glass3.json").read_text())
+    (folder / "replay.json").write_text(json.dumps({"iterations": [1], "trials": [[{}]]}))  # 1 trial, not 2
+    with pytest.raises(ProblemError, match="not the replay of this result"):
+        load_view(folder)
+
+
+def test_history_postures_must_be_a_boolean(tmp_path):
+    from graspnet_torch.errors import ConfigError
+    from graspnet_torch.jobs.solve_grasp import solve_grasp
+
+    out = tmp_path / "result.json"
+    with pytest.raises(ConfigError, match="history_postures"):
+        solve_grasp({"task": "glass3", "out": str(out), "solver": {"history_postures": "maybe"}}, tmp_path)
+    assert not out.exists() and not (tmp_path / "replay.json").exists()
