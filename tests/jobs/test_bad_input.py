@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -19,59 +17,10 @@ import pytest
 from graspnet_torch.paths import repo_root
 from tests.in_process import run_script
 from tests.processes import run_measured
+from tests.refusals import refused, refused_in_a_fresh_process, run_command, write_problem
 
 GLASS3 = (repo_root() / "configs" / "task" / "glass3.yaml").read_text()
 INDEX = "  - {finger: index, position: [0, 0, 0]}\n"
-
-
-def _run(script: str, *args: str, timeout: float = 120) -> tuple[subprocess.CompletedProcess, float]:
-    t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, str(repo_root() / "scripts" / script), *args], capture_output=True,
-                         text=True, cwd=repo_root(), timeout=timeout)
-    return res, time.perf_counter() - t0
-
-
-def _run_measured(tmp_path: Path, script: str, *args: str) -> tuple[subprocess.CompletedProcess, float, int]:
-    """:func:`_run` through a small launcher: also the script's own peak memory (bytes)."""
-    t0 = time.perf_counter()
-    res, peak = run_measured([sys.executable, str(repo_root() / "scripts" / script), *args], tmp_path / "peak.json",
-                             capture_output=True, text=True, cwd=repo_root(), timeout=120)
-    return res, time.perf_counter() - t0, peak
-
-
-def _check_refusal(tmp_path: Path, returncode: int, stderr: str, message: str) -> str:
-    lines = stderr.strip().splitlines()
-    assert returncode == 2, stderr[-2000:]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in stderr, stderr[-2000:]
-    assert message in lines[0], lines[0]
-    assert not (tmp_path / "run").exists(), "a refused run wrote its run folder"
-    return lines[0]
-
-
-def _refused(tmp_path: Path, script: str, *args: str, message: str) -> str:
-    """Run ``script`` (in this process) with its outputs under tmp_path/run; assert a clean
-    refusal; return the line."""
-    res = run_script(script, *args, f"hydra.run.dir={tmp_path / 'run'}", f"hydra.sweep.dir={tmp_path / 'run'}")
-    line = _check_refusal(tmp_path, res.returncode, res.stderr, message)
-    assert res.stdout == "" and res.warnings == [], (res.stdout[-2000:], res.warnings)
-    return line
-
-
-def _refused_in_a_fresh_process(tmp_path: Path, script: str, *args: str, message: str) -> str:
-    """:func:`_refused` as a real command: also quick (< 30 s with the interpreter's start) and
-    small (< 1 GiB peak)."""
-    res, seconds, peak = _run_measured(tmp_path, script, *args, f"hydra.run.dir={tmp_path / 'run'}",
-                                       f"hydra.sweep.dir={tmp_path / 'run'}")
-    line = _check_refusal(tmp_path, res.returncode, res.stderr, message)
-    assert seconds < 30
-    assert peak < 1 << 30, f"a refusal peaked at {peak / 2**20:.0f} MiB"
-    return line
-
-
-def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
-    path = tmp_path / name
-    path.write_text(text)
-    return path
 
 
 # ------------------------------------------------------------------ settings and overrides
@@ -121,7 +70,7 @@ def _problem(tmp_path: Path, text: str, name: str = "p.yaml") -> Path:
     (["srv.lr_bp=null"], "srv.lr_bp=None: expected a number in [0, 100]"),
 ])
 def test_bad_settings_are_refused_before_any_work(tmp_path, args, message):
-    _refused(tmp_path, "solve_grasp.py", *args, message=message)
+    refused(tmp_path, "solve_grasp.py", *args, message=message)
 
 
 def test_device_cuda_is_checked_for_availability(tmp_path):
@@ -129,12 +78,12 @@ def test_device_cuda_is_checked_for_availability(tmp_path):
 
     if torch.cuda.is_available():
         pytest.skip("this machine has CUDA")
-    _refused(tmp_path, "solve_grasp.py", "device=cuda", message="device=cuda: CUDA is not available")
+    refused(tmp_path, "solve_grasp.py", "device=cuda", message="device=cuda: CUDA is not available")
 
 
 @pytest.mark.slow
 def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path):
-    line = _refused_in_a_fresh_process(tmp_path, "solve_grasp.py", "trials=200000000",
+    line = refused_in_a_fresh_process(tmp_path, "solve_grasp.py", "trials=200000000",
                                        message="trials=200000000 x max_iterations=2000")
     assert "GiB of memory but" in line and "solver.history=false" in line
 
@@ -168,8 +117,8 @@ def test_sizes_that_cannot_fit_in_memory_are_refused_with_the_estimate(tmp_path)
      "  - {finger: index, position: [0, 0, 0]}\n", "unknown finger ['x', 'x', 'x', 'x', ...]"),
 ])
 def test_bad_problem_files_are_refused_with_a_short_line(tmp_path, text, message):
-    path = _problem(tmp_path, text)
-    line = _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+    path = write_problem(tmp_path, text)
+    line = refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
     assert len(line) < 600
 
 
@@ -180,17 +129,17 @@ def test_oversized_non_utf8_and_special_problem_files(tmp_path):
         fh.write("robot: hand\ncontacts: [")
         fh.write("0, " * 600_000)
         fh.write("0]\n")
-    _refused_in_a_fresh_process(tmp_path, "solve_grasp.py", f"problem={big}",
+    refused_in_a_fresh_process(tmp_path, "solve_grasp.py", f"problem={big}",
                                 message="a problem file may have at most 1048576 bytes")
     latin = tmp_path / "latin.yaml"
     latin.write_bytes(GLASS3.replace("Drinking glass", "Verre à boire").encode("latin-1"))
-    _refused(tmp_path, "solve_grasp.py", f"problem={latin}", message="not UTF-8 text")
-    _refused(tmp_path, "solve_grasp.py", "problem=/dev/zero", message="the problem file is not a regular file")
+    refused(tmp_path, "solve_grasp.py", f"problem={latin}", message="not UTF-8 text")
+    refused(tmp_path, "solve_grasp.py", "problem=/dev/zero", message="the problem file is not a regular file")
     # a folder is many problems: each file is checked, the first bad one named; an empty one is refused
-    _refused(tmp_path, "solve_grasp.py", f"problem={tmp_path}", message="big.yaml: 1800026 bytes")
+    refused(tmp_path, "solve_grasp.py", f"problem={tmp_path}", message="big.yaml: 1800026 bytes")
     empty = tmp_path / "empty"
     empty.mkdir()
-    _refused(tmp_path, "solve_grasp.py", f"problem={empty}", message="no problem files (*.yaml, *.yml, *.json)")
+    refused(tmp_path, "solve_grasp.py", f"problem={empty}", message="no problem files (*.yaml, *.yml, *.json)")
 
 
 # ------------------------------------------------------------------ paths
@@ -198,8 +147,8 @@ def test_mesh_paths_outside_the_allowed_folders_get_one_message_whether_or_not_t
     lines = []
     for mesh in ("/etc/passwd", "/etc/no-such-file.stl", "../../../../../../etc/passwd"):
         text = GLASS3.replace("shape: cylinder\n  size: [0.0325, 0.12]", f"shape: mesh\n  size: {mesh}")
-        path = _problem(tmp_path, text)
-        line = _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="is outside the file's folder")
+        path = write_problem(tmp_path, text)
+        line = refused(tmp_path, "solve_grasp.py", f"problem={path}", message="is outside the file's folder")
         lines.append(line.replace(mesh, "<mesh>"))
     assert len(set(lines)) == 1, lines
 
@@ -207,8 +156,8 @@ def test_mesh_paths_outside_the_allowed_folders_get_one_message_whether_or_not_t
 def test_a_file_inside_the_folder_must_be_a_real_mesh(tmp_path):
     (tmp_path / "cup.stl").write_text("this is not a mesh\n")
     text = GLASS3.replace("shape: cylinder\n  size: [0.0325, 0.12]", "shape: mesh\n  size: cup.stl")
-    path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message="cup.stl")
+    path = write_problem(tmp_path, text)
+    refused(tmp_path, "solve_grasp.py", f"problem={path}", message="cup.stl")
 
 
 @pytest.mark.parametrize(("out", "message"), [
@@ -220,7 +169,7 @@ def test_a_file_inside_the_folder_must_be_a_real_mesh(tmp_path):
 def test_out_must_be_a_regular_file_in_a_writable_folder(tmp_path, out, message):
     (tmp_path / "afile").write_text("x")
     out = out.format(tmp=tmp_path)
-    _refused(tmp_path, "solve_grasp.py", f"out={out}", message=message)
+    refused(tmp_path, "solve_grasp.py", f"out={out}", message=message)
     assert (tmp_path / "afile").read_text() == "x"
 
 
@@ -237,7 +186,7 @@ def test_out_must_be_a_regular_file_in_a_writable_folder(tmp_path, out, message)
     (["robot=octopus"], "unknown robot 'octopus'"),
 ])
 def test_training_settings_are_refused_and_nothing_is_written(tmp_path, args, message):
-    _refused(tmp_path, "train_fcnn.py", *args, message=message)
+    refused(tmp_path, "train_fcnn.py", *args, message=message)
 
 
 def test_resume_from_a_non_finite_state_is_refused(tmp_path):
@@ -263,7 +212,7 @@ def test_valid_odd_input_runs(tmp_path):
     import yaml
 
     problem.write_text(json.dumps(yaml.safe_load(GLASS3)))
-    res, _ = _run("solve_grasp.py", f"problem={problem}", "trials=2", "max_iterations=5", "noise.sigma=0",
+    res, _ = run_command("solve_grasp.py", f"problem={problem}", "trials=2", "max_iterations=5", "noise.sigma=0",
                   "reward.a=2", "pictures=false", "tensorboard=false", f"hydra.run.dir={tmp_path / 'run'}")
     assert res.returncode == 0, res.stderr
     assert json.loads((tmp_path / "run" / "result.json").read_text())["settings"]["reward_a"] == 2.0
@@ -295,7 +244,7 @@ def test_memory_estimate_bounds_a_real_solve_from_above(tmp_path):
     ("reference_posture.py", ["task=bottle"], "unknown task 'bottle'"),
 ])
 def test_the_other_scripts_refuse_bad_input_the_same_way(tmp_path, script, args, message):
-    _refused(tmp_path, script, *args, message=message)
+    refused(tmp_path, script, *args, message=message)
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -305,7 +254,7 @@ def test_the_other_scripts_refuse_bad_input_the_same_way(tmp_path, script, args,
     (["fcnn.targets_per_epoch=100000", "fcnn.random_restarts=1000"], "GiB of memory but"),
 ])
 def test_training_sizes_beyond_reason_or_memory_are_refused(tmp_path, args, message):
-    _refused(tmp_path, "train_fcnn.py", *args, message=message)
+    refused(tmp_path, "train_fcnn.py", *args, message=message)
 
 
 @pytest.mark.parametrize(("bounds", "message"), [
@@ -314,8 +263,8 @@ def test_training_sizes_beyond_reason_or_memory_are_refused(tmp_path, args, mess
 ])
 def test_a_contact_out_of_reach_is_refused_before_the_solve(tmp_path, bounds, message):
     text = f"robot: hand\n{bounds}contacts:\n  - {{finger: thumb, position: [9.9, 9.9, 9.9]}}\n" + INDEX
-    path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", message=message)
+    path = write_problem(tmp_path, text)
+    refused(tmp_path, "solve_grasp.py", f"problem={path}", message=message)
 
 
 ENV1 = (Path(__file__).resolve().parents[2] / "configs" / "task" / "env1.yaml").read_text()
@@ -334,8 +283,8 @@ ENV1 = (Path(__file__).resolve().parents[2] / "configs" / "task" / "env1.yaml").
 def test_bad_arm_problems_are_refused(tmp_path, text, message):
     """Malformed obstacles, an obstacle that swallows a contact and a contact beyond the arm's reach:
     exit 2, one line, nothing written."""
-    path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+    path = write_problem(tmp_path, text)
+    refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
 
 
 CUBE = (Path(__file__).resolve().parents[2] / "configs" / "task" / "cube.yaml").read_text()
@@ -351,8 +300,8 @@ CUBE = (Path(__file__).resolve().parents[2] / "configs" / "task" / "cube.yaml").
     (CUBE + "approach: {elbow_pitch: 170}\n", "approach.elbow_pitch: 170 lies outside its limits [-150, 150] degrees"),
 ])
 def test_bad_manus_problems_are_refused(tmp_path, text, message):
-    path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
+    path = write_problem(tmp_path, text)
+    refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", message=message)
 
 
 @pytest.mark.parametrize(("script", "args", "message"), [
@@ -364,7 +313,7 @@ def test_bad_manus_problems_are_refused(tmp_path, text, message):
 def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, message):
     """A sample of the refusals above as real commands in a fresh process (solve_grasp.py's: the
     memory estimate and the oversized problem file above)."""
-    _refused_in_a_fresh_process(tmp_path, script, *args, message=message)
+    refused_in_a_fresh_process(tmp_path, script, *args, message=message)
 
 
 @pytest.mark.parametrize(("text", "args", "message"), [
@@ -381,13 +330,13 @@ def test_refusals_as_real_commands_are_quick_and_small(tmp_path, script, args, m
 def test_bad_reach_input_is_refused(tmp_path, text, args, message):
     """A reach motion's start with an unknown joint, outside its limits, colliding or malformed, a
     free hand's start, and bad reach settings: exit 2, one line, nothing written."""
-    path = _problem(tmp_path, text)
-    _refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", *args, message=message)
+    path = write_problem(tmp_path, text)
+    refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", *args, message=message)
 
 
 def test_reach_of_many_problems_is_refused(tmp_path):
     folder = tmp_path / "problems"
     folder.mkdir()
     (folder / "a.yaml").write_text(ENV1)
-    _refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", "reach=true",
+    refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", "reach=true",
              message="reach=true plans the motion of one problem")
