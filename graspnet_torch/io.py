@@ -1,7 +1,7 @@
 """Atomic file writes: a temporary file in the destination folder, then a rename.
 
 A reader never sees a half-written result, picture or checkpoint, and an interrupted write leaves
-the previous file intact.
+the previous file intact. :func:`json_digest` fingerprints what a file belongs to.
 """
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_path", "atomic_write_text"]
+__all__ = ["atomic_path", "atomic_write_text", "json_digest"]
 
 
 def _umask() -> int:
@@ -46,3 +47,13 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return Path(path)
+
+
+def json_digest(obj: Any) -> str:
+    """A short fingerprint of a JSON-like value (SHA-256 of its canonical JSON, 16 hex digits): the
+    same after a round trip through a JSON file, so a file can say which other file it belongs to."""
+    import hashlib
+    import json
+
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

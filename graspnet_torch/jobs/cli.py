@@ -21,6 +21,7 @@ bug and keeps its traceback (exit 1).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import os
@@ -31,7 +32,8 @@ from typing import Any, TypeVar
 from graspnet_torch.errors import ConfigError, GraspnetError, InternalError
 from graspnet_torch.settings import Free, check_value, clip, lookup
 
-__all__ = ["check_overrides", "compose_for_check", "container", "robot_path_overrides", "run_cli", "user_errors_exit_2"]
+__all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides", "robot_path_overrides", "run_cli",
+           "switch_overrides", "user_errors_exit_2"]
 
 T = TypeVar("T")
 
@@ -112,6 +114,9 @@ def _hydra_args(argv: list[str]):
 
     parser.error = refuse  # argparse calls this for every mistake
     args, unknown = parser.parse_known_args(argv)
+    if args.multirun and (args.cfg or args.info or args.shell_completion):
+        raise ConfigError("-m (a sweep) cannot be combined with --cfg, --info or --shell-completion: drop -m to "
+                          "see one job's settings")
     if args.config_name or args.config_path or args.config_dir:
         raise ConfigError("--config-name, --config-path and --config-dir are not supported: this script's settings "
                           "are configs/ with key=value overrides; your own problems go in problem=PATH")
@@ -238,6 +243,44 @@ def robot_path_overrides(argv: list[str]) -> list[str]:
     return out
 
 
+def _switch_groups(schema: type) -> set[str]:
+    """Top-level settings groups of ``schema`` with an ``enabled`` switch (``reach``)."""
+    out = set()
+    for f in dataclasses.fields(schema):
+        found = lookup(schema, f.name)
+        if found is not None and dataclasses.is_dataclass(found[0]) and lookup(found[0], "enabled") is not None:
+            out.add(f.name)
+    return out
+
+
+def switch_overrides(argv: list[str], schema: type) -> list[str]:
+    """A switched group's overrides as Hydra takes them: the config holds ``reach: {enabled: false}``
+    and the rest of the group's defaults live in its dataclass, so ``reach=true`` becomes
+    ``reach.enabled=true`` and ``reach.KEY=V`` (or ``+reach.KEY=V``) becomes ``++reach.KEY=V``: both
+    orders of ``reach=true reach.timeout_s=10`` give the group switched on with that setting."""
+    if not dataclasses.is_dataclass(schema):
+        return list(argv)
+    groups = _switch_groups(schema)
+    out = []
+    for arg in argv:
+        key, sep, value = arg.partition("=")
+        bare = key.lstrip("+")
+        group, dot, _ = bare.partition(".")
+        if not sep or group not in groups or key.startswith("~"):
+            out.append(arg)
+        elif not dot:
+            out.append(f"{group}.enabled={value}")
+        else:
+            out.append(f"++{bare}={value}")
+    return out
+
+
+def hydra_overrides(argv: list[str], schema: type) -> list[str]:
+    """A user's command line as Hydra takes it: a robot config by path
+    (:func:`robot_path_overrides`) and a switched group (:func:`switch_overrides`) rewritten."""
+    return switch_overrides(robot_path_overrides(list(argv)), schema)
+
+
 def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = None, config_name: str | None = None,
             prepare: Callable[[dict, str], Any] | None = None) -> None:
     """Check the command line, then run the Hydra ``main``; a refusal before the job starts is one
@@ -259,10 +302,10 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     # the checks run on one thread (a busy machine, docs/solvers.md, "Threads"); every job sets its own count
     torch.set_num_threads(1)
     if argv is None:
-        sys.argv[1:] = robot_path_overrides(sys.argv[1:])  # Hydra's main reads sys.argv
+        sys.argv[1:] = hydra_overrides(sys.argv[1:], schema)  # Hydra's main reads sys.argv
         argv = sys.argv[1:]
     else:
-        argv = robot_path_overrides(argv)
+        argv = hydra_overrides(argv, schema)
     try:
         if os.environ.get("GRASPNET_TORCH_NO_PRECHECK") == "1":  # benchmarks/bench_validation.py only
             raise _SkipChecks

@@ -285,14 +285,16 @@ def write_replay(robot, problem: GraspProblem, result: GraspResult, env, path: P
     errors recomputed in float64) at up to ``frames`` iterations spread over the search, from the
     configurations and finger joints the loop recorded (``solver.history_postures``), for
     ``scripts/view.py``. ``env``: the problem's environment, built with the solve's settings."""
-    from graspnet_torch.io import atomic_write_text
+    from graspnet_torch.io import atomic_write_text, json_digest
     from graspnet_torch.solver.environment import Evaluation
 
     history = result.outcome.history
     K = history["config"].shape[0]
     steps = sorted(set(np.linspace(0, K - 1, min(frames, K)).round().astype(int).tolist()))
     iterations = history["iteration"].tolist() if "iteration" in history else list(range(1, K + 1))
-    out = {"problem": result.problem, "iterations": [], "trials": []}
+    # the replay names the result it belongs to: the fingerprint of its trials as the result file holds them
+    out = {"problem": result.problem, "result": json_digest(json.loads(result.to_json())["trials"]),
+           "iterations": [], "trials": []}
     for k in steps:
         config = history["config"][k].to(torch.float64)
         joints = history["joints"][k].to(torch.float64) if "joints" in history else None

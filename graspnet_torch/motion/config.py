@@ -37,6 +37,9 @@ class ReachCfg:
             orientation kept; from there a straight line to the grasp (where that pre-grasp is out of
             reach or collides, the motion is planned to the grasp itself).
         sample_hz: rows of the timed motion per second (and every corner of the path).
+        max_samples: the most rows a timed motion may have (a slow ``acceleration`` at a high
+            ``sample_hz`` is hours of rows: the result's size and the check's memory grow with
+            them); a longer motion is not reported (``found`` false, the reason names this).
         seed: the planner's random seed.
     """
 
@@ -50,6 +53,7 @@ class ReachCfg:
     backoff_m: float = setting(0.1, lo=0.0, lo_open=True, hi=2.0)
     approach_m: float = setting(0.05, lo=0.0, lo_open=True, hi=1.0)
     sample_hz: float = setting(50.0, lo=1.0, hi=10_000.0)
+    max_samples: int = setting(100_000, lo=2, hi=10_000_000)
     seed: int = setting(0, lo=0, hi=2**31 - 1)
 
     @classmethod

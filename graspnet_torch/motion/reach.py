@@ -32,7 +32,7 @@ import torch
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.planner import plan_path
-from graspnet_torch.motion.trajectory import Trajectory, time_path
+from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
@@ -141,7 +141,14 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     else:
         corners, reason = _hand_path(robot, problem, checker, goal, cfg)
     while corners is not None:  # the rows are checked as check_motion does; a colliding stretch is planned again
-        times, rows, at = time_path(corners, velocity, acceleration, cfg.sample_hz)
+        try:
+            times, rows, at = time_path(corners, velocity, acceleration, cfg.sample_hz, cfg.max_samples)
+        except TooManyRows as exc:
+            return Trajectory.missing(
+                list(layout.names), layout.revolute,
+                f"the timed motion lasts {exc.duration:.4g} s: {exc.rows} rows at reach.sample_hz={cfg.sample_hz:g}, "
+                f"more than reach.max_samples={cfg.max_samples} (raise reach.acceleration or reach.max_samples, or "
+                f"lower reach.sample_hz)", time.perf_counter() - t0, PLANNER)
         k = colliding_row(checker, rows, *res)
         if k is None:
             return Trajectory(list(layout.names), times, rows, layout.revolute, PLANNER, time.perf_counter() - t0)

@@ -15,7 +15,7 @@ from itertools import pairwise
 
 import numpy as np
 
-__all__ = ["Trajectory", "time_path"]
+__all__ = ["TooManyRows", "Trajectory", "time_path"]
 
 
 @dataclass
@@ -65,14 +65,25 @@ class Trajectory:
                    data.get("reason", ""))
 
 
-def time_path(waypoints: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, sample_hz: float
-              ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+class TooManyRows(ValueError):
+    """A timed motion that would have more rows than allowed (``reach.max_samples``): its
+    ``rows`` and ``duration`` (s), found before any row is made."""
+
+    def __init__(self, rows: int, duration: float):
+        super().__init__(f"{rows} rows over {duration:.4g} s")
+        self.rows, self.duration = rows, duration
+
+
+def time_path(waypoints: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, sample_hz: float,
+              max_rows: int = 10_000_000) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Time a polyline from rest to rest, segment by segment (Ruckig, phase-synchronised).
 
     Args:
         waypoints: (W, n) corners, internal units.
         velocity, acceleration: (n,) limits per joint.
         sample_hz: samples per second within a segment.
+        max_rows: the most rows the motion may have; more raise :class:`TooManyRows` before any
+            row is made (a slow acceleration at a high rate is hours of rows).
     Returns:
         times (S,), positions (S, n) and the row of each corner (W,).
     """
@@ -80,10 +91,9 @@ def time_path(waypoints: np.ndarray, velocity: np.ndarray, acceleration: np.ndar
     from ruckig import Trajectory as RuckigTrajectory
 
     W, n = waypoints.shape
-    times, rows, corners = [0.0], [waypoints[0].copy()], [0]
     otg = Ruckig(n)
+    segments = []  # (a, b, trajectory, steps) of each segment that moves
     for a, b in pairwise(waypoints):
-        t0 = times[-1]
         if np.max(np.abs(b - a)) < 1e-12:
             continue
         inp = InputParameter(n)
@@ -96,8 +106,13 @@ def time_path(waypoints: np.ndarray, velocity: np.ndarray, acceleration: np.ndar
         traj = RuckigTrajectory(n)
         if otg.calculate(inp, traj) not in (Result.Working, Result.Finished):
             raise RuntimeError("ruckig could not time a segment")
-        duration = traj.duration
-        steps = max(1, math.ceil(duration * sample_hz))
+        segments.append((a, b, traj, max(1, math.ceil(traj.duration * sample_hz))))
+    total = 1 + sum(seg[3] for seg in segments)
+    if total > max_rows:
+        raise TooManyRows(total, sum(seg[2].duration for seg in segments))
+    times, rows, corners = [0.0], [waypoints[0].copy()], [0]
+    for a, b, traj, steps in segments:
+        t0, duration = times[-1], traj.duration
         for k in range(1, steps + 1):
             t = duration * k / steps
             p = b if k == steps else _on_segment(a, b, np.asarray(traj.at_time(t)[0]))

@@ -22,6 +22,7 @@ import numpy as np
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.settings import clip
 from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
@@ -57,6 +58,7 @@ def load_view(path: str | Path) -> ResultView:
     (:class:`ProblemError`, one line) a missing file, one that is not a result, a result without
     its problem."""
     from graspnet_torch.files import read_document
+    from graspnet_torch.io import json_digest
     from graspnet_torch.robot.postures import trial_posture
     from graspnet_torch.solver.api import as_problem, robot_and_ik
 
@@ -67,31 +69,57 @@ def load_view(path: str | Path) -> ResultView:
     result = read_document(file, "result", ProblemError)
     if not isinstance(result, dict) or not isinstance(result.get("trials"), list) or not result["trials"]:
         raise ProblemError(f"{file}: not a result of solve_grasp.py (no 'trials')")
-    if not result.get("problem"):
+    bad = next((k for k, t in enumerate(result["trials"]) if not isinstance(t, dict)), None)
+    if bad is not None:
+        raise ProblemError(f"{file}: trials[{bad}] is not a trial (a mapping of its palm pose or arm joints and "
+                           f"finger joints)")
+    if not result.get("problem") or not isinstance(result["problem"], str):
         raise ProblemError(f"{file}: the result does not name its problem ('problem'), so there is nothing to place")
-    source = str(result["problem"])
+    source = result["problem"]
     candidate = file.parent / source
     problem = as_problem(candidate if not Path(source).is_absolute() and candidate.is_file() else source)
     robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
     try:
         postures = [trial_posture(robot, t) for t in result["trials"]]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ProblemError(f"{file}: a trial does not fit robot '{robot.name}' ({exc})") from None
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise ProblemError(f"{file}: a trial does not fit robot '{robot.name}' ({clip(str(exc), 120)})") from None
     best = next((k for k, t in enumerate(result["trials"]) if t.get("palm_pose") == result.get("palm_pose")
                  and t.get("joints") == result.get("joints") and t.get("arm_joints") == result.get("arm_joints")), 0)
-    motion = None
-    if isinstance(result.get("trajectory"), dict) and result["trajectory"].get("found"):
-        from graspnet_torch.motion.trajectory import Trajectory
-
-        motion = Trajectory.from_dict(result["trajectory"])
+    motion = _motion(file, result.get("trajectory"), robot)
     replay = None
     if (file.parent / "replay.json").is_file():
         replay = read_document(file.parent / "replay.json", "replay", ProblemError)
-        if not isinstance(replay, dict) or len(replay.get("iterations", ())) != len(replay.get("trials", ())) or \
-                any(len(row) != len(postures) for row in replay.get("trials", ())):
+        if not isinstance(replay, dict) or replay.get("problem") != result["problem"] or \
+                replay.get("result") != json_digest(result["trials"]):
+            raise ProblemError(f"{file.parent / 'replay.json'}: not the replay of this result (another problem or "
+                               f"run; solve again with solver.history_postures=true)")
+        if not isinstance(replay.get("iterations"), list) or not isinstance(replay.get("trials"), list) or \
+                len(replay["iterations"]) != len(replay["trials"]) or \
+                any(not isinstance(row, list) or len(row) != len(postures) for row in replay["trials"]):
             raise ProblemError(f"{file.parent / 'replay.json'}: not the replay of this result (iterations x "
                                f"{len(postures)} trials)")
     return ResultView(file, result, problem, robot, postures, best, motion, replay)
+
+
+def _motion(file: Path, data: Any, robot: Robot) -> Trajectory | None:
+    """The result's reach motion (``trajectory`` when ``found``), refused in one line where it is
+    not a motion of ``robot``."""
+    from graspnet_torch.motion.trajectory import Trajectory
+    from graspnet_torch.motion.validity import StateLayout
+
+    if not isinstance(data, dict) or data.get("found") is not True:
+        return None
+    layout = StateLayout.of(robot)
+    if data.get("joint_names") != list(layout.names):
+        raise ProblemError(f"{file}: the trajectory's joint_names are not the planned joints of robot '{robot.name}'")
+    try:
+        motion = Trajectory.from_dict(data, layout.revolute)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ProblemError(f"{file}: the trajectory is not a motion ({clip(str(exc), 120)})") from None
+    if len(motion.times) != len(motion.positions) or not np.all(np.isfinite(motion.positions)):
+        raise ProblemError(f"{file}: the trajectory is not a motion (times and positions differ in length, or a "
+                           f"position is not finite)")
+    return motion
 
 
 def _shape_mesh(shape):
