@@ -204,3 +204,18 @@ def test_serving_other_machines_is_said_and_ctrl_c_stops_in_one_line(glass3_resu
     local.send_signal(signal.SIGINT)
     _, err = local.communicate(timeout=60)
     assert local.returncode == 0 and err.strip() == "stopped (Ctrl-C)", err[-2000:]
+
+
+def test_a_result_with_its_reach_motion_is_viewed_and_a_foreign_motion_refused(tmp_path):
+    problem = gt.GraspProblem.from_task("cube")
+    result = gt.solve(problem, trials=4, seed=0)  # its motion is found in about a second
+    result.trajectory = gt.plan_reach(problem, result, ReachCfg(enabled=True))
+    assert result.trajectory.found
+    data = result.to_dict()
+    data["problem"] = "cube"
+    (tmp_path / "result.json").write_text(json.dumps(data))
+    motion = load_view(tmp_path).motion
+    assert motion is not None and np.allclose(motion.positions, result.trajectory.positions, atol=1e-9)
+    data["trajectory"]["joint_names"] = data["trajectory"]["joint_names"][::-1]
+    (tmp_path / "other.json").write_text(json.dumps(data))
+    _viewer_refused(tmp_path, str(tmp_path / "other.json"), message="the trajectory's joint_names are not the planned")
