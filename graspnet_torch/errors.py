@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "InternalError", "ProblemError"]
+__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "InternalError", "Interrupted", "ProblemError"]
 
 
 class GraspnetError(Exception):
@@ -28,3 +28,9 @@ class CheckpointError(GraspnetError, ValueError):
 class InternalError(RuntimeError):
     """A failure that is not the user's input but is still reported in one line: a result that is
     not finite (NaN or infinity) is never written. Command-line entry points exit 1 on it."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) ended a job, which says in one line what it kept (a training: its state,
+    and how to resume). A ``KeyboardInterrupt``, so a program's own handling still catches it;
+    command-line entry points exit 130 on it (128 + SIGINT, the shells' convention)."""

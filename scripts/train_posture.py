@@ -4,7 +4,8 @@
     python scripts/train_posture.py robot=examples/trifinger/trifinger.yaml posture.steps=3000 resume=true
     tensorboard --logdir outputs/train_posture/hand/tb
 
-Exit status: 0 when it trained, 2 when the input was refused (one line on stderr), 1 otherwise.
+Exit status: 0 when it trained, 2 when the input was refused (one line on stderr), 130 when
+Ctrl-C stopped it (one line: its state kept, resume with resume=true), 1 otherwise.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-from graspnet_torch.errors import ConfigError, GraspnetError, InternalError
+from graspnet_torch.errors import ConfigError, GraspnetError, InternalError, Interrupted
 from graspnet_torch.settings import Free, check_value, clip, lookup
 
 __all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides", "robot_path_overrides", "run_cli",
@@ -42,7 +42,8 @@ _job_started = False  # set once Hydra hands over to the job: errors after that 
 
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2, an
-    :class:`InternalError` prints ``internal error: <message>`` and exits 1."""
+    :class:`InternalError` prints ``internal error: <message>`` and exits 1, an
+    :class:`Interrupted` (Ctrl-C in a training) ``interrupted: <message>`` and exits 130."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
@@ -56,6 +57,9 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
         except InternalError as exc:
             print(f"internal error: {_one_line(exc)}", file=sys.stderr)
             sys.exit(1)
+        except Interrupted as exc:  # Ctrl-C in a job that kept its work (a training's state)
+            print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
+            sys.exit(130)
 
     return wrapper
 

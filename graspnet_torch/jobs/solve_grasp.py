@@ -23,9 +23,10 @@ from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.motion import ReachCfg, StateLayout, Trajectory, check_start, plan_reach
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.proposal import proposal_of
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
-from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, trial_posture
+from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, starts_from_proposals, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.result import GraspResult, TrialResult
@@ -186,8 +187,9 @@ def with_robot_defaults(job: SolveGraspJobCfg, groups: dict, robot_cfg: RobotCfg
 
 def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
     """The checks of one problem that need its robot: collision meshes found and readable (when
-    it has something to collide with), the robot and its FCNN checkpoint loaded (cached), every
-    contact within reach, a gripper's approach within its limits."""
+    it has something to collide with), the robot and its FCNN checkpoint loaded (cached), its
+    posture proposal model where the search starts from it (cached), every contact within reach,
+    a gripper's approach within its limits."""
     rc = problem.robot_cfg
     if problem.object is not None or problem.obstacles or rc.floor is not None or rc.self_collision:
         from graspnet_torch.robot.chain import UrdfModel  # collisions need the URDF's collision geometry:
@@ -195,6 +197,8 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
 
         link_shapes(UrdfModel(rc.urdf), "collision")
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
+    if solver.method == "srv" and not robot.shared.names and starts_from_proposals(robot, [problem], solver):
+        proposal_of(robot)  # its posture proposal model, if it has one (refused if corrupted); cached
     environment_class(robot).check(robot, problem, solver)  # every contact within reach; a gripper's approach
 
 

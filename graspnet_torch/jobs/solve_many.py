@@ -6,8 +6,12 @@ skipped), is read and checked before any work; then :func:`graspnet_torch.solve_
 ``batch`` problems at a time (P x T trials as one vectorised search), with a progress bar, and
 writes one result JSON per problem into the folder ``out`` (default ``<run dir>/results``):
 ``<file stem>.json`` for a folder, ``<name>.json`` (the problem's ``name``, else ``line<k>``)
-for a JSON-lines file, each written atomically, plus ``summary.csv`` (one row per problem: its
-success, error, collisions, iterations, trials reported and wall time).
+for a JSON-lines file (characters other than letters, digits, ``.``, ``_`` and ``-`` become
+``_``), each written atomically, plus ``summary.csv`` (one row per problem: its
+success, error, collisions, iterations, trials reported and wall time). Every problem gets its
+own file: a name already taken (ignoring case) gets ``-2``, ``-3``, ... (the first not taken).
+Every problem (its file, or its line, strictly UTF-8) and every result path is checked before
+any work: a result path that exists as anything but a regular file is refused.
 No pictures or TensorBoard curves: those are for one problem.
 
 With ``sequence=true`` the problems are the frames of a sequence (a hand following moving
@@ -18,6 +22,7 @@ from the previous frame's result and searched in full only where that does not l
 from __future__ import annotations
 
 import json
+import os
 import re
 import time
 from collections.abc import Mapping, Sequence
@@ -57,7 +62,7 @@ def load_problems(path: str | Path, robot: RobotCfg | str | None = None, allow_o
                   ) -> list[tuple[str, GraspProblem]]:
     """(name, problem) of every problem of a folder or a JSON-lines file, validated, in order;
     one robot for all (``robot``: a config that replaces the shipped one of its name, or a name
-    the problems must use). Names are unique file names (a suffix ``-k`` where they repeat)."""
+    the problems must use). Names are unique file names (``-2``, ``-3``, ... where they repeat)."""
     p = Path(str(path)).expanduser()
     robot_cfg = robot if isinstance(robot, RobotCfg) else None
     named: list[tuple[str, GraspProblem]] = []
@@ -67,24 +72,24 @@ def load_problems(path: str | Path, robot: RobotCfg | str | None = None, allow_o
             raise ProblemError(f"{clip(str(p), 200)}: no problem files ({', '.join('*' + s for s in SUFFIXES)}) in "
                                f"this folder")
         for f in files:
+            try:
+                f.name.encode("utf-8")
+            except UnicodeEncodeError:  # undecodable bytes, kept by the file system as surrogates
+                raise ProblemError(f"{clip(str(p), 200)}: the file name {ascii(os.fsencode(f.name))[2:-1]} is not "
+                                   f"UTF-8 (problem files and their names are UTF-8); rename it") from None
             named.append((f.stem, GraspProblem.from_file(f, robot_cfg=robot_cfg,
                                                          allow_outside_paths=allow_outside_paths)))
     else:
         if not p.is_file():
             raise ProblemError(f"problem={clip(str(path), 200)}: no such file or folder")
         with p.open("rb") as fh:
-            for k, raw in enumerate(fh, 1):
-                if len(raw) > MAX_LINE_BYTES:
-                    raise ProblemError(f"{clip(str(p), 200)}:{k}: a line over 1 MiB")
-                text = raw.decode("utf-8", errors="replace").strip()
-                if not text:
+            for k, raw in enumerate(iter(lambda: fh.readline(MAX_LINE_BYTES + 1), b""), 1):
+                where = f"{clip(str(p), 200)}:{k}"
+                if len(raw) > MAX_LINE_BYTES:  # read no further than the limit
+                    raise ProblemError(f"{where}: a line over 1 MiB")
+                if not raw.strip():
                     continue
-                try:
-                    data = json.loads(text)
-                except json.JSONDecodeError as exc:
-                    where = f"{clip(str(p), 200)}:{k}"
-                    raise ProblemError(f"{where}: not valid JSON ({exc.msg}, column {exc.colno})") from None
-                problem = GraspProblem.from_mapping(data, source=f"{clip(str(p), 200)}:{k}", robot_cfg=robot_cfg,
+                problem = GraspProblem.from_mapping(_json_line(raw, where), source=where, robot_cfg=robot_cfg,
                                                     folder=p.resolve().parent,
                                                     allow_outside_paths=allow_outside_paths)
                 named.append((problem.name or f"line{k}", problem))
@@ -102,18 +107,45 @@ def load_problems(path: str | Path, robot: RobotCfg | str | None = None, allow_o
     return _unique([(_file_name(n), pr) for n, pr in named])
 
 
+def _json_line(raw: bytes, where: str) -> Any:
+    """One line of a JSON-lines file, parsed; refused in one line naming ``where`` (file:line)
+    when it is not UTF-8, not JSON, nested too deeply or holds an integer of thousands of digits."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ProblemError(f"{where}: not UTF-8 text (invalid byte at offset {exc.start})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{where}: not valid JSON ({exc.msg}, column {exc.colno})") from None
+    except RecursionError:
+        raise ProblemError(f"{where}: nested too deeply") from None
+    except ValueError as exc:  # an integer literal with thousands of digits
+        raise ProblemError(f"{where}: unreadable value ({clip(str(exc), 80)})") from None
+
+
 def _file_name(name: str) -> str:
     safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "problem"
     return safe[:100]
 
 
 def _unique(named: list[tuple[str, GraspProblem]]) -> list[tuple[str, GraspProblem]]:
-    seen: dict[str, int] = {}
+    """Result names that never collide, even on a file system that ignores case: each first use
+    of a name keeps it; a repeat gets ``-2``, ``-3``, ... (the first not already taken)."""
+    taken = {name.casefold() for name, _ in named}
+    first: set[str] = set()
     out = []
     for name, problem in named:
-        k = seen.get(name, 0)
-        seen[name] = k + 1
-        out.append((name if k == 0 else f"{name}-{k}", problem))
+        key = name.casefold()
+        if key not in first:
+            first.add(key)
+            out.append((name, problem))
+            continue
+        k = 2
+        while f"{name}-{k}".casefold() in taken:
+            k += 1
+        taken.add(f"{name}-{k}".casefold())
+        out.append((f"{name}-{k}", problem))
     return out
 
 
@@ -131,7 +163,7 @@ def prepare_many(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     problems = [p for _, p in named]
     job, solver = with_robot_defaults(job, groups, problems[0].robot_cfg)
     out = Path(job.out or Path(run_dir) / "results").expanduser()
-    _check_out_folder(out)
+    _check_out_folder(out, [f"{name}.json" for name, _ in named] + ["summary.csv"])
     per_batch = min(job.batch, len(problems))
     check_solve_memory(job.trials * per_batch, solver.max_iterations, max(len(p.contacts) for p in problems),
                        solver.history, 4 if solver.dtype == "float32" else 8, device, job.srv.hidden)
@@ -146,16 +178,24 @@ def problems_robot(named: Sequence[tuple[str, GraspProblem]]) -> RobotCfg | str:
     return first.robot_cfg or first.robot
 
 
-def _check_out_folder(out: Path) -> None:
+def _check_out_folder(out: Path, files: Sequence[str]) -> None:
+    """The output folder: a folder or nothing yet, writable; each of ``files`` in it a regular
+    file or nothing yet (a folder, a device or a broken link of a result's name is never replaced)."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder (many problems write one result "
                           f"each into a folder)")
+    if out.is_dir():
+        for name in files:
+            target = out / name
+            if os.path.lexists(target) and not target.is_file():
+                what = "a folder" if target.is_dir() else "not a regular file"
+                raise ConfigError(f"out={clip(str(out), 120)}: {clip(name, 110)} in it is {what}, where a result "
+                                  f"goes; it is never replaced (move it, or give another out=)")
     probe = out
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir():
         raise ConfigError(f"out={clip(str(out), 120)}: {clip(str(probe), 120)} is not a folder")
-    import os
     import tempfile
 
     try:

@@ -13,7 +13,7 @@ from typing import Any
 
 import torch
 
-from graspnet_torch.errors import CheckpointError, ConfigError
+from graspnet_torch.errors import CheckpointError, ConfigError, Interrupted
 from graspnet_torch.fcnn.checkpoint import (
     chain_fingerprint,
     load_payload,
@@ -27,6 +27,7 @@ from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
 from graspnet_torch.jobs.configs import TrainFCNNJobCfg, check_train_memory
+from graspnet_torch.jobs.interrupt import resume_hint, stop_on_interrupt
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build, clip
@@ -168,60 +169,72 @@ def train_fcnn(
     trainers: dict[str, FingerTrainer] = {}
     finished: list[str] = list(state["finished"]) if state else []
     points: dict[str, int] = {}
-    writer = SummaryWriter(str(run_dir / "tb"))
-    t_start = time.perf_counter()
+    kept = f"(finished: {', '.join(finished) or 'none'})" if state else None  # the state on disk
     try:
-        for finger in fingers:
-            trainer = FingerTrainer(robot.fingers[finger].chain, cfg, seed=seed + 101 * robot.finger_index(finger),
-                                    name=finger)
-            if state and finger in state["fingers"]:
-                try:
-                    trainer.load_state_dict(state["fingers"][finger])
-                except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
-                    raise CheckpointError(f"{state_path}: cannot resume, the state of finger '{finger}' is malformed "
-                                          f"({type(exc).__name__})") from None
-            trainers[finger] = trainer
-            bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
-                       disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
-            while trainer.epochs_done < cfg.epochs:
-                stats = trainer.epoch()
-                ep = trainer.epochs_done
-                for e, loss in enumerate(stats.get("loss", [])):
-                    writer.add_scalar(f"{finger}/loss/expert_{e}", loss, ep)
-                for e, count in enumerate(stats["points_per_expert"]):
-                    writer.add_scalar(f"{finger}/points/expert_{e}", count, ep)
-                writer.add_scalar(f"{finger}/experts", stats["experts"], ep)
-                writer.add_scalar(f"{finger}/unsolved_targets", stats["unsolved"], ep)
-                postfix = {"experts": stats["experts"], "points": len(trainer.data)}
-                if ep % cfg.val_every == 0 or ep == cfg.epochs:
-                    val = trainer.validate()
-                    writer.add_scalar(f"{finger}/val/median_mm", val["median_mm"], ep)
-                    writer.add_scalar(f"{finger}/val/p95_mm", val["p95_mm"], ep)
-                    postfix["val median mm"] = f"{val['median_mm']:.3f}"
-                bar.set_postfix(postfix)
-                bar.update(1)
-                if ep % checkpoint_every == 0:
-                    _save_state(state_path, robot, cfg, seed, trainers, finished)
-            bar.close()
-            if finger not in finished:
-                finished.append(finger)
-            points[finger] = len(trainer.data)
-            _save_state(state_path, robot, cfg, seed, trainers, finished)
-    finally:
-        writer.flush()
-        writer.close()
-    elapsed = time.perf_counter() - t_start
-    ik = FingerIK(robot, {f: t.experts for f, t in trainers.items()})
-    rows = evaluate_ik(ik, n=eval_targets)
-    info = {"seed": seed, "epochs": cfg.epochs, "train_seconds": round(elapsed, 1),
-            "heldout": {r["finger"]: {"competition": r["competition"], "refined": r["refined"]} for r in rows}}
-    save_finger_ik(ik, run_dir / "fcnn.pt", info)
-    if export:
-        target = robot_checkpoint(robot) if export is True else Path(export)
-        save_finger_ik(ik, target, info)
-        reads = Path(target).resolve() == robot_checkpoint(robot).resolve()
-        print(f"exported {target}" + (f" (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)"
-                                      if reads else ""))
+        writer = SummaryWriter(str(run_dir / "tb"))
+        t_start = time.perf_counter()
+        try:
+            for finger in fingers:
+                trainer = FingerTrainer(robot.fingers[finger].chain, cfg,
+                                        seed=seed + 101 * robot.finger_index(finger), name=finger)
+                if state and finger in state["fingers"]:
+                    try:
+                        trainer.load_state_dict(state["fingers"][finger])
+                    except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
+                        raise CheckpointError(f"{state_path}: cannot resume, the state of finger '{finger}' is "
+                                              f"malformed ({type(exc).__name__})") from None
+                trainers[finger] = trainer
+                bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
+                           disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
+                with stop_on_interrupt() as stop:  # Ctrl-C: stop after this epoch, keep the state, say so
+                    while trainer.epochs_done < cfg.epochs:
+                        stats = trainer.epoch()
+                        ep = trainer.epochs_done
+                        for e, loss in enumerate(stats.get("loss", [])):
+                            writer.add_scalar(f"{finger}/loss/expert_{e}", loss, ep)
+                        for e, count in enumerate(stats["points_per_expert"]):
+                            writer.add_scalar(f"{finger}/points/expert_{e}", count, ep)
+                        writer.add_scalar(f"{finger}/experts", stats["experts"], ep)
+                        writer.add_scalar(f"{finger}/unsolved_targets", stats["unsolved"], ep)
+                        postfix = {"experts": stats["experts"], "points": len(trainer.data)}
+                        if ep % cfg.val_every == 0 or ep == cfg.epochs:
+                            val = trainer.validate()
+                            writer.add_scalar(f"{finger}/val/median_mm", val["median_mm"], ep)
+                            writer.add_scalar(f"{finger}/val/p95_mm", val["p95_mm"], ep)
+                            postfix["val median mm"] = f"{val['median_mm']:.3f}"
+                        bar.set_postfix(postfix)
+                        bar.update(1)
+                        if ep % checkpoint_every == 0 or stop.requested:
+                            _save_state(state_path, robot, cfg, seed, trainers, finished)
+                            kept = f"at epoch {ep} of {cfg.epochs} of finger '{finger}'"
+                        if stop.requested:
+                            bar.close()
+                            raise Interrupted(resume_hint(state_path, kept))
+                bar.close()
+                if finger not in finished:
+                    finished.append(finger)
+                points[finger] = len(trainer.data)
+                _save_state(state_path, robot, cfg, seed, trainers, finished)
+                kept = f"(finished: {', '.join(finished)})"
+        finally:
+            writer.flush()
+            writer.close()
+        elapsed = time.perf_counter() - t_start
+        ik = FingerIK(robot, {f: t.experts for f, t in trainers.items()})
+        rows = evaluate_ik(ik, n=eval_targets)
+        info = {"seed": seed, "epochs": cfg.epochs, "train_seconds": round(elapsed, 1),
+                "heldout": {r["finger"]: {"competition": r["competition"], "refined": r["refined"]} for r in rows}}
+        save_finger_ik(ik, run_dir / "fcnn.pt", info)
+        if export:
+            target = robot_checkpoint(robot) if export is True else Path(export)
+            save_finger_ik(ik, target, info)
+            reads = Path(target).resolve() == robot_checkpoint(robot).resolve()
+            print(f"exported {target}" + (f" (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)"
+                                          if reads else ""))
+    except Interrupted:
+        raise
+    except KeyboardInterrupt:  # Ctrl-C outside the epochs (evaluating, exporting) or a second one
+        raise Interrupted(resume_hint(state_path, kept)) from None
     print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
     print(_closing_table(rows, points))
     return ik, rows

@@ -14,12 +14,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from graspnet_torch.errors import CheckpointError, ConfigError
+from graspnet_torch.errors import CheckpointError, ConfigError, Interrupted
 from graspnet_torch.fcnn.checkpoint import finger_ik_of, load_payload, non_finite_tensors
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_path
 from graspnet_torch.jobs.configs import TrainPostureJobCfg
+from graspnet_torch.jobs.interrupt import resume_hint, stop_on_interrupt
 from graspnet_torch.proposal.checkpoint import posture_checkpoint, robot_signature, save_proposal
 from graspnet_torch.proposal.data import ProposalData, proposal_data
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
@@ -131,51 +132,63 @@ def train_posture(robot: Robot, finger_ik: FingerIK | None, cfg: ProposalCfg, ru
             print(f"resuming {state_path} (step {state['trainer']['steps_done']})")
         else:
             print(f"nothing to resume at {state_path}; starting a new run")
-    t_start = time.perf_counter()
-    if state is not None:
-        d = state["data"]
-        data = ProposalData(d["targets"], d["mask"], d["configs"])
-    else:
-        print(f"drawing {cfg.samples + cfg.samples // 10} random posed problems of '{robot.name}' ...", flush=True)
-        data = proposal_data(robot, finger_ik, cfg.samples + cfg.samples // 10, seed * 1_000_003)
-    train, held = data.split(cfg.samples)
-    torch.manual_seed(seed)
-    model = PostureProposal(data.targets.shape[1], data.configs.shape[1], cfg)
-    model.fit_scales(train.targets, train.mask, train.configs, _periodic(robot, finger_ik, seed))
-    trainer = ProposalTrainer(model, train, held, cfg, seed=seed)
-    if state is not None:
-        trainer.load_state_dict(state["trainer"])
-    writer = SummaryWriter(str(run_dir / "tb"))
-    bar = tqdm(total=cfg.steps, initial=min(trainer.steps_done, cfg.steps), desc=f"{robot.name} posture",
-               disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
+    kept = f"of step {state['trainer']['steps_done']}" if state is not None else None  # the state on disk
     try:
-        while trainer.steps_done < cfg.steps:
-            loss = trainer.step()
-            step = trainer.steps_done
-            writer.add_scalar("loss", loss, step)
-            if step % cfg.val_every == 0 or step == cfg.steps:
-                val = trainer.validate()
-                for key, value in val.items():
-                    writer.add_scalar(f"val/{key}", value, step)
-                bar.set_postfix({"loss": f"{loss:.3f}", "val median": f"{val['median']:.3f}"})
-            bar.update(1)
-            if step % checkpoint_every == 0:
-                _save_state(state_path, robot, cfg, seed, trainer, data)
-        _save_state(state_path, robot, cfg, seed, trainer, data)
-    finally:
-        bar.close()
-        writer.flush()
-        writer.close()
-    elapsed = time.perf_counter() - t_start
-    model.eval()
-    table = evaluate_proposal(model, robot, finger_ik, eval_problems)
-    info = {"seed": seed, "steps": cfg.steps, "samples": cfg.samples, "train_seconds": round(elapsed, 1),
-            "fresh_problems": table}
-    save_proposal(model, robot, cfg, run_dir / "posture.pt", info)
-    if export:
-        target = posture_checkpoint(robot) if export is True else Path(export)
-        save_proposal(model, robot, cfg, target, info)
-        print(f"exported {target}")
+        t_start = time.perf_counter()
+        if state is not None:
+            d = state["data"]
+            data = ProposalData(d["targets"], d["mask"], d["configs"])
+        else:
+            print(f"drawing {cfg.samples + cfg.samples // 10} random posed problems of '{robot.name}' ...",
+                  flush=True)
+            data = proposal_data(robot, finger_ik, cfg.samples + cfg.samples // 10, seed * 1_000_003)
+        train, held = data.split(cfg.samples)
+        torch.manual_seed(seed)
+        model = PostureProposal(data.targets.shape[1], data.configs.shape[1], cfg)
+        model.fit_scales(train.targets, train.mask, train.configs, _periodic(robot, finger_ik, seed))
+        trainer = ProposalTrainer(model, train, held, cfg, seed=seed)
+        if state is not None:
+            trainer.load_state_dict(state["trainer"])
+        writer = SummaryWriter(str(run_dir / "tb"))
+        bar = tqdm(total=cfg.steps, initial=min(trainer.steps_done, cfg.steps), desc=f"{robot.name} posture",
+                   disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
+        try:
+            with stop_on_interrupt() as stop:  # Ctrl-C: stop after this step, keep the state, say so
+                while trainer.steps_done < cfg.steps:
+                    loss = trainer.step()
+                    step = trainer.steps_done
+                    writer.add_scalar("loss", loss, step)
+                    if step % cfg.val_every == 0 or step == cfg.steps:
+                        val = trainer.validate()
+                        for key, value in val.items():
+                            writer.add_scalar(f"val/{key}", value, step)
+                        bar.set_postfix({"loss": f"{loss:.3f}", "val median": f"{val['median']:.3f}"})
+                    bar.update(1)
+                    if step % checkpoint_every == 0 or stop.requested:
+                        _save_state(state_path, robot, cfg, seed, trainer, data)
+                        kept = f"of step {step}"
+                    if stop.requested:
+                        raise Interrupted(resume_hint(state_path, f"{kept} of {cfg.steps}"))
+            _save_state(state_path, robot, cfg, seed, trainer, data)
+            kept = f"of step {trainer.steps_done} (trained; resuming evaluates and exports)"
+        finally:
+            bar.close()
+            writer.flush()
+            writer.close()
+        elapsed = time.perf_counter() - t_start
+        model.eval()
+        table = evaluate_proposal(model, robot, finger_ik, eval_problems)
+        info = {"seed": seed, "steps": cfg.steps, "samples": cfg.samples, "train_seconds": round(elapsed, 1),
+                "fresh_problems": table}
+        save_proposal(model, robot, cfg, run_dir / "posture.pt", info)
+        if export:
+            target = posture_checkpoint(robot) if export is True else Path(export)
+            save_proposal(model, robot, cfg, target, info)
+            print(f"exported {target}")
+    except Interrupted:
+        raise
+    except KeyboardInterrupt:  # Ctrl-C outside the steps (drawing data, evaluating) or a second one
+        raise Interrupted(resume_hint(state_path, kept)) from None
     print(f"\nposture proposals of '{robot.name}' ({elapsed:.0f} s with the data), best of {cfg.heads} on "
           f"{eval_problems} fresh problems, no iteration:")
     print(format_table(["start", "median mm", "p90 mm"],

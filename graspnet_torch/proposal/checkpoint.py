@@ -13,16 +13,18 @@ from pathlib import Path
 
 import torch
 
-from graspnet_torch.errors import CheckpointError
+from graspnet_torch.errors import CheckpointError, ConfigError
 from graspnet_torch.fcnn.checkpoint import load_payload, non_finite_tensors
 from graspnet_torch.io import atomic_path
 from graspnet_torch.paths import checkpoints_dir
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
 from graspnet_torch.robot.robot import Robot
+from graspnet_torch.settings import build, check_value, clip
 
 __all__ = ["FORMAT", "load_proposal", "posture_checkpoint", "proposal_of", "robot_signature", "save_proposal"]
 
 FORMAT = "graspnet_torch.posture/1"
+MAX_SIZE = 10_000  # target slots or search variables a file may declare (robots have up to tens)
 
 
 def posture_checkpoint(robot: Robot) -> Path:
@@ -72,10 +74,12 @@ def load_proposal(robot: Robot, path: str | Path | None = None) -> PosturePropos
                            f"not a posture proposal checkpoint (format {FORMAT!r} expected)")
     try:
         signature, state = payload["signature"], payload["state"]
-        slots, n, heads, hidden = int(payload["slots"]), int(payload["n"]), int(payload["heads"]), payload["hidden"]
-        cfg = ProposalCfg(heads=heads, hidden=tuple(int(h) for h in hidden))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise CheckpointError(f"{where}: malformed posture proposal checkpoint ({type(exc).__name__})") from None
+        sizes = {key: payload[key] for key in ("slots", "n", "heads", "hidden")}
+    except KeyError as exc:
+        raise CheckpointError(f"{where}: malformed posture proposal checkpoint (no {exc})") from None
+    slots, n, cfg = _declared_sizes(sizes, where)
+    if not isinstance(signature, dict) or not isinstance(state, dict):
+        raise CheckpointError(f"{where}: malformed posture proposal checkpoint (signature, state)")
     if payload.get("robot") != robot.name or signature != robot_signature(robot):
         raise CheckpointError(f"{where}: trained for robot '{payload.get('robot')}' ({signature.get('kind')}), "
                               f"not for robot '{robot.name}' as it is now; retrain with {_train_hint(robot)}")
@@ -83,6 +87,7 @@ def load_proposal(robot: Robot, path: str | Path | None = None) -> PosturePropos
     if bad:
         raise CheckpointError(f"{where}: non-finite values (NaN or infinity) in {', '.join(bad[:3])}; retrain with "
                               f"{_train_hint(robot)}")
+    _check_shapes(state, slots, n, cfg, where)  # before the model is made: its size is the file's
     model = PostureProposal(slots, n, cfg)
     try:
         model.load_state_dict(state)
@@ -91,6 +96,32 @@ def load_proposal(robot: Robot, path: str | Path | None = None) -> PosturePropos
     if not bool((model.config_std > 0).all()) or not bool((model.target_std > 0).all()):
         raise CheckpointError(f"{where}: scales must be positive; the file is corrupted")
     return model.eval()
+
+
+def _declared_sizes(sizes: dict, where: str) -> tuple[int, int, ProposalCfg]:
+    """The sizes the file declares (target slots, search variables, heads, hidden layers), each
+    within its range (heads and hidden: the ``posture`` settings' own); one line naming the file."""
+    try:
+        cfg = build(ProposalCfg, {"heads": sizes["heads"], "hidden": sizes["hidden"]}, "posture")
+        slots, n = (check_value(int, {"lo": 1, "hi": MAX_SIZE}, sizes[key], key) for key in ("slots", "n"))
+    except ConfigError as exc:
+        raise CheckpointError(f"{where}: a corrupted posture proposal checkpoint ({exc})") from None
+    return slots, n, cfg
+
+
+def _check_shapes(state: dict, slots: int, n: int, cfg: ProposalCfg, where: str) -> None:
+    """Every tensor of ``state`` has the shape the declared sizes give (a model made on the meta
+    device: nothing allocated), so a file cannot make the loader allocate more than it holds."""
+    layers = sum(isinstance(k, str) and k.startswith("trunk.") for k in state) // 2
+    if layers != len(cfg.hidden):  # checked first: the meta model costs time per layer
+        raise CheckpointError(f"{where}: tensors do not fit the recorded sizes ({len(cfg.hidden)} hidden layers "
+                              f"recorded, {layers} in the file)")
+    with torch.device("meta"):
+        expected = {k: tuple(v.shape) for k, v in PostureProposal(slots, n, cfg).state_dict().items()}
+    got = {k: tuple(v.shape) if isinstance(v, torch.Tensor) else None for k, v in state.items()}
+    if got != expected:
+        wrong = sorted(str(k) for k in set(got) ^ set(expected)) or sorted(k for k in got if got[k] != expected[k])
+        raise CheckpointError(f"{where}: tensors do not fit the recorded sizes ({clip(', '.join(wrong[:3]), 120)})")
 
 
 _CACHE: dict[tuple, PostureProposal | None] = {}

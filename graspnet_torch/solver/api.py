@@ -27,7 +27,7 @@ from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
-           "search", "settings_of", "solve", "solve_many", "solve_with", "trial_posture"]
+           "search", "settings_of", "solve", "solve_many", "solve_with", "starts_from_proposals", "trial_posture"]
 # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -205,6 +205,15 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
 
 _SAID_NO_MODEL: set[str] = set()
+
+
+def starts_from_proposals(robot: Robot, problems: Sequence[GraspProblem], solver: SolverCfg) -> bool:
+    """Whether an srv search of ``problems`` starts its trials from the robot's posture proposal
+    model (when it has one): ``solver.start`` 'proposal', or 'auto' where nothing can collide."""
+    from graspnet_torch.collision.scene import has_environment
+
+    return solver.start != "random" and not (solver.start == "auto" and any(has_environment(robot, p)
+                                                                             for p in problems))
 NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: their own stream
 
 
@@ -221,10 +230,7 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     runs to its own stop (``stop: null``, independent learners) it is no start: that trial starts
     at random (measured on the MANUS, whose colliding proposals pass through the table). A robot without
     a trained posture proposal model starts at random, and its first such search says so."""
-    from graspnet_torch.collision.scene import has_environment
-
-    if solver.start == "random" or env.shared_slots or (
-            solver.start == "auto" and any(has_environment(env.robot, p) for p in env.problems)):
+    if env.shared_slots or not starts_from_proposals(env.robot, env.problems, solver):
         return None  # (a hand whose fingers share joints: its proposals do not give them)
     from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
 

@@ -61,6 +61,12 @@ def _check_texts(data: Mapping, source: str) -> None:
     for key in ("name", "description"):
         if data.get(key) is not None and (not isinstance(data[key], str) or len(data[key]) > 10_000):
             raise ProblemError(f"{source}: '{key}' must be a string (at most 10000 characters)")
+        if isinstance(data.get(key), str) and not data[key].isascii():
+            try:
+                data[key].encode("utf-8")
+            except UnicodeEncodeError as exc:  # a lone surrogate, such as the escape \udcff in JSON
+                raise ProblemError(f"{source}: '{key}' is not UTF-8 text (a lone surrogate "
+                                   f"{data[key][exc.start]!a} at character {exc.start})") from None
 
 
 @dataclass(frozen=True)
