@@ -43,7 +43,8 @@ _job_started = False  # set once Hydra hands over to the job: errors after that 
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2, an
     :class:`InternalError` prints ``internal error: <message>`` and exits 1, an
-    :class:`Interrupted` (Ctrl-C in a training) ``interrupted: <message>`` and exits 130."""
+    :class:`Interrupted` (Ctrl-C in a training) ``interrupted: <message>`` and exits 130, as any
+    other Ctrl-C does with a one-line ``interrupted (Ctrl-C): ...``."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
@@ -59,6 +60,10 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
             sys.exit(1)
         except Interrupted as exc:  # Ctrl-C in a job that kept its work (a training's state)
             print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
+            sys.exit(130)
+        except KeyboardInterrupt:  # Ctrl-C anywhere else in a job: what was written is whole (atomic writes)
+            print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
+                  file=sys.stderr)
             sys.exit(130)
 
     return wrapper
@@ -322,6 +327,9 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
+        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
+        sys.exit(130)
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
     try:
         main()
