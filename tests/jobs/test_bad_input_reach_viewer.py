@@ -219,3 +219,17 @@ def test_a_result_with_its_reach_motion_is_viewed_and_a_foreign_motion_refused(t
     data["trajectory"]["joint_names"] = data["trajectory"]["joint_names"][::-1]
     (tmp_path / "other.json").write_text(json.dumps(data))
     _viewer_refused(tmp_path, str(tmp_path / "other.json"), message="the trajectory's joint_names are not the planned")
+
+
+def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
+    out = tmp_path / "result.json"
+    proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), "task=glass3",
+                             "trials=200", "max_iterations=100000", "solver.threshold=null", f"out={out}",
+                             f"hydra.run.dir={tmp_path / 'run'}"], text=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    time.sleep(6.0)  # settings checked, the search under way (or still starting: either is one line)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "Traceback" not in err, err[-2000:]
+    assert len(err.strip().splitlines()) == 1 and err.startswith("interrupted"), err
+    assert not out.exists()
