@@ -31,7 +31,8 @@ def _train(robot: gt.Robot) -> None:
 
 
 def _solve(problem: gt.GraspProblem) -> None:
-    gt.solve(problem, trials=20, seed=0, max_iterations=300, solver={"threshold": None})
+    gt.solve(problem, trials=20, seed=0, max_iterations=300, solver={"threshold": None},
+             threads=torch.get_num_threads())  # the count this round set (gt.solve's own default is 1)
 
 
 def _kinematics(robot: gt.Robot) -> None:

@@ -45,6 +45,7 @@ from graspnet_torch.tasks import (
     random_reachable_problem,
     random_sequence,
 )
+from graspnet_torch.threads import set_default_threads
 
 __version__ = "0.1.0"
 
@@ -93,6 +94,7 @@ __all__ = [
     "plan_reach",
     "random_reachable_problem",
     "random_sequence",
+    "set_default_threads",
     "solve",
     "solve_many",
 ]

@@ -54,7 +54,10 @@ def bench_args(doc: str) -> argparse.Namespace:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--check", action="store_true")
     args = ap.parse_args()
+    from graspnet_torch.threads import set_default_threads
+
     torch.set_num_threads(args.threads)
+    set_default_threads(args.threads)  # the Python API's calls use it too (their own default is 1)
     return args
 
 

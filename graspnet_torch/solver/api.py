@@ -25,6 +25,7 @@ from graspnet_torch.solver.loop import LoopOutcome, Starts, enough_succeeded, ru
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.threads import torch_threads
 
 __all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
            "search", "settings_of", "solve", "solve_many", "solve_with", "starts_from_proposals", "trial_posture"]
@@ -137,7 +138,7 @@ def result_of(robot: Robot, problem: GraspProblem, env: Environment, outcome: Lo
 def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
           solver: SolverCfg | None = None, srv: SRVNetCfg | None = None, reward: RewardCfg | None = None,
           noise: NoiseCfg | float | None = None, robot: Robot | None = None, finger_ik: FingerIK | None = None,
-          device: str | torch.device = "cpu") -> GraspResult:
+          device: str | torch.device = "cpu", threads: int | None = None) -> GraspResult:
     """Find the palm pose and finger joints that put each fingertip on its contact.
 
     Args:
@@ -153,15 +154,18 @@ def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0
         noise: the sensor noise's settings, or sigma_n.
         robot: overrides the shipped robot.
         finger_ik: overrides its trained FCNN.
+        threads: torch CPU threads for the work (None: the package's default, 1;
+            :func:`~graspnet_torch.threads.set_default_threads`); the caller's count is put back.
     """
-    problem = as_problem(problem)
-    noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
-    if robot is None or finger_ik is None:
-        shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
-        robot = robot or shipped_robot
-        finger_ik = finger_ik or shipped_ik
-    solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
-    return solve_with(robot, finger_ik, problem, trials, seed, solver, srv, reward, noise, device)
+    with torch_threads(threads):
+        problem = as_problem(problem)
+        noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
+        if robot is None or finger_ik is None:
+            shipped_robot, shipped_ik = robot_and_ik(problem.robot_cfg or problem.robot)
+            robot = robot or shipped_robot
+            finger_ik = finger_ik or shipped_ik
+        solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
+        return solve_with(robot, finger_ik, problem, trials, seed, solver, srv, reward, noise, device)
 
 
 def solve_with(robot: Robot, finger_ik: FingerIK | None, problem: GraspProblem, trials: int, seed: int,
@@ -256,7 +260,7 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
                max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
                robot: Robot | None = None, finger_ik: FingerIK | None = None,
-               device: str | torch.device = "cpu") -> list[GraspResult]:
+               device: str | torch.device = "cpu", threads: int | None = None) -> list[GraspResult]:
     """Solve P problems of one robot, ``trials`` learners each: one result per problem, in order.
 
     The P x ``trials`` learners run as one vectorised search (one network batch; for a hand, the
@@ -265,8 +269,17 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
     problem ends once ``solver.stop`` of its trials have succeeded; once most trials have stopped,
     only the others are evaluated. Settings as :func:`solve`; one ``seed`` for the batch, so a
     problem's result differs from its single solve with the same seed. Each result's
-    ``wall_time_s`` is the batch's time divided by P.
+    ``wall_time_s`` is the batch's time divided by P; ``threads`` as :func:`solve`.
     """
+    with torch_threads(threads):
+        return _solve_many(problems, trials, seed, max_iterations, solver, srv, reward, noise, robot, finger_ik,
+                           device)
+
+
+def _solve_many(problems: Sequence[GraspProblem | str | Path], trials: int, seed: int, max_iterations: int | None,
+                solver: SolverCfg | None, srv: SRVNetCfg | None, reward: RewardCfg | None,
+                noise: NoiseCfg | float | None, robot: Robot | None, finger_ik: FingerIK | None,
+                device: str | torch.device) -> list[GraspResult]:
     batch = [as_problem(p) for p in problems]
     if not batch:
         return []
@@ -282,7 +295,8 @@ def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 2
                                f"(one batch, one robot)")
     if len(batch) == 1:
         return [solve(batch[0], trials=trials, seed=seed, max_iterations=max_iterations, solver=solver, srv=srv,
-                      reward=reward, noise=noise, robot=robot, finger_ik=finger_ik, device=device)]
+                      reward=reward, noise=noise, robot=robot, finger_ik=finger_ik, device=device,
+                      threads=torch.get_num_threads())]  # the count this call already set
     solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
     env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)

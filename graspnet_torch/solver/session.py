@@ -37,6 +37,7 @@ from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.threads import check_threads, torch_threads
 
 __all__ = ["Solver", "Start"]
 
@@ -61,6 +62,8 @@ class Solver:
         noise: as :func:`gt.solve`.
         device: as :func:`gt.solve`.
         finger_ik: the FCNN to use instead of the robot's trained one.
+        threads: torch CPU threads for each call's work (None: the package's default, 1); the
+            caller's count is put back after each call.
 
     Collision models of a problem's scene are built once per distinct geometry
     (:mod:`graspnet_torch.collision.cache`), problem files once per file version.
@@ -69,7 +72,7 @@ class Solver:
     def __init__(self, robot: str | Path | RobotCfg | Robot = "hand", *, trials: int = 20, seed: int = 0,
                  max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                  reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
-                 finger_ik: FingerIK | None = None, device: str | torch.device = "cpu"):
+                 finger_ik: FingerIK | None = None, device: str | torch.device = "cpu", threads: int | None = None):
         if isinstance(robot, Robot):
             self.robot, ik = robot, finger_ik
             if ik is None:
@@ -81,6 +84,7 @@ class Solver:
             self.robot, ik = built, finger_ik or ik
         self.finger_ik = ik
         self.trials, self.seed, self.device = int(trials), int(seed), device
+        self.threads = check_threads(threads)
         self.noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
         self.solver_cfg, self.srv, self.reward = api.settings_of(self.robot, solver, srv, reward, max_iterations)
 
@@ -101,8 +105,10 @@ class Solver:
               ) -> GraspResult:
         """One problem: the search (``trials`` trials), or first a warm start from ``start`` (see
         the module's docstring)."""
-        problem = self.problem(problem)
-        seed = self.seed if seed is None else int(seed)
+        with torch_threads(self.threads):
+            return self._solve(self.problem(problem), start, self.seed if seed is None else int(seed))
+
+    def _solve(self, problem: GraspProblem, start: Start | None, seed: int) -> GraspResult:
         warm = None
         if start is not None:
             warm = self._warm(problem, self._posture(start), seed)
@@ -122,7 +128,7 @@ class Solver:
         return api.solve_many([self.problem(p) for p in problems], trials=self.trials,
                               seed=self.seed if seed is None else int(seed), solver=self.solver_cfg, srv=self.srv,
                               reward=self.reward, noise=self.noise, robot=self.robot, finger_ik=self.finger_ik,
-                              device=self.device)
+                              device=self.device, threads=self.threads)
 
     def track(self, problems: Iterable[GraspProblem | str | Path], *, start: Start | None = None
               ) -> list[GraspResult]:
@@ -137,9 +143,10 @@ class Solver:
         frame that fails leaves the start of the next one where the last success was."""
         previous = start
         for k, problem in enumerate(problems):
-            result = self.solve(problem, start=previous, seed=self.seed + k)
-            if previous is None:  # the search's posture, moved away from the limits for the frames after it
-                result = self._centred(self.problem(problem), result, self.seed + k)
+            with torch_threads(self.threads):  # each frame's work; the caller's count between frames
+                result = self.solve(problem, start=previous, seed=self.seed + k)
+                if previous is None:  # the search's posture, moved away from the limits for the frames after it
+                    result = self._centred(self.problem(problem), result, self.seed + k)
             previous = result if result.success or previous is None else previous
             yield result
 
