@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.meshes import load_trimesh
+
 __all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "point_triangle_distance", "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
@@ -37,10 +39,9 @@ MAX_POINTS = 1500
 def load_mesh(path: Path, scale: float = 1.0):
     """A mesh file as one ``trimesh.Trimesh`` (a scene's geometry concatenated; vertices split by
     texture seams or normals merged, so that a closed surface is watertight), scaled; cached per
-    process: do not modify it."""
-    import trimesh
-
-    mesh = trimesh.load(Path(path), force="mesh")
+    process: do not modify it. A user's file is checked first
+    (:func:`graspnet_torch.meshes.check_mesh_file`, from the problem's validation)."""
+    mesh = load_trimesh(Path(path))
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     if scale != 1.0:
         mesh.apply_scale(scale)

@@ -23,6 +23,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.meshes import check_mesh_file, load_trimesh
 from graspnet_torch.settings import clip
 
 __all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "package_candidates", "package_roots",
@@ -86,7 +87,7 @@ def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh") -> Path:
 def _load(path: str, mtime: float, scale: tuple[float, float, float]):
     import trimesh
 
-    mesh = trimesh.load(path, force="mesh", process=True)
+    mesh = load_trimesh(path, process=True)
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ValueError("no triangles")
     if scale != (1.0, 1.0, 1.0):
@@ -100,6 +101,7 @@ def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mes
     cannot read is a one-line :class:`ConfigError` starting with ``what``."""
     path = resolve_mesh(uri, urdf_path, what)
     s = np.broadcast_to(np.asarray(scale if scale is not None else 1.0, dtype=np.float64), (3,))
+    check_mesh_file(path, f"{what}: mesh '{clip(uri, 160)}'", ConfigError, s)  # before trimesh parses it
     try:
         return _load(str(path.resolve()), path.stat().st_mtime, tuple(float(v) for v in s))
     except Exception as exc:  # trimesh raises assorted types on unreadable or foreign files

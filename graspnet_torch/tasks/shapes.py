@@ -17,6 +17,7 @@ import numpy as np
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.files import confined_file
+from graspnet_torch.meshes import check_mesh_file
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
@@ -140,21 +141,19 @@ class Shape:
 
 
 def check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
-    """The file must load as a triangle mesh with finite vertices within +-10 m once scaled."""
+    """The file must be a solid triangle mesh of a sensible size, checked as written before it is
+    parsed and processed (:func:`graspnet_torch.meshes.check_mesh_file`: format, face count,
+    finite vertices within +-10 m once scaled, not flat), then load as one."""
     from graspnet_torch.collision.mesh import load_mesh
 
+    check_mesh_file(path, where, ProblemError, scale, solid=True)
     try:
-        mesh = load_mesh(Path(path).resolve(), scale)
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = len(mesh.faces)
+        faces = len(load_mesh(Path(path).resolve(), scale).faces)
     except Exception as exc:  # trimesh raises assorted errors on files it cannot read
         raise ProblemError(f"{where}: {clip(path.name, 80)} is not a mesh trimesh can read "
                            f"({type(exc).__name__})") from None
-    if faces == 0 or vertices.size == 0:
+    if faces == 0:
         raise ProblemError(f"{where}: {clip(path.name, 80)} holds no triangles")
-    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > MAX_LENGTH_M:
-        raise ProblemError(f"{where}: {clip(path.name, 80)} has vertices that are not finite or beyond "
-                           f"+-{MAX_LENGTH_M:g} m at scale {scale:g} (metres expected: give scale, e.g. 0.001 for mm)")
 
 
 def obstacles_of(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:

@@ -81,7 +81,7 @@ def test_a_missing_mesh_is_one_line_naming_the_link_the_uri_and_where_it_looked(
 def test_an_unreadable_mesh_is_one_line(tmp_path):
     (tmp_path / "palm.stl").write_bytes(b"\x00garbage" * 10)
     model = _model(tmp_path, '<mesh filename="palm.stl"/>')
-    with pytest.raises(gt.ConfigError, match=r"link 'palm' collision: mesh 'palm.stl' .* could not be loaded"):
+    with pytest.raises(gt.ConfigError, match=r"link 'palm' collision: mesh 'palm.stl': palm.stl holds no triangles"):
         link_shapes(model)
 
 
