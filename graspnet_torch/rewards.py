@@ -6,17 +6,19 @@ All functions are elementwise over leading batch dimensions; errors and distance
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 from torch import Tensor
 
-if TYPE_CHECKING:
-    from graspnet_torch.solver.config import RewardCfg
-    from graspnet_torch.solver.environment import Evaluation
+from graspnet_torch.settings import build, setting
 
 __all__ = [
+    "NoiseCfg",
     "Reward",
+    "RewardCfg",
+    "Scored",
     "add_noise",
     "manus_reward",
     "r1",
@@ -25,6 +27,51 @@ __all__ = [
     "r4",
     "total_error",
 ]
+
+
+@dataclass(frozen=True)
+class RewardCfg:
+    """Reinforcement (Hydra group ``reward/``): R_1 = 1 - tanh(a E) (eq. 14 / 20), E the total
+    fingertip error in metres, and its collision-shaped forms (eq. 21-23).
+
+    Attributes:
+        kind: 'r1' (no collision term), 'r2' (R_1 / 2 on a collision), 'r3' (shaping:
+            R_1 / (1 + i / p) on a collision) or 'r4' (R_1 / (1 + c^beta i / p), c collisions).
+        a: slope of the evaluation (the paper gives a = 1.5 for the arm, none for the hand; with
+            a = 1 the default threshold r > 0.99 means E < 10 mm).
+        beta: exponent of the collision count in R_4 (paper: 0.25).
+        p: the iteration count at which R_3 reaches R_2 (paper: 2000, its iteration budget);
+            ``None``: the solver's ``max_iterations``.
+    """
+
+    kind: str = setting("r1", choices=("r1", "r2", "r3", "r4"))
+    a: float = setting(1.0, lo=0.0, lo_open=True, hi=1e4)
+    beta: float = setting(0.25, lo=0.0, lo_open=True, hi=100.0)
+    p: int | None = setting(None, lo=1, hi=10_000_000)
+
+    @classmethod
+    def from_mapping(cls, d: dict | None, where: str = "reward") -> RewardCfg:
+        return build(cls, d, where)
+
+
+@dataclass(frozen=True)
+class NoiseCfg:
+    """Sensor noise on the reinforcement: r + N(0, sigma) (eq. 15)."""
+
+    sigma: float = setting(0.0, lo=0.0, hi=100.0)
+
+    @classmethod
+    def from_mapping(cls, d: dict | None, where: str = "noise") -> NoiseCfg:
+        return build(cls, d, where)
+
+
+class Scored(Protocol):
+    """What a reward reads of an evaluation (:class:`~graspnet_torch.solver.environment.Evaluation`):
+    ``error`` (T,) metres, ``collisions`` (T,) or None, ``alignment`` (T,) or None."""
+
+    error: Tensor
+    collisions: Tensor | None
+    alignment: Tensor | None
 
 
 def total_error(desired: Tensor, actual: Tensor) -> Tensor:
@@ -90,12 +137,12 @@ class Reward:
         base: ``base(evaluation, a) -> (T,)``, the reinforcement before shaping (None: R_1).
     """
 
-    def __init__(self, cfg: RewardCfg, budget: int, base: Callable[[Evaluation, float], Tensor] | None = None):
+    def __init__(self, cfg: RewardCfg, budget: int, base: Callable[[Scored, float], Tensor] | None = None):
         self.cfg = cfg
         self.p = cfg.p if cfg.p is not None else budget
         self.base = base
 
-    def __call__(self, evaluation: Evaluation, iteration: int | Tensor) -> Tensor:
+    def __call__(self, evaluation: Scored, iteration: int | Tensor) -> Tensor:
         """(T,) reinforcement, noise-free; ``iteration`` an int or (T,) per trial."""
         r = r1(evaluation.error, self.cfg.a) if self.base is None else self.base(evaluation, self.cfg.a)
         if self.cfg.kind == "r1" or evaluation.collisions is None:

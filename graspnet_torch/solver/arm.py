@@ -121,7 +121,7 @@ class ArmHandEnvironment(FingerEnvironment):
     def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
         """Refuse a contact farther from the arm's first joint than the arm's links, their
         prismatic travel and the finger can reach; and ``bounds`` that do not fit the arm."""
-        from graspnet_torch.solver.hand import finger_reach_bound
+        from graspnet_torch.solver.search_space import finger_reach_bound
 
         origin, arm = _arm_reach(robot)
         for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):

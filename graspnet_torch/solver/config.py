@@ -6,46 +6,11 @@ from dataclasses import dataclass, replace
 from functools import cache
 
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.rewards import NoiseCfg, RewardCfg  # the reward's own settings, re-exported
 from graspnet_torch.settings import build, setting
 
 __all__ = ["RENAMED", "SOLVERS", "CmaesCfg", "FingersCfg", "GripperCfg", "NoiseCfg", "PolishCfg", "RewardCfg",
            "SolverCfg", "paper_protocol"]
-
-
-@dataclass(frozen=True)
-class RewardCfg:
-    """Reinforcement (Hydra group ``reward/``): R_1 = 1 - tanh(a E) (eq. 14 / 20), E the total
-    fingertip error in metres, and its collision-shaped forms (eq. 21-23).
-
-    Attributes:
-        kind: 'r1' (no collision term), 'r2' (R_1 / 2 on a collision), 'r3' (shaping:
-            R_1 / (1 + i / p) on a collision) or 'r4' (R_1 / (1 + c^beta i / p), c collisions).
-        a: slope of the evaluation (the paper gives a = 1.5 for the arm, none for the hand; with
-            a = 1 the default threshold r > 0.99 means E < 10 mm).
-        beta: exponent of the collision count in R_4 (paper: 0.25).
-        p: the iteration count at which R_3 reaches R_2 (paper: 2000, its iteration budget);
-            ``None``: the solver's ``max_iterations``.
-    """
-
-    kind: str = setting("r1", choices=("r1", "r2", "r3", "r4"))
-    a: float = setting(1.0, lo=0.0, lo_open=True, hi=1e4)
-    beta: float = setting(0.25, lo=0.0, lo_open=True, hi=100.0)
-    p: int | None = setting(None, lo=1, hi=10_000_000)
-
-    @classmethod
-    def from_mapping(cls, d: dict | None, where: str = "reward") -> RewardCfg:
-        return build(cls, d, where)
-
-
-@dataclass(frozen=True)
-class NoiseCfg:
-    """Sensor noise on the reinforcement: r + N(0, sigma) (eq. 15)."""
-
-    sigma: float = setting(0.0, lo=0.0, hi=100.0)
-
-    @classmethod
-    def from_mapping(cls, d: dict | None, where: str = "noise") -> NoiseCfg:
-        return build(cls, d, where)
 
 
 SOLVERS = ("srv", "cmaes", "dls")

@@ -28,6 +28,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.rewards import r1
+
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
     from graspnet_torch.robot.robot import Posture, Robot
@@ -167,8 +169,6 @@ class Environment(ABC):
 
     def reward_base(self, evaluation: Evaluation, a: float) -> Tensor:
         """(T,) the reinforcement before collision shaping: R_1 = 1 - tanh(a E) (eq. 14)."""
-        from graspnet_torch.rewards import r1
-
         return r1(evaluation.error, a)
 
     def grasped(self, evaluation: Evaluation, tolerance: float) -> Tensor:

@@ -20,10 +20,10 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_jacobian, pose_to_rt
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
-from graspnet_torch.solver.search_space import PalmSearchSpace
+from graspnet_torch.solver.search_space import PalmSearchSpace, finger_reach_bound
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["HandEnvironment", "finger_reach_bound"]
+__all__ = ["HandEnvironment"]
 
 
 class HandEnvironment(FingerEnvironment):
@@ -209,14 +209,3 @@ class HandEnvironment(FingerEnvironment):
         gap = np.linalg.norm(local - np.clip(local, space.lower[:3], space.upper[:3]), axis=1)
         reach = finger_reach(robot)
         return [c.finger for c, g in zip(problem.contacts, gap, strict=True) if g > reach[robot.finger_index(c.finger)]]
-
-
-def finger_reach_bound(robot: Robot, finger: str) -> float:
-    """Upper bound of a fingertip's distance from the palm origin, whatever the joints: its base
-    offset, the lengths of its links and the travel of its prismatic joints."""
-    f = robot.fingers[finger]
-    spec = f.chain.spec
-    travel = sum(max(abs(lo), abs(hi)) for lo, hi, t in zip(spec.lower, spec.upper, spec.joint_types, strict=True)
-                 if t == "prismatic")
-    return float(np.linalg.norm(f.base_in_palm[:3, 3]) + np.linalg.norm(spec.offsets[:, :3, 3], axis=1).sum() + travel)
-

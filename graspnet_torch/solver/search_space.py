@@ -35,8 +35,8 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "hand_frame",
-           "palm_search_space", "palm_space_around", "sample_hand_configurations"]
+__all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "finger_reach_bound",
+           "hand_frame", "palm_search_space", "palm_space_around", "sample_hand_configurations"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -103,8 +103,6 @@ def _reach_and_mid(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     """Per finger: the farthest its fingertip gets from the palm origin (sampled over the joint
     range, plus a margin; at most the bound of its link lengths) and its fingertip at mid-range
     joints, in the palm frame: (F,), (F, 3)."""
-    from graspnet_torch.solver.hand import finger_reach_bound
-
     g = torch.Generator().manual_seed(0)
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
     q = lo + (hi - lo) * torch.rand(REACH_SAMPLES, *lo.shape, generator=g, dtype=torch.float64)
@@ -223,3 +221,14 @@ def sample_hand_configurations(robot: Robot, space: PalmSearchSpace, n: int,
     flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
     q = flo + (fhi - flo) * torch.rand(n, *flo.shape, generator=generator, dtype=torch.float64)
     return pose, q
+
+
+def finger_reach_bound(robot: Robot, finger: str) -> float:
+    """Upper bound of a fingertip's distance from the palm origin, whatever the joints: its base
+    offset, the lengths of its links and the travel of its prismatic joints."""
+    f = robot.fingers[finger]
+    spec = f.chain.spec
+    travel = sum(max(abs(lo), abs(hi)) for lo, hi, t in zip(spec.lower, spec.upper, spec.joint_types, strict=True)
+                 if t == "prismatic")
+    return float(np.linalg.norm(f.base_in_palm[:3, 3]) + np.linalg.norm(spec.offsets[:, :3, 3], axis=1).sum() + travel)
+

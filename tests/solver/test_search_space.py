@@ -189,8 +189,7 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
     palm positions that the bound reaches but the thumb does not: the thumb's contact is out of
     reach of the search space, and a failed result says so first."""
     from graspnet_torch.solver.api import failure_reason
-    from graspnet_torch.solver.hand import finger_reach_bound
-    from graspnet_torch.solver.search_space import finger_reach
+    from graspnet_torch.solver.search_space import finger_reach, finger_reach_bound
     from tests.odd_hands import write_oddhand
 
     robot = gt.load_robot(write_oddhand(tmp_path))
