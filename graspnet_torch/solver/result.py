@@ -11,15 +11,13 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+
+import numpy as np
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.io import atomic_write_text
 
-if TYPE_CHECKING:
-    from graspnet_torch.motion.trajectory import Trajectory
-
-__all__ = ["FIELD_ORDER", "GraspResult", "TrialResult"]
+__all__ = ["FIELD_ORDER", "GraspResult", "Trajectory", "TrialResult"]
 
 
 # The result JSON's trial fields in the order they are written (INTERFACE.md): the common core, then
@@ -27,6 +25,53 @@ __all__ = ["FIELD_ORDER", "GraspResult", "TrialResult"]
 # with a body: its arm joints; a gripper: d, the alignment and its points).
 FIELD_ORDER = ("success", "iterations", "reinforcement", "wall_time_s", "palm_pose", "joints", "fingertip_error_mm",
                "total_error_mm", "collisions", "arm_joints", "distance_mm", "alignment", "gripper_points")
+
+
+@dataclass
+class Trajectory:
+    """A reach motion (the result's ``trajectory``).
+
+    Attributes:
+        joint_names: URDF joint names (a free hand: ``palm_x`` ... ``palm_rz`` first), in order.
+        times: (W,) seconds, increasing from 0.
+        positions: (W, n) radians or metres (a free hand's palm: metres, radians).
+        revolute: (n,) which columns are angles (degrees in the file).
+        planner: the planner that found the approach.
+        planning_time_s: the planning wall time (planner, simplification, checks, timing).
+        found: whether a motion was found; else ``reason`` says why in one line.
+    """
+
+    joint_names: list[str]
+    times: np.ndarray
+    positions: np.ndarray
+    revolute: np.ndarray
+    planner: str = "RRTConnect"
+    planning_time_s: float = 0.0
+    found: bool = True
+    reason: str = ""
+
+    @classmethod
+    def missing(cls, joint_names: list[str], revolute: np.ndarray, reason: str, planning_time_s: float,
+                planner: str = "RRTConnect") -> Trajectory:
+        """No motion: ``found`` false and the one-line reason."""
+        n = len(joint_names)
+        return cls(joint_names, np.zeros(0), np.zeros((0, n)), revolute, planner, planning_time_s, False, reason)
+
+    def to_dict(self) -> dict:
+        """The result file's ``trajectory`` (degrees for the angles)."""
+        scale = np.where(self.revolute, 180.0 / math.pi, 1.0)
+        return {"joint_names": list(self.joint_names), "times": [float(t) for t in self.times],
+                "positions": (self.positions * scale).tolist(), "planner": self.planner,
+                "planning_time_s": float(self.planning_time_s), "found": bool(self.found), "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, data: dict, revolute: np.ndarray) -> Trajectory:
+        """The inverse of :meth:`to_dict` (``revolute``: which columns are angles)."""
+        positions = np.asarray(data["positions"], dtype=np.float64).reshape(-1, len(data["joint_names"]))
+        return cls(list(data["joint_names"]), np.asarray(data["times"], dtype=np.float64),
+                   positions * np.where(revolute, math.pi / 180.0, 1.0), np.asarray(revolute, dtype=bool),
+                   data.get("planner", ""), float(data.get("planning_time_s", 0.0)), bool(data["found"]),
+                   data.get("reason", ""))
 
 
 class TrialResult:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -184,7 +185,14 @@ def test_a_replay_of_another_problem_or_run_is_refused(tmp_path, glass3_result):
     assert load_view(folder).replay is not None  # its own replay is served
 
 
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 def _serve(args: list[str]) -> subprocess.Popen:
+    args = [*args, "--port", str(_free_port())]
     proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / "view.py"), *args], text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     for line in proc.stdout:  # viser's banner, then "viewing ... at http://...": the page is served
@@ -194,13 +202,13 @@ def _serve(args: list[str]) -> subprocess.Popen:
 
 
 def test_serving_other_machines_is_said_and_ctrl_c_stops_in_one_line(glass3_result):
-    proc = _serve([str(glass3_result), "--host", "0.0.0.0", "--port", "8141"])
+    proc = _serve([str(glass3_result), "--host", "0.0.0.0"])
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     lines = err.strip().splitlines()
     assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
     assert lines[0].startswith("warning: serving on 0.0.0.0: other machines") and lines[1:] == ["stopped (Ctrl-C)"]
-    local = _serve([str(glass3_result), "--port", "8142"])  # the default: this machine only, no warning
+    local = _serve([str(glass3_result)])  # the default: this machine only, no warning
     local.send_signal(signal.SIGINT)
     _, err = local.communicate(timeout=60)
     assert local.returncode == 0 and err.strip() == "stopped (Ctrl-C)", err[-2000:]
