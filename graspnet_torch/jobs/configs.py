@@ -71,6 +71,7 @@ class TrainFCNNJobCfg:
     progress: bool = True
     threads: int = setting(1, lo=1, hi=1024)
     eval_targets: int = setting(10_000, lo=1, hi=1_000_000)
+    allow_outside_paths: bool = False  # the robot's URDF and meshes anywhere
 
 
 @dataclass(frozen=True)

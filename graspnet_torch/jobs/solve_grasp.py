@@ -164,7 +164,7 @@ def job_settings(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> tuple[SolveGraspJ
     job = build(SolveGraspJobCfg, cfg)
     robot = job.robot
     if isinstance(robot, Mapping):  # the robot group, as composed (overrides included), or robot=PATH
-        robot = robot_cfg_from_setting(robot)
+        robot = robot_cfg_from_setting(robot, job.allow_outside_paths)
     return job, groups, robot
 
 
@@ -195,7 +195,7 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
         from graspnet_torch.robot.chain import UrdfModel  # collisions need the URDF's collision geometry:
         from graspnet_torch.robot.geometry import link_shapes  # every mesh found and readable, before any work
 
-        link_shapes(UrdfModel(rc.urdf), "collision")
+        link_shapes(UrdfModel(rc.urdf, rc.mesh_roots, rc.allow_outside_paths), "collision")
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     if solver.method == "srv" and not robot.shared.names and starts_from_proposals(robot, [problem], solver):
         proposal_of(robot)  # its posture proposal model, if it has one (refused if corrupted); cached

@@ -243,10 +243,11 @@ def train_fcnn(
 def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
                   run_dir: str | Path) -> tuple[TrainFCNNJobCfg, RobotCfg]:
     """Every check of the training job before any work, writing nothing: the settings, the robot
-    config, the export path and, with ``resume``, the training state in ``run_dir``."""
+    config and its URDF (the robot is built), the export path and, with ``resume``, the training
+    state in ``run_dir``."""
     job = build(TrainFCNNJobCfg, cfg)
     check_train_memory(job.fcnn, job.eval_targets)
-    robot_cfg = robot_cfg_from_setting(job.robot)
+    robot_cfg = robot_cfg_from_setting(job.robot, job.allow_outside_paths)
     if robot_cfg is None:
         raise ConfigError("robot: give robot=NAME (configs/robot/) or robot=PATH (a robot YAML) to train its fingers")
     if not robot_cfg.fingers:
@@ -258,11 +259,12 @@ def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,
                               f"{', '.join(robot_cfg.fingers)})")
     if export_target(job, robot_cfg) is not None:
         check_output_path(str(export_target(job, robot_cfg)), "export", ConfigError)
+    robot = Robot(robot_cfg)  # the URDF checked and the fingers' chains built (milliseconds), before any folder
     state_path = Path(run_dir) / "state.pt"
     if job.resume and os.path.lexists(state_path) and not state_path.is_file():
         raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
     if job.resume and state_path.is_file():
-        _load_state(state_path, Robot(robot_cfg), job.fcnn, job.seed)
+        _load_state(state_path, robot, job.fcnn, job.seed)
     return job, robot_cfg
 
 

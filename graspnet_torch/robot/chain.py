@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.robot.urdf_checks import check_urdf
 from graspnet_torch.settings import clip
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -113,10 +114,20 @@ def _quiet_parser():
 
 
 class UrdfModel:
-    """A URDF file parsed by pytorch-kinematics, with its serial chains on demand."""
+    """A URDF file parsed by pytorch-kinematics and checked (:func:`check_urdf`: a tree of finite
+    joints), with its serial chains on demand.
 
-    def __init__(self, path: str | Path):
+    Args:
+        path: the URDF file.
+        roots: folders its meshes may also lie in, besides its own folder, the repository and the
+            installed Python packages (the robot config's folder; :func:`~graspnet_torch.robot.meshes.resolve_mesh`).
+        allow_outside_paths: its meshes may lie anywhere.
+    """
+
+    def __init__(self, path: str | Path, roots: tuple[Path, ...] = (), allow_outside_paths: bool = False):
         self.path = Path(path)
+        self.mesh_roots = tuple(Path(r) for r in roots)
+        self.allow_outside_paths = allow_outside_paths
         if not self.path.is_file():
             raise ConfigError(f"URDF file not found: {self.path}")
         if self.path.stat().st_size > MAX_URDF_BYTES:
@@ -129,6 +140,7 @@ class UrdfModel:
                 self.robot = URDF.from_xml_string(self.xml)
         except Exception as exc:  # the parser raises assorted types on malformed XML
             raise ConfigError(f"{self.path}: not a valid URDF ({clip(' '.join(str(exc).split()), 160)})") from None
+        check_urdf(self.robot, self.path)  # a tree of finite joints, before any walk or kinematics
         self.links: dict[str, object] = {link.name: link for link in self.robot.links}
         self.joints: dict[str, object] = {j.name: j for j in self.robot.joints}
         self.parent_joint: dict[str, object] = {j.child: j for j in self.robot.joints}

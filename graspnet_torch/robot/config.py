@@ -136,6 +136,10 @@ class RobotCfg:
             user sets them (the ACNN's section 6.3 parameters for ``arm_hand``); checked against
             the groups' dataclasses.
         source: the file this came from, for error messages.
+        folder: the config file's folder (a config given by path), where its URDF's meshes may
+            also lie; None for a shipped config.
+        allow_outside_paths: its URDF and the URDF's meshes may lie anywhere (else within the
+            URDF's folder, ``folder``, the repository and installed packages).
     """
 
     name: str
@@ -152,6 +156,14 @@ class RobotCfg:
     self_collision: bool = False
     solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
+    folder: Path | None = None
+    allow_outside_paths: bool = False
+
+    @property
+    def mesh_roots(self) -> tuple[Path, ...]:
+        """Folders the URDF's meshes may lie in besides the URDF's own (see
+        :func:`graspnet_torch.robot.meshes.mesh_roots`)."""
+        return (self.folder,) if self.folder is not None else ()
 
     @property
     def kind(self) -> str:
@@ -238,7 +250,8 @@ class RobotCfg:
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
                    home=home, checkpoint=checkpoint, floor=floor, self_collision=self_collision,
-                   solver_defaults=_solver_defaults(data, source), source=source)
+                   solver_defaults=_solver_defaults(data, source), source=source,
+                   folder=Path(folder) if folder is not None else None, allow_outside_paths=allow_outside_paths)
 
 
 def _urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: bool) -> Path:
@@ -315,8 +328,9 @@ def _is_file(path: Path) -> bool:
         return False
 
 
-def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
-    """A robot config by name (``configs/robot/<name>.yaml``) or by path to a YAML file."""
+def load_robot_cfg(name_or_path: str | Path, allow_outside_paths: bool = False) -> RobotCfg:
+    """A robot config by name (``configs/robot/<name>.yaml``) or by path to a YAML file; its URDF
+    and meshes may lie anywhere only with ``allow_outside_paths``."""
     text = str(name_or_path)
     if not text or len(text) > 4096 or "\x00" in text:
         raise ConfigError(f"unknown robot '{clip(text, 80)}': expected one of {', '.join(available_robots())}")
@@ -329,25 +343,28 @@ def load_robot_cfg(name_or_path: str | Path) -> RobotCfg:
                               f"(configs/robot/) or a path to a robot YAML file")
     data = read_document(path, "robot config", ConfigError)
     shipped = path.resolve().parent == (configs_dir() / "robot").resolve()
-    return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent)
+    return RobotCfg.from_mapping(data, source=str(path), folder=None if shipped else path.resolve().parent,
+                                 allow_outside_paths=allow_outside_paths)
 
 
-def robot_cfg_from_setting(value: Any) -> RobotCfg | None:
+def robot_cfg_from_setting(value: Any, allow_outside_paths: bool = False) -> RobotCfg | None:
     """The robot of a job's ``robot`` setting: a name or a YAML path (str), the ``robot`` group as
     Hydra composed it (a mapping, overrides included), ``robot=PATH`` on the command line
-    (``{name, config}``, see :func:`graspnet_torch.jobs.cli.robot_path_overrides`), or None."""
+    (``{name, config}``, see :func:`graspnet_torch.jobs.cli.robot_path_overrides`), or None.
+    ``allow_outside_paths``: the job's setting of that name (its URDF and meshes anywhere)."""
     if value is None:
         return None
     if isinstance(value, str):
-        return load_robot_cfg(value)
+        return load_robot_cfg(value, allow_outside_paths)
     if isinstance(value, Mapping) and "config" in value and "urdf" not in value:
         extra = sorted(set(value) - {"name", "config"})
         if extra:
             raise ConfigError(f"robot={clip(str(value['config']), 200)}: robot.{extra[0]} cannot be overridden for a "
                               f"robot given by path; edit the file")
-        return load_robot_cfg(str(value["config"]))
+        return load_robot_cfg(str(value["config"]), allow_outside_paths)
     if isinstance(value, Mapping):
-        return RobotCfg.from_mapping(value, source=f"robot={clip(str(value.get('name')), 80)}")
+        return RobotCfg.from_mapping(value, source=f"robot={clip(str(value.get('name')), 80)}",
+                                     allow_outside_paths=allow_outside_paths)
     raise ConfigError(f"robot: expected a robot name or a path to a robot YAML file, got {short(value)}")
 
 

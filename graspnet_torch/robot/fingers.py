@@ -65,8 +65,8 @@ class FingerChain:
                   what: str = "finger") -> FingerChain:
         """From a chain and its mimic joints: name -> (leader, multiplier, offset).
 
-        Raises ValueError (with ``what`` in the message) for a leader outside the chain or a
-        cycle of mimic joints.
+        Raises ValueError (with ``what`` in the message) for a leader outside the chain, a cycle
+        of mimic joints or a free joint whose range is empty or a single value.
         """
         mimic = {k: v for k, v in (mimic or {}).items() if k in spec.joint_names}
         names = spec.joint_names
@@ -102,6 +102,12 @@ class FingerChain:
             lo, hi = sorted(((spec.lower[i] - c[i]) / m, (spec.upper[i] - c[i]) / m))
             if max(lower[k], lo) <= min(upper[k], hi):  # never empty the range (inconsistent URDF limits)
                 lower[k], upper[k] = max(lower[k], lo), min(upper[k], hi)
+        stuck = [k for k in range(n_f) if not lower[k] < upper[k]]
+        if stuck:  # nothing to learn or search: the FCNN's training data would be empty
+            k = stuck[0]
+            raise ValueError(f"{what}: joint '{names[free[k]]}' cannot move (its <limit> range, within the limits of "
+                             f"the joints that follow it, is [{lower[k]:g}, {upper[k]:g}]); make it a fixed joint or "
+                             f"widen its limits")
         return cls(spec, A, c, free, lower, upper)
 
     # ------------------------------------------------------------------ the free joints

@@ -48,9 +48,10 @@ def _origin(origin) -> np.ndarray:
 def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] | None = None) -> list[Shape]:
     """Every shape of every link; ``source`` is 'collision' or 'visual'.
 
-    Meshes are loaded (``robot/meshes.py`` resolves their URIs). A mesh that cannot be found or
-    loaded is a one-line :class:`ConfigError` naming the link, the URI and where it looked; when
-    ``errors`` (a list) is given, it is skipped instead and that line appended (pictures).
+    Meshes are loaded (``robot/meshes.py`` resolves their URIs, within the model's folders). A mesh
+    that lies outside them, cannot be found or cannot be loaded is a one-line :class:`ConfigError`
+    naming the link, the URI and where it looked; when ``errors`` (a list) is given, it is
+    skipped instead and that line appended (pictures).
     """
     from pytorch_kinematics.urdf_parser_py.urdf import Box, Cylinder, Mesh, Sphere
 
@@ -81,7 +82,8 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
                 scale = np.broadcast_to(np.asarray(g.scale if g.scale is not None else 1.0, dtype=np.float64), (3,))
                 try:
                     mesh = load_link_mesh(g.filename, model.path, scale,
-                                          f"{model.path.name}: link '{link.name}' {source}")
+                                          f"{model.path.name}: link '{link.name}' {source}", model.mesh_roots,
+                                          model.allow_outside_paths)
                 except ConfigError as exc:
                     if errors is None:
                         raise

@@ -9,6 +9,10 @@ A URI is resolved, first match wins:
 - ``file:///abs/path`` or ``file://rel/path``, an absolute path, or a relative path: against the
   URDF's folder.
 
+Only files within the robot's own folders are read (:func:`mesh_roots`: the URDF's folder, the
+robot config's folder, the repository, installed packages), unless the robot config allows any
+path (``allow_outside_paths``); a URI outside gets the same message whether or not a file is there.
+
 Loaded meshes are cached per (file, modification time, scale): the returned ``trimesh.Trimesh``
 objects are shared and must not be modified in place.
 """
@@ -16,6 +20,7 @@ objects are shared and must not be modified in place.
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
 from urllib.parse import unquote
@@ -23,11 +28,12 @@ from urllib.parse import unquote
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.files import allowed_roots
 from graspnet_torch.meshes import check_mesh_file, load_trimesh
 from graspnet_torch.settings import clip
 
-__all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "package_candidates", "package_roots",
-           "resolve_mesh"]
+__all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "mesh_roots", "package_candidates",
+           "package_roots", "resolve_mesh"]
 
 PICTURE_FACES = 2000  # meshes with more faces are decimated for pictures
 
@@ -73,11 +79,51 @@ def mesh_candidates(uri: str, urdf_path: str | Path) -> list[Path]:
     return [folder / Path(uri)]  # an absolute path stays absolute
 
 
-def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh") -> Path:
-    """The file a mesh URI names, or a one-line :class:`ConfigError` saying where it looked."""
+def mesh_roots(uri: str, urdf_path: str | Path, roots: Sequence[str | Path] = ()) -> tuple[Path, ...]:
+    """The folders a URDF's mesh may lie in: the URDF's folder, ``roots`` (the robot config's
+    folder), for ``package://<pkg>/...`` the folder ``<pkg>`` holding the URDF or its folder (the
+    ROS layout ``<pkg>/urdf/``, ``<pkg>/meshes/``) and the installed Python package ``<pkg>``, the
+    repository and the installed packages (:func:`graspnet_torch.files.allowed_roots`)."""
+    folder = Path(urdf_path).resolve().parent
+    own = [folder, *(Path(r) for r in roots)]
+    if uri.startswith("package://"):
+        pkg = uri[len("package://"):].partition("/")[0]
+        own += [p for p in (folder, folder.parent) if p.name == pkg]
+        own += [r for r in package_roots(pkg) if _is_file(r / "__init__.py")]  # a package, not any folder on sys.path
+    return allowed_roots(tuple(own))
+
+
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL byte
+        return False
+
+
+def _inside(path: Path, roots: tuple[Path, ...]) -> bool:
+    try:
+        real = path.resolve()  # '..' and symbolic links resolved: neither leads out
+    except (OSError, RuntimeError, ValueError):  # a link loop, a NUL byte
+        return False
+    return any(real == r or real.is_relative_to(r) for r in roots)
+
+
+def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh", roots: Sequence[str | Path] = (),
+                 allow_outside: bool = False) -> Path:
+    """The file a mesh URI names, or a one-line :class:`ConfigError` saying where it looked.
+
+    Only files within :func:`mesh_roots` are looked at, unless ``allow_outside``: a URI that
+    names nothing inside them is refused with the same message whether or not a file is there.
+    """
     candidates = mesh_candidates(uri, urdf_path)
+    if not allow_outside:
+        allowed = mesh_roots(uri, urdf_path, roots)
+        candidates = [c for c in candidates if _inside(c, allowed)]
+        if not candidates:
+            raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' is outside the URDF's folder, the robot config's "
+                              f"folder, the repository and installed packages; set allow_outside_paths=true to use it")
     for path in candidates:
-        if path.is_file():
+        if _is_file(path):
             return path
     looked = ", ".join(dict.fromkeys(str(p.parent) for p in candidates))
     raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' not found (looked in {clip(looked, 400)})")
@@ -95,11 +141,13 @@ def _load(path: str, mtime: float, scale: tuple[float, float, float]):
     return mesh
 
 
-def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mesh"):
+def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mesh", roots: Sequence[str | Path] = (),
+                   allow_outside: bool = False):
     """The ``trimesh.Trimesh`` a URDF ``<mesh>`` names, in its own frame with ``scale`` (3 numbers,
-    or one) applied; cached and shared (do not modify it). A file that is missing or that trimesh
-    cannot read is a one-line :class:`ConfigError` starting with ``what``."""
-    path = resolve_mesh(uri, urdf_path, what)
+    or one) applied; cached and shared (do not modify it). A file that is missing, outside the
+    robot's folders (:func:`resolve_mesh`; ``roots``, ``allow_outside``) or that trimesh cannot
+    read is a one-line :class:`ConfigError` starting with ``what``."""
+    path = resolve_mesh(uri, urdf_path, what, roots, allow_outside)
     s = np.broadcast_to(np.asarray(scale if scale is not None else 1.0, dtype=np.float64), (3,))
     check_mesh_file(path, f"{what}: mesh '{clip(uri, 160)}'", ConfigError, s)  # before trimesh parses it
     try:

@@ -89,7 +89,7 @@ class Robot:
     def __init__(self, cfg: RobotCfg):
         self.cfg = cfg
         self.name = cfg.name
-        self.urdf = UrdfModel(cfg.urdf)
+        self.urdf = UrdfModel(cfg.urdf, cfg.mesh_roots, cfg.allow_outside_paths)  # checked: robot/urdf_checks.py
         src = cfg.source
         self.urdf.check_link(cfg.palm_link, f"{src}: palm_link")
 
