@@ -12,11 +12,13 @@ from pathlib import Path
 
 __all__ = ["checkpoints_dir", "configs_dir", "repo_root", "resolve_repo_path", "urdf_dir"]
 
+_PACKAGE_ROOT = Path(__file__).resolve().parent.parent  # resolved once: a solve asks for it on every call
+
 
 def repo_root() -> Path:
     """The repository root: the folder that holds ``configs/``, ``urdf/`` and ``checkpoints/``."""
     env = os.environ.get("GRASPNET_TORCH_ROOT")
-    return Path(env).resolve() if env else Path(__file__).resolve().parent.parent
+    return Path(env).resolve() if env else _PACKAGE_ROOT
 
 
 def configs_dir() -> Path:

@@ -7,6 +7,9 @@ clamped to the limits. All experts of all requested fingers are evaluated togeth
 weights are stacked (padded to the largest expert count) and the finger chains run as one
 stacked kernel. Fingers with fewer free joints than the robot's widest are padded (outputs,
 limits and Jacobian columns of the padding are 0), so fingers of any sizes still run in one call.
+Every finger's weights are stacked once per dtype and device; a subset of fingers (a problem's
+contact fingers) takes rows of them, and its kernel is selected from the robot's: a solve of a
+new subset builds nothing.
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ __all__ = ["FingerIK"]
 
 @dataclass
 class _Bank:
-    """Stacked expert weights of F fingers, padded to E experts: W1 (F*E, 3, H), ..."""
+    """Stacked expert weights of F fingers, padded to E experts: W1 (F*E, 3, H), ... (every
+    finger's, :meth:`FingerIK._full_bank`: W1 (F, E, 3, H), ...)."""
 
     fingers: tuple[str, ...]
     n_experts: int
@@ -58,8 +62,8 @@ class FingerIK:
         self.robot = robot
         self.experts = dict(experts)
         self.damping = damping
-        self._banks: dict[tuple, _Bank] = {}
-        self._kernels: dict[tuple[str, ...], FingerKernel] = {}  # per finger set, shared by every dtype / device
+        self._full: dict[tuple, _Bank] = {}  # every finger, per dtype / device
+        self._banks: dict[tuple, _Bank] = {}  # per finger subset: rows of the full bank
 
     @property
     def finger_names(self) -> tuple[str, ...]:
@@ -69,18 +73,30 @@ class FingerIK:
         return self.experts[finger].n_active
 
     # ------------------------------------------------------------------ banks
-    def _bank(self, fingers: tuple[str, ...], dtype: torch.dtype, device: torch.device) -> _Bank:
-        key = (fingers, dtype, device)
-        bank = self._banks.get(key)
+    def kernel(self, fingers: Sequence[str]) -> FingerKernel:
+        """The finger kernel of ``fingers`` (joints (..., F, n)): selected from the robot's kernel
+        of all its fingers (:meth:`~graspnet_torch.robot.fingers.FingerKernel.select`), the same
+        object for the same fingers."""
+        return self.robot.finger_kernel.select([self.robot.finger_index(f) for f in fingers])
+
+    def cache_info(self) -> dict[str, int]:
+        """How many banks this finger IK holds: ``stacked``, every finger's expert weights stacked
+        (one per dtype and device), and ``subsets``, banks of finger subsets (rows of those)."""
+        return {"stacked": len(self._full), "subsets": len(self._banks)}
+
+    def _full_bank(self, dtype: torch.dtype, device: torch.device) -> _Bank:
+        """Every finger with experts (:attr:`finger_names`) stacked once per dtype and device:
+        params (F, E, ...), padded to the largest expert count E."""
+        key = (dtype, device)
+        bank = self._full.get(key)
         if bank is not None:
             return bank
+        fingers = self.finger_names
         sets = [self.experts[f] for f in fingers]
         E = max(s.n_active for s in sets)
-        F = len(fingers)
         n = self.robot.joints_per_finger
-        names = ("W1", "b1", "W2", "b2", "W3", "b3")
         params = []
-        for name in names:
+        for name in ("W1", "b1", "W2", "b2", "W3", "b3"):
             per = []
             for s in sets:
                 p = getattr(s, name).detach()[: s.n_active]
@@ -88,8 +104,8 @@ class FingerIK:
                     p = torch.nn.functional.pad(p, (0, n - p.shape[-1]))
                 pad = p.new_zeros((E - s.n_active, *p.shape[1:]))
                 per.append(torch.cat([p, pad]))
-            params.append(torch.stack(per).reshape(F * E, *per[0].shape[1:]).to(dtype=dtype, device=device))
-        valid = torch.zeros(E, 1, F, dtype=torch.bool, device=device)
+            params.append(torch.stack(per).to(dtype=dtype, device=device))
+        valid = torch.zeros(E, 1, len(fingers), dtype=torch.bool, device=device)
         for k, s in enumerate(sets):
             valid[: s.n_active, 0, k] = True
 
@@ -98,12 +114,27 @@ class FingerIK:
                                 else getattr(s, attr) for s in sets]).to(dtype=dtype, device=device)
 
         lower, upper = stack("q_lower"), stack("q_upper")
-        kernel = self._kernels.get(fingers)
-        if kernel is None:
-            kernel = self._kernels[fingers] = FingerKernel([self.robot.fingers[f].chain for f in fingers], width=n)
-        bank = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
-                     (lower + upper) / 2, (upper - lower) / 2, lower, upper, kernel)
-        self._banks[key] = bank
+        bank = self._full[key] = _Bank(fingers, E, tuple(params), valid, stack("x_center"), stack("x_scale"),
+                                       (lower + upper) / 2, (upper - lower) / 2, lower, upper, self.kernel(fingers))
+        return bank
+
+    def _bank(self, fingers: tuple[str, ...], dtype: torch.dtype, device: torch.device) -> _Bank:
+        """The bank of ``fingers`` (any subset, any order): the rows of :meth:`_full_bank`, padded
+        to the subset's largest expert count E (params (F*E, ...)); the finger kernel selected from
+        the robot's (:meth:`~graspnet_torch.robot.fingers.FingerKernel.select`). Once per subset."""
+        key = (fingers, dtype, device)
+        bank = self._banks.get(key)
+        if bank is not None:
+            return bank
+        full = self._full_bank(dtype, device)
+        column = {f: k for k, f in enumerate(full.fingers)}
+        rows = torch.as_tensor([column[f] for f in fingers], device=device)
+        E = max(self.experts[f].n_active for f in fingers)
+        params = tuple(p.index_select(0, rows)[:, :E].reshape(len(fingers) * E, *p.shape[2:]) for p in full.params)
+        picked = [t.index_select(0, rows) for t in (full.x_center, full.x_scale, full.q_mid, full.q_half, full.lower,
+                                                     full.upper)]
+        bank = self._banks[key] = _Bank(fingers, E, params, full.valid[:E].index_select(2, rows).contiguous(), *picked,
+                                        self.kernel(fingers))
         return bank
 
     # ------------------------------------------------------------------ solving

@@ -201,11 +201,45 @@ class FingerKernel:
             plain = all(self.chains[k].identity for k in idx)
             kernel = ChainKernel(specs if self.stacked else specs[0])
             self._groups.append(_Group(idx, kernel, A, c, plain, {}))
+        self._finish()
+
+    def _finish(self) -> None:
         order = [k for g in self._groups for k in g.idx]
         self._inverse = torch.as_tensor(np.argsort(order))
         only = self._groups[0]
         # one group, no mimic joint, no padding: the stacked kernel itself
-        self._direct = only.kernel if len(self._groups) == 1 and only.plain and only.kernel.n_joints == n else None
+        self._direct = (only.kernel if len(self._groups) == 1 and only.plain and only.kernel.n_joints == self.n_joints
+                        else None)
+        self._selected: dict[tuple[int, ...], FingerKernel] = {}
+
+    def select(self, fingers: Sequence[int]) -> FingerKernel:
+        """The kernel of the fingers ``fingers`` (indices of this stacked kernel's chains, in that
+        order; joints ``(..., len(fingers), n)``, n as here), the same object for the same indices:
+        a robot's kernel built once serves every subset of its fingers. Made from this kernel's
+        parts (:meth:`~graspnet_torch.robot.kernel.ChainKernel.rows`); its results are those of
+        ``FingerKernel([chains[k] for k in fingers], width=n)``, bit for bit."""
+        key = tuple(int(k) for k in fingers)
+        sub = self._selected.get(key)
+        if sub is not None:
+            return sub
+        if not self.stacked or not key or min(key) < 0 or max(key) >= self.num_chains:
+            raise ValueError(f"select: fingers {list(key)} of a stacked kernel of {self.num_chains} finger(s)")
+        sub = object.__new__(FingerKernel)
+        sub.stacked, sub.num_chains, sub.n_joints = True, len(key), self.n_joints
+        sub.chains = tuple(self.chains[k] for k in key)
+        group_of = {k: (g, row) for g in self._groups for row, k in enumerate(g.idx)}
+        by_types: dict[tuple[str, ...], list[int]] = {}  # as the constructor groups them: first appearance
+        for pos, k in enumerate(key):
+            by_types.setdefault(self.chains[k].spec.joint_types, []).append(pos)
+        sub._groups = []
+        for idx in by_types.values():
+            g = group_of[key[idx[0]]][0]
+            rows = [group_of[key[pos]][1] for pos in idx]
+            sub._groups.append(_Group(idx, g.kernel.rows(rows), g.A[rows], g.c[rows],
+                                      all(sub.chains[pos].identity for pos in idx), {}))
+        sub._finish()
+        self._selected[key] = sub
+        return sub
 
     @property
     def specs(self) -> tuple[ChainSpec, ...]:

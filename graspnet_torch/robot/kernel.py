@@ -14,8 +14,9 @@ shape (K, B): for a revolute joint, with c = cos q and s = sin q, the rotation's
 and the fixed transforms that follow are applied as ``p += R' t`` and ``R = R' C``. Entries that
 are exactly 0 or 1, or equal across the stack, are folded at trace time (a URDF's axes and
 offsets are mostly zeros, so most of the 3x3 products vanish), and dead code is removed for each
-output mode. The geometric Jacobian uses ``J_v,i = z_i x (p - o_i)``, ``J_w,i = z_i`` (revolute) and
-``J_v,i = z_i`` (prismatic), where ``z_i``, ``o_i`` are joint i's axis and origin in the root frame.
+output mode (the tracer: :mod:`graspnet_torch.robot.trace`). The geometric Jacobian uses
+``J_v,i = z_i x (p - o_i)``, ``J_w,i = z_i`` (revolute) and ``J_v,i = z_i`` (prismatic), where
+``z_i``, ``o_i`` are joint i's axis and origin in the root frame.
 
 The result is a straight-line program of elementwise torch ops on contiguous (K, B) tensors: fast
 at large batch (memory-bound, no 3x3 bmm) and differentiable by autograd. It is checked against
@@ -32,29 +33,23 @@ one Kronecker product of the v_i and one matrix product; d p / d q_i replaces v_
 so FK and all n Jacobian columns come from one product over n + 1 variants: ~14 ops instead of ~60.
 ``strategy='auto'`` picks it when the work is small; both routes are tested against
 pytorch-kinematics.
+
+A kernel of some chains of a stack (:meth:`ChainKernel.rows`: a problem's contact fingers among
+a hand's) is made from the stack's parts, not traced and expanded again.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from graspnet_torch.robot.chain import ChainSpec
+from graspnet_torch.robot.trace import Program, compile_program, snap, trace_chain
 
 __all__ = ["ChainKernel"]
-
-_SNAP = 1e-12  # constants within this of 0 or +-1 are made exact
-
-
-def _snap(a: np.ndarray) -> np.ndarray:
-    a = np.where(np.abs(a) < _SNAP, 0.0, a)
-    a = np.where(np.abs(a - 1.0) < _SNAP, 1.0, a)
-    return np.where(np.abs(a + 1.0) < _SNAP, -1.0, a)
-
 
 def _axis_frame(axis: np.ndarray) -> np.ndarray:
     """A rotation A with ``A @ e_z = axis``; a signed permutation when ``axis`` is +-e_k."""
@@ -64,202 +59,7 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     c0 = helper - helper.dot(a) * a
     c0 /= np.linalg.norm(c0)
     c1 = np.cross(a, c0)
-    return _snap(np.stack([c0, c1, a], axis=1))
-
-
-class _Const:
-    """A value that does not depend on q: one float64 number per chain of the stack, (K,)."""
-
-    __slots__ = ("v",)
-
-    def __init__(self, v: np.ndarray):
-        self.v = v
-
-    def is_zero(self) -> bool:
-        return not np.any(self.v)
-
-
-_Value = "int | _Const"  # a register id or a constant
-
-
-@dataclass
-class _Instr:
-    dst: int
-    op: str  # mul | scale | axpy | addmul | addc
-    srcs: tuple[int, ...]
-    coef: int | None = None  # index into the coefficient table
-    value: float = 1.0
-
-
-@dataclass
-class _Trace:
-    """The traced program: instructions over registers 0..n_regs-1.
-
-    Registers ``0..n-1`` hold cos(q_i), ``n..2n-1`` sin(q_i) and ``2n..3n-1`` q_i; each is (K, B).
-    """
-
-    n: int
-    n_regs: int = 0
-    instrs: list[_Instr] = field(default_factory=list)
-    coefs: list[np.ndarray] = field(default_factory=list)  # (K,) per-chain coefficients
-    outputs: dict[str, list] = field(default_factory=dict)
-
-    def coef(self, c: np.ndarray) -> tuple[int | None, float]:
-        """A coefficient as a python float when equal across the stack, else a table index."""
-        if np.all(c == c[0]):
-            return None, float(c[0])
-        self.coefs.append(c)
-        return len(self.coefs) - 1, 1.0
-
-    def emit(self, op: str, srcs: tuple[int, ...], c: np.ndarray | None = None, value: float = 1.0) -> int:
-        coef = None
-        if c is not None:
-            coef, value = self.coef(c)
-        dst = self.n_regs
-        self.n_regs += 1
-        self.instrs.append(_Instr(dst, op, srcs, coef, value))
-        return dst
-
-
-class _Tracer:
-    """Symbolic evaluation of the chain over registers, with constant folding."""
-
-    def __init__(self, K: int, n: int):
-        self.K = K
-        self.t = _Trace(n=n, n_regs=3 * n)
-
-    def const(self, v) -> _Const:
-        return _Const(_snap(np.broadcast_to(np.asarray(v, dtype=np.float64), (self.K,)).copy()))
-
-    # terms: list of (coef (K,), factors: tuple of 1 or 2 registers); c0: constant part
-    @staticmethod
-    def prod(a, b, sign: float = 1.0) -> tuple[np.ndarray | float, list]:
-        if isinstance(a, _Const) and isinstance(b, _Const):
-            return sign * a.v * b.v, []
-        if isinstance(a, _Const):
-            return 0.0, [(sign * a.v, (b,))]
-        if isinstance(b, _Const):
-            return 0.0, [(sign * b.v, (a,))]
-        return 0.0, [(np.full(1, sign), tuple(sorted((a, b))))]
-
-    @staticmethod
-    def lin(coef, a) -> tuple[np.ndarray | float, list]:
-        if isinstance(a, _Const):
-            return coef * a.v, []
-        return 0.0, [(np.asarray(coef, dtype=np.float64) * np.ones(1), (a,))]
-
-    def sum(self, parts: Sequence[tuple]) -> int | _Const:
-        """Materialise a sum of ``prod``/``lin`` results; returns a register or a constant."""
-        c0 = np.zeros(self.K)
-        merged: dict[tuple[int, ...], np.ndarray] = {}
-        for const, terms in parts:
-            c0 = c0 + const
-            for coef, factors in terms:
-                merged[factors] = merged.get(factors, np.zeros(self.K)) + coef
-        items = [(f, _snap(np.broadcast_to(c, (self.K,)).copy())) for f, c in merged.items()]
-        items = [(f, c) for f, c in items if np.any(c)]
-        c0 = _snap(c0)
-        if not items:
-            return _Const(c0)
-
-        def cost(item):  # start with a free alias, then a scalar product
-            f, c = item
-            uniform = np.all(c == c[0])
-            return (0 if (len(f) == 1 and uniform and c[0] == 1.0) else 1 if uniform else 2)
-
-        items.sort(key=cost)
-        (f, c), rest = items[0], items[1:]
-        if len(f) == 1:
-            acc = f[0] if np.all(c == 1.0) else self.t.emit("scale", f, c)
-        else:
-            acc = self.t.emit("mul", f)
-            if not np.all(c == 1.0):
-                acc = self.t.emit("scale", (acc,), c)
-        for f, c in rest:
-            if len(f) == 1:
-                acc = self.t.emit("axpy", (acc, f[0]), c)
-            elif np.all(c == c[0]):
-                acc = self.t.emit("addmul", (acc, *f), value=float(c[0]))
-            else:
-                scaled = self.t.emit("scale", (f[0],), c)
-                acc = self.t.emit("addmul", (acc, scaled, f[1]), value=1.0)
-        if np.any(c0):
-            acc = self.t.emit("addc", (acc,), c0)
-        return acc
-
-
-def _trace(offsets: np.ndarray, types: tuple[str, ...]) -> _Trace:
-    """Trace T = G_0 M_0 G_1 ... M_{n-1} G_n; offsets: (K, n+1, 4, 4) with axes folded in."""
-    K, n = offsets.shape[0], len(types)
-    tr = _Tracer(K, n)
-    R = [[tr.const(offsets[:, 0, r, c]) for c in range(3)] for r in range(3)]  # R[row][col]
-    p = [tr.const(offsets[:, 0, r, 3]) for r in range(3)]
-    z_axes, origins = [], []
-    for i, kind in enumerate(types):
-        z_axes.append([R[r][2] for r in range(3)])
-        origins.append(list(p))
-        if kind == "revolute":
-            cos_i, sin_i = i, n + i
-            u = [tr.sum([tr.prod(cos_i, R[r][0]), tr.prod(sin_i, R[r][1])]) for r in range(3)]
-            v = [tr.sum([tr.prod(cos_i, R[r][1]), tr.prod(sin_i, R[r][0], -1.0)]) for r in range(3)]
-            R = [[u[r], v[r], R[r][2]] for r in range(3)]
-        else:
-            q_i = 2 * n + i
-            p = [tr.sum([tr.lin(1.0, p[r]), tr.prod(q_i, R[r][2])]) for r in range(3)]
-        G = offsets[:, i + 1]
-        p = [tr.sum([tr.lin(1.0, p[r])] + [tr.lin(G[:, k, 3], R[r][k]) for k in range(3)]) for r in range(3)]
-        R = [[tr.sum([tr.lin(G[:, k, c], R[r][k]) for k in range(3)]) for c in range(3)] for r in range(3)]
-    jv, jw = [], []
-    for i, kind in enumerate(types):
-        z = z_axes[i]
-        if kind == "revolute":
-            d = [tr.sum([tr.lin(1.0, p[r]), tr.lin(-1.0, origins[i][r])]) for r in range(3)]
-            jv.append([tr.sum([tr.prod(z[(r + 1) % 3], d[(r + 2) % 3]), tr.prod(z[(r + 2) % 3], d[(r + 1) % 3], -1.0)])
-                       for r in range(3)])
-            jw.append(z)
-        else:
-            jv.append(z)
-            jw.append([tr.const(0.0)] * 3)
-    tr.t.outputs = {
-        "p": p,
-        "R": [R[r][c] for r in range(3) for c in range(3)],
-        "Jv": [jv[i][r] for r in range(3) for i in range(n)],  # row-major (3, n)
-        "Jw": [jw[i][r] for r in range(3) for i in range(n)],
-    }
-    return tr.t
-
-
-@dataclass
-class _Program:
-    """A dead-code-eliminated trace bound to a dtype/device: ``steps`` run on the register list."""
-
-    n_regs: int
-    steps: list[tuple[int, Callable[[list], Tensor]]]
-    outputs: list  # register ids or (K, 1) constant tensors
-    n_ops: int
-
-
-def _bind(instr: _Instr, coefs: list[Tensor]) -> Callable[[list], Tensor]:
-    s, v = instr.srcs, instr.value
-    c = coefs[instr.coef] if instr.coef is not None else v
-    if instr.op == "mul":
-        a, b = s
-        return lambda r: r[a] * r[b]
-    if instr.op == "scale":
-        (a,) = s
-        return lambda r: r[a] * c
-    if instr.op == "axpy":
-        a, b = s
-        if instr.coef is None:
-            return lambda r: torch.add(r[a], r[b], alpha=v)
-        return lambda r: torch.addcmul(r[a], r[b], c)
-    if instr.op == "addmul":
-        a, b, d = s
-        return lambda r: torch.addcmul(r[a], r[b], r[d], value=v)
-    if instr.op == "addc":
-        (a,) = s
-        return lambda r: r[a] + c
-    raise AssertionError(instr.op)
+    return snap(np.stack([c0, c1, a], axis=1))
 
 
 _REV_TERMS = np.stack([np.diag([0.0, 0.0, 1.0, 1.0]), np.diag([1.0, 1.0, 0.0, 0.0]),
@@ -304,11 +104,36 @@ class ChainKernel:
         self.joint_types = types
         self.n_joints = len(types)
         self.num_chains = len(self.specs)
-        folded = np.stack([self._fold(spec) for spec in self.specs])  # (K, n+1, 4, 4)
-        self._trace = _trace(folded, types)
-        self._programs: dict[tuple, _Program] = {}
-        self._ml_weights = _multilinear_weights(folded, types) if self.n_joints <= MULTILINEAR_MAX_JOINTS else None
+        self._folded = np.stack([self._fold(spec) for spec in self.specs])  # (K, n+1, 4, 4)
+        self._trace = trace_chain(self._folded, types)
+        self._ml_weights = (_multilinear_weights(self._folded, types) if self.n_joints <= MULTILINEAR_MAX_JOINTS
+                            else None)
+        self._programs: dict[tuple, Program] = {}
         self._ml_cache: dict[tuple, tuple[Tensor, Tensor]] = {}
+        self._views: dict[tuple[int, ...], ChainKernel] = {}
+
+    def rows(self, rows: Sequence[int]) -> ChainKernel:
+        """The kernel of the chains ``rows`` of this stack, in that order (joints ``(..., len(rows),
+        n)``), the same object for the same rows. Built from this kernel's parts: the folded
+        offsets and multilinear weights at those rows, and its traced program with the
+        coefficients at those rows wherever the rows fold alike
+        (:meth:`~graspnet_torch.robot.trace.Trace.folds_alike`), else the rows traced anew. Either
+        way its results are those of ``ChainKernel([specs[r] for r in rows])``, bit for bit."""
+        key = tuple(int(r) for r in rows)
+        view = self._views.get(key)
+        if view is None:
+            if not key or min(key) < 0 or max(key) >= self.num_chains:
+                raise ValueError(f"rows {list(key)} of a stack of {self.num_chains} chain(s)")
+            view = object.__new__(ChainKernel)
+            view.stacked, view.specs = True, tuple(self.specs[r] for r in key)
+            view.joint_types, view.n_joints, view.num_chains = self.joint_types, self.n_joints, len(key)
+            view._folded = self._folded[list(key)]
+            view._trace = (self._trace.rows(key) if self._trace.folds_alike(key)
+                           else trace_chain(view._folded, self.joint_types))
+            view._ml_weights = None if self._ml_weights is None else self._ml_weights[list(key)]
+            view._programs, view._ml_cache, view._views = {}, {}, {}
+            self._views[key] = view
+        return view
 
     @staticmethod
     def _fold(spec: ChainSpec) -> np.ndarray:
@@ -317,29 +142,14 @@ class ChainKernel:
         A = [np.eye(4) for _ in range(n + 2)]  # A[i+1] belongs to joint i; A[0] = A[n+1] = I
         for i in range(n):
             A[i + 1][:3, :3] = _axis_frame(spec.axes[i])
-        return np.stack([_snap(A[i].T @ spec.offsets[i] @ A[i + 1]) for i in range(n + 1)])
+        return np.stack([snap(A[i].T @ spec.offsets[i] @ A[i + 1]) for i in range(n + 1)])
 
     # ------------------------------------------------------------------ compile and run
-    def _program(self, outputs: tuple[str, ...], dtype: torch.dtype, device: torch.device) -> _Program:
+    def _program(self, outputs: tuple[str, ...], dtype: torch.dtype, device: torch.device) -> Program:
         key = (outputs, dtype, device)
         prog = self._programs.get(key)
-        if prog is not None:
-            return prog
-        tr = self._trace
-        values = [v for name in outputs for v in tr.outputs[name]]
-        live = {v for v in values if isinstance(v, int)}
-        kept = []
-        for ins in reversed(tr.instrs):  # dead-code elimination
-            if ins.dst in live:
-                kept.append(ins)
-                live.update(ins.srcs)
-        kept.reverse()
-        coefs = [torch.as_tensor(c, dtype=dtype, device=device).reshape(-1, 1) for c in tr.coefs]
-        steps = [(ins.dst, _bind(ins, coefs)) for ins in kept]
-        outs = [v if isinstance(v, int) else torch.as_tensor(v.v, dtype=dtype, device=device).reshape(-1, 1)
-                for v in values]
-        prog = _Program(tr.n_regs, steps, outs, len(kept))
-        self._programs[key] = prog
+        if prog is None:
+            prog = self._programs[key] = compile_program(self._trace, outputs, dtype, device)
         return prog
 
     def num_ops(self, outputs: tuple[str, ...] = ("p",)) -> int:

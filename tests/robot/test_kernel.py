@@ -203,3 +203,56 @@ def test_closed_form_index_finger(hand, gen):
     assert (ChainKernel(spec).position(q) - expected).abs().max() < 1e-12
     assert math.isclose(float(torch.linalg.norm(ChainKernel(spec).position(torch.zeros(4, dtype=torch.float64)))),
                         l1 + l2 + l3, rel_tol=1e-12)
+
+
+def _same(a, b) -> bool:
+    a, b = (a,) if isinstance(a, torch.Tensor) else a, (b,) if isinstance(b, torch.Tensor) else b
+    return all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def test_rows_of_a_stack_equal_a_stack_of_those_chains_bit_for_bit(hand, gen):
+    """A kernel of some chains of a stack (a problem's contact fingers among the hand's) is the
+    stack's, rows selected: the same object for the same rows, and the results of a kernel built
+    from those chains alone, bit for bit, on both routes (small and large batches), in float32
+    and float64; single chains (which fold otherwise) included."""
+    specs = [f.chain.spec for f in hand.fingers.values()]
+    stack = ChainKernel(specs)
+    for rows in [(0, 1), (1, 3, 4), (4, 2, 0), (0, 1, 2, 3, 4), (3,), (2,)]:
+        view = stack.rows(rows)
+        assert view is stack.rows(list(rows)) and view.num_chains == len(rows)
+        alone = ChainKernel([specs[r] for r in rows])
+        assert view.num_ops(("p", "Jv")) == alone.num_ops(("p", "Jv"))
+        lo = torch.as_tensor(np.stack([specs[r].lower for r in rows]))
+        hi = torch.as_tensor(np.stack([specs[r].upper for r in rows]))
+        for batch in (3, 500):
+            q = uniform(lo, hi, batch, gen)
+            for dtype in (torch.float32, torch.float64):
+                qq = q.to(dtype)
+                for fn in ("position", "position_jacobian", "pose", "pose_jacobian"):
+                    assert _same(getattr(view, fn)(qq), getattr(alone, fn)(qq)), (rows, batch, dtype, fn)
+        ref = np.stack([np.stack([specs[r].transform(row)[:3, 3] for r, row in zip(rows, qk, strict=True)])
+                        for qk in q[:20].numpy()])  # the chains' own float64 evaluation
+        np.testing.assert_allclose(view.position(q[:20]).numpy(), ref, atol=1e-12)
+
+
+def test_rows_that_fold_otherwise_are_traced_anew(tmp_path, gen):
+    """Where the chosen rows alone fold otherwise than the stack (here: an offset that is zero
+    for the first chain only), their program is their own, with fewer ops than the stack's, and
+    their results are those of a kernel built from them alone."""
+    straight = _planar_urdf("0 0 1")
+    bent = straight.replace('<origin xyz="0.05 0.01 -0.02"/>', '<origin xyz="0.05 0.01 0.03"/>').replace(
+        '<origin xyz="0 0.02 0" rpy="0 0 0.4"/>', '<origin xyz="0 0.02 0.01" rpy="0 0 0.4"/>')
+    specs = []
+    for k, text in enumerate((straight.replace("0.05 0.01 -0.02", "0.05 0.01 0"), bent)):
+        path = tmp_path / f"c{k}.urdf"
+        path.write_text(text)
+        specs.append(UrdfModel(path).chain_spec("base", "tip"))
+    stack = ChainKernel(specs)
+    first = stack.rows([0])
+    alone = ChainKernel([specs[0]])
+    assert first.num_ops(("p", "Jv")) == alone.num_ops(("p", "Jv")) < stack.num_ops(("p", "Jv"))
+    q = uniform(specs[0].lower, specs[0].upper, 300, gen).unsqueeze(1)
+    for dtype in (torch.float32, torch.float64):
+        assert _same(first.position_jacobian(q.to(dtype)), alone.position_jacobian(q.to(dtype)))
+    with pytest.raises(ValueError, match=r"rows \[2\] of a stack of 2"):
+        stack.rows([2])

@@ -1,0 +1,204 @@
+"""The whole configuration of a finger environment: x = [configuration (n), the contact fingers'
+joints (F * j)], float64 on the CPU: what the whole polish, ``solver=dls`` and a warm start move
+together (padding slots have limits [0, 0]). Mixed into
+:class:`~graspnet_torch.solver.fingers.FingerEnvironment`, whose attributes it reads.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Self
+
+import torch
+from torch import Tensor
+
+from graspnet_torch.solver.environment import Done, Evaluation
+
+if TYPE_CHECKING:
+    from graspnet_torch.collision.proxy import CollisionProxy
+    from graspnet_torch.fcnn.ik import FingerIK
+    from graspnet_torch.robot.robot import Posture, Robot
+    from graspnet_torch.solver.least_squares import LMResult
+
+__all__ = ["WholeConfiguration"]
+
+
+class WholeConfiguration:
+    """The whole-configuration methods of :class:`~graspnet_torch.solver.fingers.FingerEnvironment`
+    (its attributes below; :meth:`palm_frame_jacobian`, :meth:`bounds64`, :meth:`clamp`,
+    :meth:`bases` and the others it calls are the environment's)."""
+
+    robot: Robot
+    ik: FingerIK
+    n: int
+    idx: list[int]
+    fingers: tuple[str, ...]
+    mask: Tensor | None
+    contacts64: Tensor
+    lower: Tensor
+    proxy: CollisionProxy | None
+    joint_box: tuple[Tensor, Tensor] | None
+    polish_iterations: int
+    polish_tol: float
+    min_gain: float
+
+    def near(self, posture: Posture, step_deg: float | None) -> Self:
+        """Keep the contact fingers' joints within ``step_deg`` degrees (a prismatic joint: that
+        many mm) of the posture's, within their limits (None: the limits only): a warm start
+        from the previous frame of a sequence moves no finger joint by more. Returns self."""
+        if step_deg is not None:
+            import math
+
+            chains = [self.robot.fingers[self.robot.finger_names[i]].chain for i in self.idx]
+            j = self.robot.joints_per_finger
+            unit = torch.tensor([[math.radians(step_deg) if c.spec.joint_types[k] != "prismatic" else step_deg / 1000
+                                  for k in c.free] + [0.0] * (j - len(c.free))  # free joints; padding slots
+                                 for c in chains], dtype=torch.float64)
+            q = posture.fingers[self.idx].to(torch.float64)
+            flo, fhi = (torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
+            lo, hi = torch.maximum(flo, q - unit), torch.minimum(fhi, q + unit)
+            self.joint_box = (torch.minimum(lo, fhi), torch.maximum(hi, flo))  # a posture beyond a limit: the limit
+        return self
+
+    def whole_bounds(self, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Lower and upper bounds of x, (m,) or (B, m) for a batch: the configuration's bounds,
+        then the joint limits (or :attr:`joint_box`)."""
+        box = self.joint_box if self.joint_box is not None else \
+            tuple(torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
+        flo, fhi = (b.reshape(-1) for b in box)
+        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
+        if lo.dim() == 2:
+            flo, fhi = flo.expand(lo.shape[0], -1), fhi.expand(lo.shape[0], -1)
+        return torch.cat([lo, flo], -1), torch.cat([hi, fhi], -1)
+
+    def whole_start(self, config: Tensor, joints: Tensor, rows: Tensor | None = None) -> Tensor:
+        """x (B, m) of configurations (B, n) and contact-finger joints (B, F, j), within bounds."""
+        lo, hi = self.whole_bounds(rows)
+        B = config.shape[0]
+        x = torch.cat([self.clamp(config, rows), joints.detach().to(torch.float64).cpu().reshape(B, -1)], 1)
+        return torch.minimum(torch.maximum(x, lo), hi)
+
+    def whole_of(self, posture: Posture) -> Tensor:
+        """x (1, m) of a posture: :meth:`config_of` its palm (or body), its contact fingers' joints."""
+        joints = posture.fingers[self.idx].to(torch.float64).unsqueeze(0)
+        return self.whole_start(self.config_of(posture), joints, None if self.mask is None else torch.zeros(1).long())
+
+    def config_of(self, posture: Posture) -> Tensor:
+        """(1, n) the configuration that places the palm (or the body) where ``posture`` has it."""
+        raise NotImplementedError
+
+    def random_whole(self, trials: int, gen: torch.Generator) -> Tensor:
+        """x (T, m) uniform within the bounds and joint limits (``solver=dls``'s restarts)."""
+        lo, hi = self.whole_bounds()
+        u = torch.rand(trials, lo.shape[-1], generator=gen, dtype=torch.float64, device=gen.device).cpu()
+        return lo + (hi - lo) * u
+
+    def _goal64(self, rows: Tensor | None = None) -> Tensor:
+        """The contacts, flattened, float64: (3F,) or (B, 3F) for a batch (zero where masked)."""
+        c = self._rows(self.contacts64, rows)
+        if self.mask is None:
+            return c.reshape(-1)
+        return (c * self._rows(self.mask, rows).to(c).unsqueeze(-1).cpu()).reshape(c.shape[0], -1)
+
+    def whole_tips(self, x: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Contact fingertips in the world, flattened, of x (B, m) float64 of the trials ``rows``
+        -> (B, 3F), and their Jacobian d tips / d x (B, 3F, m) (zero where a batch's mask is): the
+        palm's columns by :func:`~graspnet_torch.robot.transforms.frame_point_jacobian`, each
+        finger's R B_R dk/dq (free joints; mimic joints through their coupling)."""
+        from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
+
+        B, F, j, n = x.shape[0], len(self.idx), self.robot.joints_per_finger, self.n
+        R, t, Jc = self.palm_frame_jacobian(x[:, :n])
+        kernel = self.ik.kernel(self.fingers)
+        local, Jq = kernel.position_jacobian(x[:, n:].reshape(B, F, j))  # (B, F, 3), (B, F, 3, j)
+        base_R, base_t = self.bases(x[:, :n])
+        in_palm = transform_points(base_R, base_t, local)
+        tips = transform_points(R.unsqueeze(1), t.unsqueeze(1), in_palm)
+        palm = frame_point_jacobian(R, Jc, in_palm)  # (B, F, 3, n); zero in the shared joints' columns
+        if self.shared_slots:  # the bases move with the shared joints: central differences, d in_palm / d s
+            S, h = self.shared_slots, 1e-6
+            for k in range(S):
+                step = torch.zeros_like(x[:, :n])
+                step[:, n - S + k] = h
+                moved = [transform_points(*self.bases(x[:, :n] + sign * step), local) for sign in (1.0, -1.0)]
+                palm[..., n - S + k] = (R.unsqueeze(1) @ ((moved[0] - moved[1]) / (2 * h)).unsqueeze(-1)).squeeze(-1)
+            fingers = torch.einsum("nab,nfbc,nfcj->nfaj", R, base_R, Jq)  # R B_R(s) dk/dq
+        else:
+            fingers = torch.einsum("nab,nfbj->nfaj", R, torch.einsum("fab,nfbj->nfaj", base_R, Jq))  # R B_R dk/dq
+        mask = self._rows(self.mask, rows)
+        if mask is not None:
+            mask = mask.to(tips).cpu().unsqueeze(-1)
+            tips, palm, fingers = tips * mask, palm * mask.unsqueeze(-1), fingers * mask.unsqueeze(-1)
+        J = x.new_zeros(B, F, 3, n + F * j)
+        J[..., :n] = palm
+        J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
+        return tips.reshape(B, -1), J.reshape(B, 3 * F, -1)
+
+    def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
+        """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
+        F, j = len(self.idx), self.robot.joints_per_finger
+        config = x[:, : self.n].to(self.lower)
+        q = x[:, self.n:].reshape(-1, F, j).to(self.lower)
+        return self.proxy.count(self.palm_frame(config), self._every(q, rows), self.body(config), None,
+                                self._pid(rows), self._all_bases(config)).cpu()
+
+    def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
+                    trace: list[Tensor] | None = None, rows: Tensor | None = None,
+                    prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
+        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
+        their contacts, within bounds and limits, never into a collision the proxy sees (when
+        there is one); ``prior``: its (centre, weight), see there."""
+        from graspnet_torch.solver.least_squares import levenberg_marquardt
+
+        trials = None if rows is None else rows.cpu()
+
+        def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
+            return self.whole_tips(xx, r if trials is None else trials[r])
+
+        def count(xx: Tensor, r: Tensor) -> Tensor:
+            return self._count64(xx, r if trials is None else trials[r])
+
+        lo, hi = self.whole_bounds(trials)
+        return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
+                                   trace=trace, count=count if self.proxy is not None else None,
+                                   min_gain=self.min_gain, prior=prior)
+
+    def centre(self, x: Tensor, weight: float, iterations: int) -> Tensor:
+        """x (B, m) moved toward the middle of the contact fingers' joint ranges while their
+        fingertips stay on the contacts: Levenberg-Marquardt with a prior pulling each joint to
+        the middle of its range (weight ``weight`` per range), the weight lowered to 0 in six
+        steps of ``iterations`` each (the fit tightens as the pull fades). The result fits
+        roughly; a plain :meth:`local_solve` lands it."""
+        lo, hi = (torch.as_tensor(a)[self.idx].reshape(-1) for a in self.robot.finger_limits)
+        span = hi - lo
+        w = torch.zeros(x.shape[1], dtype=torch.float64)
+        w[self.n:] = torch.where(span > 1e-9, weight / span.clamp_min(1e-9), 0.0)
+        middle = torch.zeros_like(w)
+        middle[self.n:] = (lo + hi) / 2
+        for k in range(6):
+            x = self.local_solve(x, iterations, prior=(middle, w / 3 ** k)).x
+        return x
+
+    def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:
+        """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""
+        B, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
+        goal = self._goal64(None if rows is None else rows.cpu())
+        finger_err = (goal - solved.value).reshape(B, F, 3).norm(dim=-1)
+        kw = {"dtype": like.dtype, "device": like.device}
+        count = solved.count
+        return solved.x[:, : self.n].to(**kw), Evaluation(
+            error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
+            joints=solved.x[:, self.n:].reshape(B, F, j).to(**kw),
+            collisions=None if count is None else count.to(like.device))
+
+    def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
+               ) -> tuple[Tensor, Evaluation]:
+        """``solver.polish.iterations`` Levenberg-Marquardt steps on the whole configuration (palm
+        pose or arm joints) together with the contact fingers' free joints (:meth:`local_solve`),
+        from the reported ones, of the trials ``trials``: never worse. The loop finds the basin;
+        the fingers alone, with the palm fixed, end where the palm left them (a few mm), the whole
+        polish lands in it. Rows stop below ``solver.polish.tolerance_mm`` or when ``done`` says so."""
+        x = self.whole_start(config, evaluation.joints, trials)
+        solved = self.local_solve(x, self.polish_iterations, self.polish_tol, done, rows=trials)
+        return self.whole_result(solved, config, trials)
+
