@@ -9,8 +9,8 @@ A robot with a body (an arm carrying a hand, the MANUS) moves in three straight 
 3. at the grasp, the fingers close on their contacts (where, as in the result, the contact
    fingertips may touch the object).
 
-The opening (:func:`_openings`): fingers at the grasp with no link touching the object, from which
-the fingers close onto the grasp clear: each contact fingertip backed off its contact by up to
+The opening (:mod:`~graspnet_torch.motion.openings`): fingers at the grasp with no link touching the
+object, from which the fingers close onto the grasp clear: each contact fingertip backed off its contact by up to
 4 cm, away from the object's centre or curling toward the palm (finger inverse kinematics), or
 the fingers straightened toward their home; each finger at its own most open clear one first. A
 gripper (the MANUS) has no fingers: its jaws may touch the object as in the result. A free hand
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,6 +30,7 @@ import torch
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.motion.config import ReachCfg
+from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path
 from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
@@ -42,8 +42,6 @@ if TYPE_CHECKING:
 
 __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_reach", "start_posture"]
 
-OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
-OPEN_TOWARD_HOME = (1.0, 0.75, 0.5, 0.25)  # else: the fingers this far from the grasp's toward their home
 PLANNER = "RRTConnect"
 DETOUR_DEG, DETOUR_M = 15.0, 0.05  # a detour searches this far around the stretch it replaces
 COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
@@ -194,102 +192,6 @@ def colliding_row(checker: MotionChecker, rows: np.ndarray, resolution_deg: floa
     return None
 
 
-def _opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> np.ndarray | None:
-    """The most open of :func:`_openings`, or None."""
-    return next(iter(_openings(checker, problem, goal, cfg)), None)
-
-
-def _openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> Iterator[np.ndarray]:
-    """The pre-grasp states at the grasp, clear of the object with no link touching it and whose
-    closing onto the grasp is clear; the other fingers as in the grasp (a gripper: the grasp
-    itself). First each contact finger at its own first clear candidate (:func:`_finger_by_finger`),
-    then every candidate for all fingers at once, in order: each contact fingertip backed off from
-    its contact by each of :data:`OPENINGS_M` away from the object's centre (or the contacts'
-    centroid; finger inverse kinematics), then by each toward the palm (curling), then the
-    fingers straightened toward their home by :data:`OPEN_TOWARD_HOME`."""
-    from graspnet_torch.robot.ik import refine
-
-    robot, m = checker.robot, checker.layout.body
-    if robot.n_fingers == 0:
-        yield goal
-        return
-    posture = checker.posture(goal)
-    contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
-    centre = np.asarray(problem.object.pose[:3], dtype=np.float64) if problem.object is not None else contacts.mean(0)
-    out = contacts - centre
-    norms = np.linalg.norm(out, axis=1, keepdims=True)
-    palm = posture.palm_pose[:3].numpy()
-    out = np.where(norms > 1e-6, out / np.maximum(norms, 1e-12), (palm - contacts) /
-                   np.maximum(np.linalg.norm(palm - contacts, axis=1, keepdims=True), 1e-12))
-    if robot.has_body:
-        tips = robot.fingertips_world_from_body(posture.body, posture.fingers)
-    else:
-        tips = robot.fingertips_world(posture.palm_pose, posture.fingers)
-    lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
-    rows = [robot.finger_index(f) for f in problem.fingers]
-    res = (cfg.resolution_deg, cfg.resolution_mm)
-    mask = torch.as_tensor(robot.finger_mask)
-    inward = palm - contacts  # curling back toward the palm, where backing off outward is blocked
-    inward = inward / np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-12)
-    candidates = []
-    for direction, distance in [(out, d) for d in OPENINGS_M] + [(inward, d) for d in OPENINGS_M]:
-        targets = tips.clone()
-        targets[rows] = torch.as_tensor(contacts + distance * direction)
-        if robot.has_body:
-            bases = robot.world_to_bases_from_body(targets, posture.body)
-        else:
-            bases = robot.world_to_bases(targets, posture.palm_pose)
-        q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, 40)
-        candidates.append(q[mask].numpy())
-    home = robot.home_posture(torch.float64).fingers[mask].numpy()
-    grasp = goal[m:]
-    candidates += [grasp + f * (home - grasp) for f in OPEN_TOWARD_HOME]  # the fingers straightened
-    mixed = _finger_by_finger(checker, problem, goal, np.stack(candidates))
-    for fingers in ([mixed] if mixed is not None else []) + candidates:
-        pre = goal.copy()
-        pre[m:] = fingers
-        if checker.strictly_clear(pre[None])[0] and checker.first_collision(pre, goal, *res) is None:
-            yield pre
-
-
-def _finger_by_finger(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, candidates: np.ndarray
-                      ) -> np.ndarray | None:
-    """Each contact finger at the first of the candidate openings (C, n_free) at which none of its
-    own links collides (the other fingers as in the grasp); None where a finger has none."""
-    robot, m = checker.robot, checker.layout.body
-    owner = np.repeat(np.arange(robot.n_fingers)[:, None], robot.joints_per_finger, 1)[robot.finger_mask]
-    out = goal[m:].copy()
-    for name in problem.fingers:
-        cols = np.nonzero(owner == robot.finger_index(name))[0]
-        states = np.repeat(goal[None], len(candidates), 0)
-        states[:, m + cols] = candidates[:, cols]
-        links = _finger_links(robot, name)
-        for c, report in enumerate(checker.scene.check_many(checker.postures(states))):
-            hit = {link for link, _ in report.obstacle_pairs} | set(report.object_links) | \
-                {link for pair in report.self_pairs for link in pair}
-            if not hit & links:
-                out[cols] = candidates[c, cols]
-                break
-        else:
-            return None
-    return out
-
-
-def _finger_links(robot: Robot, name: str) -> set[str]:
-    """The links a finger's joints move."""
-    joints = set(robot.fingers[name].chain.all_joint_names)
-    out = set()
-    for link in robot.urdf.links:
-        at = link
-        while at in robot.urdf.parent_joint:
-            joint = robot.urdf.parent_joint[at]
-            if joint.name in joints:
-                out.add(link)
-                break
-            at = joint.parent
-    return out
-
-
 def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg,
                deadline: float) -> tuple[np.ndarray | None, str]:
     """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers
@@ -298,7 +200,7 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     base and arm are planned together (by :func:`_plan`, until ``deadline``)."""
     m = checker.layout.body
     start = checker.state(start_posture(robot, problem))
-    pre = _opening(checker, problem, goal, cfg)
+    pre = opening(checker, problem, goal, cfg)
     if pre is None:
         return None, "no pre-grasp opening of the fingers at the grasp is clear of the object"
     opened = start.copy()
@@ -418,7 +320,7 @@ def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
             directions.append(d / np.linalg.norm(d))
     res = (cfg.resolution_deg, cfg.resolution_mm)
     reason = "no pre-grasp opening of the fingers at the grasp is clear of the object"
-    for pre in _openings(checker, problem, goal, cfg):
+    for pre in openings(checker, problem, goal, cfg):
         for direction in directions:
             back = pre.copy()
             back[:3] = palm + cfg.backoff_m * direction
