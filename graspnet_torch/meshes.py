@@ -17,7 +17,8 @@ anything is built from them.
   has no inside to cut.
 
 :func:`load_trimesh` is trimesh's loader with the side files a mesh names (OBJ materials and
-textures, glTF buffers) limited to regular files of at most ``MAX_MESH_BYTES`` in the mesh's folder.
+textures, glTF buffers) limited to regular files of at most ``MAX_MESH_BYTES`` in the mesh's folder;
+:func:`load_mesh` is the one mesh of a file a problem's object or obstacle is built from (cached).
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ from graspnet_torch.errors import ConfigError, GraspnetError
 from graspnet_torch.files import MAX_MESH_BYTES
 from graspnet_torch.settings import MAX_LENGTH_M, clip
 
-__all__ = ["FACES_VARIABLE", "MAX_MESH_FACES", "MESH_FORMATS", "MIN_THICKNESS_M", "check_mesh_file", "load_trimesh",
-           "max_mesh_faces", "mesh_format"]
+__all__ = ["FACES_VARIABLE", "MAX_MESH_FACES", "MESH_FORMATS", "MIN_THICKNESS_M", "check_mesh_file", "load_mesh",
+           "load_trimesh", "max_mesh_faces", "mesh_format"]
 
 MAX_MESH_FACES = 200_000  # the largest mesh of pybullet_data has 124,789; a robot's link or an object far fewer
 FACES_VARIABLE = "GRASPNET_TORCH_MAX_MESH_FACES"  # raises MAX_MESH_FACES
@@ -100,6 +101,19 @@ def load_trimesh(path: str | os.PathLike, **kwargs):
     import trimesh
 
     return trimesh.load(Path(path), force="mesh", resolver=_resolver(Path(path)), **kwargs)
+
+
+@lru_cache(maxsize=32)
+def load_mesh(path: Path, scale: float = 1.0):
+    """A mesh file as one ``trimesh.Trimesh`` (a scene's geometry concatenated; vertices split by
+    texture seams or normals merged, so that a closed surface is watertight), scaled; cached per
+    process: do not modify it. A user's file is checked first (:func:`check_mesh_file`, from the
+    problem's validation)."""
+    mesh = load_trimesh(Path(path))
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    if scale != 1.0:
+        mesh.apply_scale(scale)
+    return mesh
 
 
 def _resolver(path: Path):

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.geometry import Shape as LinkShape
 from graspnet_torch.tasks.shapes import Shape, pose_matrix
 
@@ -65,8 +66,6 @@ def shape_box(shape: Shape) -> tuple[np.ndarray, np.ndarray]:
     """An obstacle's or object's box: its pose (4, 4) in the world and half extents (3,)."""
     pose = pose_matrix(np.asarray(shape.pose, dtype=np.float64))
     if shape.kind == "mesh":
-        from graspnet_torch.collision.mesh import load_mesh
-
         mesh = load_mesh(Path(shape.mesh).resolve(), shape.scale)
         T, half = _vertices_box(np.asarray(mesh.vertices, dtype=np.float64))
         return pose @ T, half

@@ -35,8 +35,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspnet_torch.collision.mesh import load_mesh
 from graspnet_torch.io import atomic_path
+from graspnet_torch.meshes import load_mesh
 
 __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
 

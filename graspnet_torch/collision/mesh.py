@@ -24,36 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-from graspnet_torch.meshes import load_trimesh
+from graspnet_torch.meshes import load_mesh
 
-__all__ = ["MeshQuery", "load_mesh", "mesh_bvh", "mesh_query", "point_triangle_distance", "shape_points"]
+__all__ = ["MeshQuery", "mesh_query", "point_triangle_distance", "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
 CHUNK = 64  # inside points measured at a time
 RAY = np.array([0.4395064455, 0.617598629942, 0.652231566745])  # the inside test's ray (trimesh's default)
 MAX_POINTS = 1500
-
-
-@lru_cache(maxsize=32)
-def load_mesh(path: Path, scale: float = 1.0):
-    """A mesh file as one ``trimesh.Trimesh`` (a scene's geometry concatenated; vertices split by
-    texture seams or normals merged, so that a closed surface is watertight), scaled; cached per
-    process: do not modify it. A user's file is checked first
-    (:func:`graspnet_torch.meshes.check_mesh_file`, from the problem's validation)."""
-    mesh = load_trimesh(Path(path))
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)
-    if scale != 1.0:
-        mesh.apply_scale(scale)
-    return mesh
-
-
-@lru_cache(maxsize=32)
-def mesh_bvh(path: Path, scale: float = 1.0):
-    """The FCL BVH model of a mesh file (cached; shared by the collision objects that use it)."""
-    from graspnet_torch.collision.scene import fcl_geometry
-
-    return fcl_geometry("mesh", (), load_mesh(path, scale))
 
 
 def shape_points(kind: str, size: tuple[float, ...], mesh=None) -> np.ndarray:

@@ -23,16 +23,17 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from graspnet_torch.collision.boxes import boxes_apart, link_box, shape_box
+from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry, mesh_bvh
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
-__all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "fcl_geometry", "has_environment",
-           "link_geometry", "self_collision_pairs"]
+__all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "has_environment", "self_collision_pairs"]
 
 FLOOR_SIZE = (100.0, 100.0, 1.0)  # m: the floor slab (centred under the world origin)
 FLOOR_GAP = 0.001  # m: its top lies this far below the robot's floor height
@@ -92,7 +93,7 @@ def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
         frames = robot.link_frames(robot.home_posture())
         objects: dict[str, list] = {}
         for shape in shapes:
-            placed = _transform(frames[shape.link] @ shape.origin)
+            placed = fcl_transform(frames[shape.link] @ shape.origin)
             obj = fcl.CollisionObject(link_geometry(shape), placed)
             objects.setdefault(shape.link, []).append(obj)
         for i, a in enumerate(with_geometry):
@@ -109,37 +110,6 @@ def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
 OBJECT_TOLERANCE_M = 0.002
 
 
-def fcl_geometry(kind: str, size: tuple[float, ...], mesh=None):
-    """An FCL geometry: box (full extents), cylinder (radius, length along z), sphere (radius), or
-    a triangle mesh (a ``trimesh.Trimesh`` in its own frame)."""
-    import fcl
-
-    if kind == "box":
-        return fcl.Box(*size)
-    if kind == "cylinder":
-        return fcl.Cylinder(size[0], size[1])
-    if kind == "sphere":
-        return fcl.Sphere(size[0])
-    model = fcl.BVHModel()
-    model.beginModel(len(mesh.vertices), len(mesh.faces))
-    model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
-    model.endModel()
-    return model
-
-
-def link_geometry(shape) -> object:
-    """The FCL geometry of a link's shape (``robot.geometry.Shape``): a primitive, or a mesh as a
-    ``BVHModel`` of its triangles (a surface: FCL finds where it crosses another geometry, not a
-    geometry wholly inside a closed mesh)."""
-    return fcl_geometry(shape.kind, shape.size, shape.mesh)
-
-
-def _transform(T: np.ndarray):
-    import fcl
-
-    return fcl.Transform(T[:3, :3], T[:3, 3])
-
-
 def _environment_object(shape: Shape):
     """An obstacle or the object as an FCL collision object at its pose in the world."""
     import fcl
@@ -150,14 +120,10 @@ def _environment_object(shape: Shape):
     T[:3, :3] = rpy_matrix_np(shape.pose[3:])
     T[:3, 3] = shape.pose[:3]
     if shape.kind == "mesh":
-        from pathlib import Path
-
-        from graspnet_torch.collision.mesh import mesh_bvh
-
         geometry = mesh_bvh(Path(shape.mesh).resolve(), shape.scale)
     else:
         geometry = fcl_geometry(shape.kind, shape.size)
-    return fcl.CollisionObject(geometry, _transform(T))
+    return fcl.CollisionObject(geometry, fcl_transform(T))
 
 
 @dataclass
@@ -317,7 +283,7 @@ class CollisionScene:
         def put(i: int) -> None:
             if i not in placed:
                 placed.add(i)
-                self.link_objects[i].setTransform(_transform(frames[self._frame_of[i]] @ self.shapes[i].origin))
+                self.link_objects[i].setTransform(fcl_transform(frames[self._frame_of[i]] @ self.shapes[i].origin))
 
         request = fcl.CollisionRequest()
         found: set[tuple[str, int]] = set()

@@ -8,7 +8,7 @@ the wall time of the whole ``gt.solve`` call. Two stop rules: every learner runs
 learners succeeded: "give me a grasp").
 
 ``random``: ``random_problems`` problems of
-:func:`~graspnet_torch.tasks.random.random_obstacle_problems` (seed 7), solved with R3 and ``trials``
+:func:`~graspnet_torch.collision.problems.random_obstacle_problems` (seed 7), solved with R3 and ``trials``
 (16) learners (seed k + 1 for problem k): solved when the best trial is collision-free with total
 error < 10 mm.
 """
@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.collision.problems import random_obstacle_problems
 from graspnet_torch.experiments.report import ExperimentReport, progress
 from graspnet_torch.settings import setting
 from graspnet_torch.table import markdown_table
-from graspnet_torch.tasks.random import random_obstacle_problems
 
 __all__ = ["ArmCfg", "product", "random_arm", "run_arm"]
 

@@ -11,7 +11,7 @@ Sections:
 2. **Real meshes**: ``sets`` contact sets on each of ``objects`` (real object meshes of
    ``pybullet_data``, :data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`), each object at a random
    pose, each set from a collision-free posture whose fingertips touch the mesh
-   (:func:`~graspnet_torch.tasks.objects.closure_problem`): a grasp is known to exist.
+   (:func:`~graspnet_torch.collision.problems.closure_problem`): a grasp is known to exist.
 
 Every problem is solved by each of ``solvers`` with its defaults (``trials`` trials): success is the
 result's (every contact finger within 1 mm, collision-free by FCL), the wall time a whole
@@ -76,9 +76,9 @@ def moved_problems(cfg: ObjectsCfg, folder: Path) -> dict[tuple[str, str], list]
 
 def real_mesh_problems(cfg: ObjectsCfg) -> list:
     """``cfg.sets`` closure contact sets on each real object, each object at a random pose
-    (:func:`~graspnet_torch.tasks.objects.real_mesh_problems`)."""
+    (:func:`~graspnet_torch.collision.problems.real_mesh_problems`)."""
     import graspnet_torch as gt
-    from graspnet_torch.tasks.objects import real_mesh_problems as problems
+    from graspnet_torch.collision.problems import real_mesh_problems as problems
 
     return problems(gt.load_robot("hand"), cfg.objects, np.random.default_rng(cfg.seed), cfg.sets, cfg.radius,
                     cfg.fingers, cfg.seed)

@@ -1,7 +1,7 @@
 """The loop's collision proxy against FCL near mesh objects (beyond the paper).
 
 A contact set on each real object mesh (``pybullet_data``; a collision-free closure at a random
-pose, :func:`~graspnet_torch.tasks.objects.closure_problem`) and the moved ``tasks`` with their
+pose, :func:`~graspnet_torch.collision.problems.closure_problem`) and the moved ``tasks`` with their
 objects as meshes; ``configurations`` palm poses uniform in each problem's search space (the frame
 and box the loop searches) with finger joints uniform in their limits; the share of configurations
 whose collision-free verdict is the same for the proxy (convex pieces) and for FCL (the mesh
@@ -43,7 +43,8 @@ def agreement_problems(folder: Path, objects: tuple[str, ...] = tuple(REAL_OBJEC
     """name -> problem: a closure contact set on each real object at a random pose, then each task
     moved to a random pose with its object written as a mesh into ``folder`` (one generator, seed 0)."""
     import graspnet_torch as gt
-    from graspnet_torch.tasks.objects import as_mesh, random_pose, real_mesh_problems
+    from graspnet_torch.collision.problems import real_mesh_problems
+    from graspnet_torch.tasks.objects import as_mesh, random_pose
 
     rng = np.random.default_rng(0)
     out = dict(zip(objects, real_mesh_problems(gt.load_robot("hand"), objects, rng), strict=True))

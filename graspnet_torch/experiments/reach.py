@@ -5,7 +5,7 @@ environments and of the MANUS protocol, reached from the robot's home posture.
    (16 trials, seeds 0, 1, ...);
 2. the MANUS protocol's ``manus_positions`` cube positions (``gt.solve_many``, 8 learners each);
 3. ``random_problems`` random reachable arm problems with 2-3 obstacles
-   (:func:`~graspnet_torch.tasks.random.random_obstacle_problems`, seed 7, the obstacles also
+   (:func:`~graspnet_torch.collision.problems.random_obstacle_problems`, seed 7, the obstacles also
    clear of the home posture the motion starts from).
 
 Each successful grasp gets :func:`~graspnet_torch.motion.plan_reach` (OMPL RRT-Connect, then its
@@ -74,8 +74,8 @@ def _reach(row: _Row, problem: gt.GraspProblem, result: gt.GraspResult, cfg: gt.
 
 
 def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
+    from graspnet_torch.collision.problems import random_obstacle_problems
     from graspnet_torch.tasks.manus import cube_problem, protocol_positions
-    from graspnet_torch.tasks.random import random_obstacle_problems
 
     reach = gt.ReachCfg(enabled=True, timeout_s=cfg.timeout_s)
     arm, manus = gt.load_robot("arm_hand"), gt.load_robot("manus")

@@ -5,11 +5,9 @@ from graspnet_torch.tasks.random import (
     random_arm_problem,
     random_gripper_problems,
     random_hand_problem,
-    random_obstacle_problems,
     random_reachable_problem,
     random_sequence,
 )
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks", "random_arm_problem",
-           "random_gripper_problems", "random_hand_problem", "random_obstacle_problems", "random_reachable_problem",
-           "random_sequence"]
+           "random_gripper_problems", "random_hand_problem", "random_reachable_problem", "random_sequence"]

@@ -7,11 +7,11 @@ known to exist.
 :func:`random_arm_problem`      a hand on an arm: the arm's joints within their limits
 :func:`random_reachable_problem`  either of the two, by ``robot.kind`` (``gt.random_reachable_problem``)
 :func:`random_gripper_problems`   a two-point gripper (MANUS): its gripper points as object points
-:func:`random_obstacle_problems`  a hand on an arm among random obstacles that clear the posture
 :func:`random_sequence`         frames of a smooth random walk of a posture (tracking, retargeting)
 ==============================  ==================================================================
 
-Each is deterministic in its seed.
+Each is deterministic in its seed. Problems among obstacles that must clear their posture are made
+where collisions are known (:mod:`graspnet_torch.collision.problems`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,7 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CONTACT_GENERATORS", "SEQUENCE_SPACES", "random_arm_problem", "random_gripper_problems",
-           "random_hand_problem", "random_obstacle_problems", "random_posed_problem", "random_reachable_problem",
-           "random_sequence"]
+           "random_hand_problem", "random_posed_problem", "random_reachable_problem", "random_sequence"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -280,59 +279,3 @@ def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int]
         return problem, Posture(palm_pose=home.palm_pose, fingers=home.fingers, body=q)
     problem = random_sequence(robot, seed, 1, n_fingers)[0]
     return problem, reference_posture(robot, problem)
-
-
-def random_obstacle_problems(robot: Robot, n: int, seed: int = 7,
-                             fingers: Sequence[str] = ("thumb", "index", "middle"),
-                             anchors: Sequence[str] = ("shoulder_rotation_link", "elbow_flexion_link", "palm"),
-                             clear_of: Sequence[Posture] = ()) -> list[GraspProblem]:
-    """``n`` problems of a hand on an arm among obstacles: a random arm posture (the middle 60 % of
-    every joint range) and ``fingers`` (the middle 60 % of their ranges) give the contacts; two or
-    three obstacles (boxes, cylinders, spheres of 3-15 cm) are centred 12-20 cm from a point near
-    one of the links ``anchors``, kept only if they clear that posture (FCL) and swallow no contact;
-    the search space is +-30 deg about the posture, shifted by up to 10 deg. ``clear_of``: other
-    postures the obstacles must clear too (a reach motion's start: the robot's home)."""
-    import numpy as np
-
-    from graspnet_torch.collision import CollisionScene
-    from graspnet_torch.errors import ProblemError
-    from graspnet_torch.robot.robot import Posture
-
-    rng = np.random.default_rng(seed)
-    lo, hi = (np.degrees(a) for a in robot.body_limits)
-    flo, fhi = robot.finger_limits
-    problems: list[GraspProblem] = []
-    while len(problems) < n:
-        qa = lo + (hi - lo) * rng.uniform(0.2, 0.8, lo.size)
-        q = robot.home_posture().fingers.clone()
-        for f in fingers:
-            i = robot.finger_index(f)
-            q[i] = torch.as_tensor(flo[i] + (fhi[i] - flo[i]) * rng.uniform(0.2, 0.8, flo[i].size))
-        body = torch.as_tensor(np.radians(qa))
-        tips = robot.fingertips_world_from_body(body, q)
-        posture = Posture(palm_pose=torch.zeros(6), fingers=q, body=body)
-        frames = robot.link_frames(posture)
-        points = [frames[link][:3, 3] for link in anchors]
-        obstacles = []
-        for _ in range(rng.integers(2, 4)):
-            a = points[rng.integers(len(points))] + rng.normal(0, 0.05, 3)
-            direction = rng.normal(size=3)
-            centre = a + direction / np.linalg.norm(direction) * rng.uniform(0.12, 0.2)
-            kind = ("box", "cylinder", "sphere")[rng.integers(3)]
-            size = {"box": rng.uniform(0.05, 0.15, 3).tolist(), "cylinder": [float(rng.uniform(0.02, 0.05)), 0.3],
-                    "sphere": [float(rng.uniform(0.03, 0.07))]}[kind]
-            obstacles.append({"shape": kind, "size": size, "pose": [*centre.tolist(), 0, 0, float(rng.uniform(0, 90))]})
-        shift = rng.uniform(-10, 10, lo.size)
-        data = {"robot": robot.name, "obstacles": obstacles,
-                "contacts": [{"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in fingers],
-                "bounds": {"min": np.maximum(qa + shift - 30, lo).tolist(),
-                           "max": np.minimum(qa + shift + 30, hi).tolist()}}
-        try:
-            problem = GraspProblem.from_mapping(data, source=f"random-{len(problems)}", robot_cfg=robot.cfg)
-        except ProblemError:  # an obstacle swallows a contact: draw again
-            continue
-        scene = CollisionScene(robot, problem)
-        if scene.count(posture) > 0 or any(scene.count(p) > 0 for p in clear_of):
-            continue  # an obstacle hits the posture that made the contacts (or one to clear): draw again
-        problems.append(problem)
-    return problems

@@ -17,7 +17,7 @@ import numpy as np
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.files import confined_file
-from graspnet_torch.meshes import check_mesh_file
+from graspnet_torch.meshes import check_mesh_file, load_mesh
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
@@ -131,8 +131,6 @@ class Shape:
         elif self.kind == "sphere":
             mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
         else:
-            from graspnet_torch.collision.mesh import load_mesh
-
             mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
         T = np.eye(4)
         T[:3, :3] = rpy_matrix_np(self.pose[3:])
@@ -144,8 +142,6 @@ def check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
     """The file must be a solid triangle mesh of a sensible size, checked as written before it is
     parsed and processed (:func:`graspnet_torch.meshes.check_mesh_file`: format, face count,
     finite vertices within +-10 m once scaled, not flat), then load as one."""
-    from graspnet_torch.collision.mesh import load_mesh
-
     check_mesh_file(path, where, ProblemError, scale, solid=True)
     try:
         faces = len(load_mesh(Path(path).resolve(), scale).faces)

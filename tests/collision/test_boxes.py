@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene, environment_obstacles
 from graspnet_torch.collision.boxes import boxes_apart, link_box
-from graspnet_torch.collision.scene import fcl_geometry, link_geometry
+from graspnet_torch.collision.geometry import fcl_geometry, link_geometry
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import rt_to_pose

@@ -14,11 +14,12 @@ import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.collision.convex import convex_pieces, pieces_distance
 from graspnet_torch.collision.mesh import MeshQuery, point_triangle_distance
+from graspnet_torch.collision.problems import closure_problem
 from graspnet_torch.collision.proxy import CollisionProxy
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_rt
 from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
-from graspnet_torch.tasks.objects import as_mesh, closure_problem, random_pose, real_objects
+from graspnet_torch.tasks.objects import as_mesh, random_pose, real_objects
 from graspnet_torch.tasks.problem import Shape
 
 

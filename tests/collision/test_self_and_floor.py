@@ -221,7 +221,7 @@ def test_self_collisions_agree_with_every_pair_tested_directly():
 
     import graspnet_torch as gt
     from graspnet_torch.collision import CollisionScene, self_collision_pairs
-    from graspnet_torch.collision.scene import fcl_geometry
+    from graspnet_torch.collision.geometry import fcl_geometry
     from graspnet_torch.robot.geometry import link_shapes
     from graspnet_torch.robot.robot import Posture
     from graspnet_torch.robot.transforms import rt_to_pose

@@ -10,9 +10,10 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.collision.mesh import mesh_query
+from graspnet_torch.collision.problems import closure_problem
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import matrix_to_pose
-from graspnet_torch.tasks.objects import REAL_OBJECTS, as_mesh, closure_problem, random_pose, real_objects
+from graspnet_torch.tasks.objects import REAL_OBJECTS, as_mesh, random_pose, real_objects
 from graspnet_torch.tasks.problem import Shape
 
 
@@ -22,7 +23,7 @@ def _cache(tmp_path, monkeypatch):
 
 
 def test_the_real_objects_come_from_an_installed_package_and_are_hand_sized():
-    from graspnet_torch.collision.mesh import load_mesh
+    from graspnet_torch.meshes import load_mesh
 
     files = real_objects()
     assert set(files) == set(REAL_OBJECTS)

@@ -8,11 +8,11 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.collision.problems import random_obstacle_problems
 from graspnet_torch.tasks import (
     random_arm_problem,
     random_gripper_problems,
     random_hand_problem,
-    random_obstacle_problems,
     random_reachable_problem,
 )
 
