@@ -53,7 +53,7 @@ class ReachCfg:
     backoff_m: float = setting(0.1, lo=0.0, lo_open=True, hi=2.0)
     approach_m: float = setting(0.05, lo=0.0, lo_open=True, hi=1.0)
     sample_hz: float = setting(50.0, lo=1.0, hi=10_000.0)
-    max_samples: int = setting(100_000, lo=2, hi=10_000_000)
+    max_samples: int = setting(100_000, lo=2, hi=200_000)  # at most: 196k rows of the arm + hand peaked at 1.3 GB
     seed: int = setting(0, lo=0, hi=2**31 - 1)
 
     @classmethod

@@ -32,6 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ResultView", "load_view", "serve"]
 
+MAX_RESULT_BYTES = 64 << 20  # a result (or replay) the viewer reads: a reach motion of 50,000 rows of 27 joints
 ROBOT_RGB, RED, OBJECT_RGB, OBSTACLE_RGB, MARK_RGB = (170, 180, 200), (230, 40, 40), (90, 150, 230), (150, 150, 150), \
     (240, 30, 30)
 
@@ -59,14 +60,14 @@ def load_view(path: str | Path) -> ResultView:
     its problem."""
     from graspnet_torch.files import read_document
     from graspnet_torch.io import json_digest
-    from graspnet_torch.robot.postures import trial_posture
     from graspnet_torch.solver.api import as_problem, robot_and_ik
+    from graspnet_torch.solver.postures import trial_posture
 
     path = Path(path)
     file = path / "result.json" if path.is_dir() else path
     if not file.is_file():
         raise ProblemError(f"{path}: no result here (a run folder with result.json, or a result JSON file)")
-    result = read_document(file, "result", ProblemError)
+    result = read_document(file, "result", ProblemError, max_bytes=MAX_RESULT_BYTES)
     if not isinstance(result, dict) or not isinstance(result.get("trials"), list) or not result["trials"]:
         raise ProblemError(f"{file}: not a result of solve_grasp.py (no 'trials')")
     bad = next((k for k, t in enumerate(result["trials"]) if not isinstance(t, dict)), None)
@@ -88,7 +89,7 @@ def load_view(path: str | Path) -> ResultView:
     motion = _motion(file, result.get("trajectory"), robot)
     replay = None
     if (file.parent / "replay.json").is_file():
-        replay = read_document(file.parent / "replay.json", "replay", ProblemError)
+        replay = read_document(file.parent / "replay.json", "replay", ProblemError, max_bytes=MAX_RESULT_BYTES)
         if not isinstance(replay, dict) or replay.get("problem") != result["problem"] or \
                 replay.get("result") != json_digest(result["trials"]):
             raise ProblemError(f"{file.parent / 'replay.json'}: not the replay of this result (another problem or "
@@ -229,7 +230,7 @@ def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.
 
         @iteration.on_update
         def _(_event) -> None:
-            from graspnet_torch.robot.postures import trial_posture
+            from graspnet_torch.solver.postures import trial_posture
 
             k = labels.index(pick.value)
             fields = view.replay["trials"][int(iteration.value)][k]
