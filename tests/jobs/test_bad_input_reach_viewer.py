@@ -217,7 +217,7 @@ def test_serving_other_machines_is_said_and_ctrl_c_stops_in_one_line(glass3_resu
 def test_a_result_with_its_reach_motion_is_viewed_and_a_foreign_motion_refused(tmp_path):
     problem = gt.GraspProblem.from_task("cube")
     result = gt.solve(problem, trials=4, seed=0)  # its motion is found in about a second
-    result.trajectory = gt.plan_reach(problem, result, ReachCfg(enabled=True))
+    result.trajectory = gt.plan_reach(problem, result, ReachCfg(enabled=True, timeout_s=60.0))  # found in ~1 s idle
     assert result.trajectory.found
     data = result.to_dict()
     data["problem"] = "cube"
