@@ -12,8 +12,8 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.hand import HandEnvironment
+from graspnet_torch.solver.reference_fit import ReferenceFit, find_reference_posture
 from graspnet_torch.tasks.problem import GraspProblem
-from graspnet_torch.tasks.reference import ReferenceFit, find_reference_posture
 
 __all__ = ["prepare_reference", "reference_posture"]
 

@@ -119,8 +119,8 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     (FCL at ``reach.resolution_deg`` / ``resolution_mm`` between consecutive rows) and timed
     within the URDF's velocity limits and ``reach.acceleration``. A motion not found within
     ``reach.timeout_s`` comes back with ``found`` false and a one-line reason."""
-    from graspnet_torch.robot.postures import trial_posture
     from graspnet_torch.solver.api import robot_and_ik
+    from graspnet_torch.solver.postures import trial_posture
 
     cfg = cfg or ReachCfg()
     robot = robot or robot_and_ik(problem.robot_cfg or problem.robot)[0]
@@ -351,7 +351,7 @@ def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajec
       rows: clear (:class:`~graspnet_torch.motion.MotionChecker`: the contact fingertips may
       touch the object only within ``reach.touch_mm`` of their contacts).
     """
-    from graspnet_torch.robot.postures import trial_posture
+    from graspnet_torch.solver.postures import trial_posture
 
     cfg = cfg or ReachCfg()
     layout = StateLayout.of(robot, cfg.palm_speed)

@@ -25,6 +25,7 @@ from torch import Tensor
 
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.tasks.reference import reference_posture
 
 __all__ = ["CONTACT_GENERATORS", "SEQUENCE_SPACES", "random_arm_problem", "random_gripper_problems",
            "random_hand_problem", "random_posed_problem", "random_reachable_problem", "random_sequence"]
@@ -264,8 +265,6 @@ def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int]
     ``n_fingers`` contact fingers (see :func:`random_reachable_problem`); for a gripper, its body
     joints uniform within their limits and the two gripper points as the object's (in either
     order). Deterministic in ``seed``."""
-    from graspnet_torch.robot.postures import reference_posture
-
     if robot.kind == "gripper":
         g = torch.Generator().manual_seed(seed)
         lo, hi = (torch.as_tensor(a) for a in robot.body_limits)

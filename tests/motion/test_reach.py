@@ -13,7 +13,7 @@ import pytest
 
 import graspnet_torch as gt
 from graspnet_torch.motion import MotionChecker, StateLayout, start_posture, time_path
-from graspnet_torch.robot.postures import trial_posture
+from graspnet_torch.solver.postures import trial_posture
 
 
 @pytest.fixture(scope="module")

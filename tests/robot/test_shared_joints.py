@@ -176,7 +176,7 @@ def test_an_arm_searches_the_shared_joints_with_its_own(tmp_path):
     reported errors."""
     from graspnet_torch.fcnn.train import FCNNTrainCfg
     from graspnet_torch.jobs.train_fcnn import train_fcnn
-    from graspnet_torch.robot.postures import trial_posture
+    from graspnet_torch.solver.postures import trial_posture
 
     robot = gt.load_robot(write_coupled_arm(tmp_path))
     tiny = FCNNTrainCfg(epochs=3, targets_per_epoch=64, train_steps=10, batch_size=64, val_targets=200, val_every=2)

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.robot.postures import trial_posture
+from graspnet_torch.solver.postures import trial_posture
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.jobs.reference_posture import reference_posture
-from graspnet_torch.tasks.reference import find_reference_posture
+from graspnet_torch.solver.reference_fit import find_reference_posture
 
 
 @pytest.mark.slow
