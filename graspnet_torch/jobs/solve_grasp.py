@@ -28,6 +28,7 @@ from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, starts_from_proposals, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
+from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
@@ -171,7 +172,9 @@ def job_settings(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> tuple[SolveGraspJ
 def with_robot_defaults(job: SolveGraspJobCfg, groups: dict, robot_cfg: RobotCfg
                         ) -> tuple[SolveGraspJobCfg, SolverCfg]:
     """The settings with the robot's ``solver_defaults`` where the job leaves them open, and the
-    solver settings with ``max_iterations`` applied; refuses what cannot go together."""
+    solver settings with ``max_iterations`` applied; refuses what cannot go together (and a
+    robot's ``solver_defaults`` its groups do not allow)."""
+    check_solver_defaults(robot_cfg)
     defaults = robot_cfg.solver_defaults
     job = replace(job, srv=with_defaults(SRVNetCfg, groups.get("srv", job.srv), defaults.get("srv"), "srv"),
                   reward=with_defaults(RewardCfg, groups.get("reward", job.reward), defaults.get("reward"), "reward"),

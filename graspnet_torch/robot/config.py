@@ -133,8 +133,9 @@ class RobotCfg:
         self_collision: count collisions between the robot's own links (pairs that are neither
             adjacent nor already touching at the home posture; :mod:`graspnet_torch.collision`).
         solver_defaults: group ('srv', 'reward', 'solver') -> settings this robot uses unless the
-            user sets them (the ACNN's section 6.3 parameters for ``arm_hand``); checked against
-            the groups' dataclasses.
+            user sets them (the ACNN's section 6.3 parameters for ``arm_hand``), as written; the
+            solver checks them against the groups' dataclasses
+            (:func:`graspnet_torch.solver.defaults.check_solver_defaults`).
         source: the file this came from, for error messages.
         folder: the config file's folder (a config given by path), where its URDF's meshes may
             also lie; None for a shipped config.
@@ -368,26 +369,21 @@ def robot_cfg_from_setting(value: Any, allow_outside_paths: bool = False) -> Rob
     raise ConfigError(f"robot: expected a robot name or a path to a robot YAML file, got {short(value)}")
 
 
-def _solver_defaults(data: Mapping[str, Any], source: str) -> dict[str, dict[str, Any]]:
-    """The robot's ``solver_defaults``, each group checked against its dataclass."""
-    from graspnet_torch.settings import build
-    from graspnet_torch.solver.config import RewardCfg, SolverCfg
-    from graspnet_torch.srv.network import SRVNetCfg
+SOLVER_DEFAULT_GROUPS = ("srv", "reward", "solver")  # the settings groups a robot's solver_defaults may set
 
+
+def _solver_defaults(data: Mapping[str, Any], source: str) -> dict[str, dict[str, Any]]:
+    """The robot's ``solver_defaults``: each of :data:`SOLVER_DEFAULT_GROUPS` a mapping of settings,
+    kept as written (their values are checked against the groups' settings where the solver reads
+    them: :func:`graspnet_torch.solver.defaults.check_solver_defaults`)."""
     raw = data.get("solver_defaults")
     if raw is None:
         return {}
-    groups = {"srv": SRVNetCfg, "reward": RewardCfg, "solver": SolverCfg}
-    if not isinstance(raw, Mapping) or any(k not in groups for k in raw):
+    if not isinstance(raw, Mapping) or any(k not in SOLVER_DEFAULT_GROUPS for k in raw):
         raise ConfigError(f"{source}: 'solver_defaults' must map srv, reward or solver to settings")
     out = {}
     for group, values in raw.items():
-        where = f"{source}: solver_defaults.{group}"
         if not isinstance(values, Mapping):
-            raise ConfigError(f"{where}: expected a mapping of settings")
-        try:
-            build(groups[group], dict(values), f"solver_defaults.{group}")
-        except ConfigError as exc:
-            raise ConfigError(f"{source}: {exc}") from None
+            raise ConfigError(f"{source}: solver_defaults.{group}: expected a mapping of settings")
         out[group] = dict(values)
     return out
