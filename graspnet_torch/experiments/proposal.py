@@ -53,9 +53,10 @@ class ProposalExperimentCfg:
 def best_proposal_mm(robot: gt.Robot, problem: gt.GraspProblem) -> float:
     """The best of the robot's K proposals for a problem (within bounds, evaluated by its
     environment: a hand's fingers by the FCNN; no iteration), mm."""
-    from graspnet_torch.proposal import proposal_of, proposals
+    from graspnet_torch.proposal import proposal_of
     from graspnet_torch.solver import api
     from graspnet_torch.solver.environments import build_environment
+    from graspnet_torch.solver.proposals import proposals
 
     _robot, ik = api.robot_and_ik(problem.robot_cfg or robot.name)
     env = build_environment(robot, problem, ik, gt.SolverCfg())

@@ -22,14 +22,14 @@ from graspnet_torch.io import atomic_path
 from graspnet_torch.jobs.configs import TrainPostureJobCfg
 from graspnet_torch.jobs.interrupt import resume_hint, stop_on_interrupt
 from graspnet_torch.proposal.checkpoint import posture_checkpoint, robot_signature, save_proposal
-from graspnet_torch.proposal.data import ProposalData, proposal_data
+from graspnet_torch.proposal.data import ProposalData
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
-from graspnet_torch.proposal.starts import proposals
 from graspnet_torch.proposal.train import ProposalTrainer
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build
 from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.proposals import proposal_data, proposals
 from graspnet_torch.table import format_table
 
 __all__ = ["evaluate_proposal", "prepare_train_posture", "train_posture", "train_posture_job"]

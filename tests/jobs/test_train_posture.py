@@ -12,9 +12,9 @@ import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.jobs.train_posture import train_posture
 from graspnet_torch.proposal import PostureProposal, ProposalCfg, load_proposal
-from graspnet_torch.proposal.data import proposal_data
 from graspnet_torch.proposal.train import ProposalTrainer
 from graspnet_torch.solver import api
+from graspnet_torch.solver.proposals import proposal_data
 from tests.in_process import run_script
 
 TINY = ProposalCfg(heads=4, hidden=(32, 32), samples=48, steps=6, batch=16, val_every=3)

@@ -14,11 +14,12 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.errors import CheckpointError
 from graspnet_torch.jobs.train_posture import evaluate_proposal
-from graspnet_torch.proposal import PostureProposal, ProposalCfg, load_proposal, proposal_of, proposal_starts, proposals
+from graspnet_torch.proposal import PostureProposal, ProposalCfg, load_proposal, proposal_of
 from graspnet_torch.proposal.checkpoint import posture_checkpoint, save_proposal
 from graspnet_torch.solver import api
 from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.loop import START_MARGIN, run_loop
+from graspnet_torch.solver.proposals import proposal_starts, proposals
 from graspnet_torch.tasks.objects import random_pose
 
 FRESH = 800_000  # seeds no training run draws

@@ -1,5 +1,8 @@
-"""Where the trials of a search start when ``solver.start: proposal``: a proposal model's K
-configurations per problem, ranked by the environment's own evaluation."""
+"""A posture proposal model seen through the environment contract: where the trials of a search
+start when ``solver.start: proposal`` (a model's K configurations per problem, ranked by the
+environment's own evaluation) and the data a model learns from (random posed problems, each with
+its environment's view of the targets and the configuration of the posture that made it). The
+model and its checkpoints: :mod:`graspnet_torch.proposal`."""
 
 from __future__ import annotations
 
@@ -9,11 +12,17 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from graspnet_torch.fcnn.ik import FingerIK
+from graspnet_torch.proposal.data import ProposalData
 from graspnet_torch.proposal.model import PostureProposal
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
+from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.loop import Starts
+from graspnet_torch.tasks.random import random_posed_problem
 
-__all__ = ["Proposals", "proposal_starts", "proposals"]
+__all__ = ["Proposals", "proposal_data", "proposal_starts", "proposals"]
 
 COLLISION_PENALTY_M = 1.0  # a proposal that collides ranks after every clear one
 
@@ -91,3 +100,21 @@ def proposal_starts(model: PostureProposal, env: Environment, trials: int,
         clear = torch.ones(P, K, dtype=torch.bool) if ev.collisions is None else (ev.collisions.cpu() == 0).view(P, K)
         given = clear.gather(1, pick) | (not colliding_random)
     return Starts(config=starts.reshape(P * runs, n).clone(), given=given.reshape(P * runs))
+
+
+def proposal_data(robot: Robot, finger_ik: FingerIK | None, n: int, seed: int, solver: SolverCfg | None = None
+                  ) -> ProposalData:
+    """n samples from :func:`~graspnet_torch.tasks.random.random_posed_problem` (seeds ``seed``,
+    ``seed + 1``, ...): each problem's environment (built with ``solver``'s settings) gives the
+    targets in its frame and the posture's configuration in its search variables
+    (:meth:`~graspnet_torch.solver.environment.Environment.whole_of`)."""
+    solver = solver or SolverCfg()
+    targets, masks, configs = [], [], []
+    for k in range(n):
+        problem, posture = random_posed_problem(robot, seed + k)
+        env = build_environment(robot, problem, finger_ik, solver)
+        t, m = env.proposal_input()
+        targets.append(t[0])
+        masks.append(m[0])
+        configs.append(env.whole_of(posture)[0, : env.n].float())
+    return ProposalData(torch.stack(targets), torch.stack(masks), torch.stack(configs))
