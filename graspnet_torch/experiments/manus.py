@@ -148,10 +148,10 @@ def figure12(out: Path, seed: int = 0) -> list[Figure]:
     network learning on its own as in the paper (no polish inside the loop, which would land a
     learner within a few iterations; the polish after the loop as by default)."""
     import graspnet_torch as gt
-    from graspnet_torch.jobs.solve_grasp import posture_panels
     from graspnet_torch.solver.api import robot_and_ik
     from graspnet_torch.viz import render_robot
     from graspnet_torch.viz.plots import _plt
+    from graspnet_torch.viz.result import posture_panels
 
     plt = _plt()
     problem = gt.GraspProblem.from_task("cube")

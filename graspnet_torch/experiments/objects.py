@@ -154,9 +154,9 @@ def run_objects(cfg: ObjectsCfg, out: Path) -> ExperimentReport:
 def _picture(problem, out: Path) -> Figure:
     """The default solver's grasp of a real-mesh contact set, two views."""
     import graspnet_torch as gt
-    from graspnet_torch.jobs.solve_grasp import posture_panels
     from graspnet_torch.solver.api import robot_and_ik
     from graspnet_torch.viz import render_robot
+    from graspnet_torch.viz.result import posture_panels
 
     robot, _ = robot_and_ik(problem.robot_cfg)
     result = gt.solve(problem, trials=20, seed=0)

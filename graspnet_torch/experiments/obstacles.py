@@ -307,9 +307,9 @@ def run_tables(cfg: ObstaclesCfg, out: Path) -> ExperimentReport:
 def run_fig10(cfg: Fig10Cfg, out: Path) -> ExperimentReport:
     """Fig. 10: the best of ``trials`` learners on task ``fig10`` (a cylinder among three obstacles)."""
     import graspnet_torch as gt
-    from graspnet_torch.jobs.solve_grasp import posture_panels
     from graspnet_torch.solver.api import robot_and_ik
     from graspnet_torch.viz import render_robot
+    from graspnet_torch.viz.result import posture_panels
 
     problem = gt.GraspProblem.from_task("fig10")
     res = gt.solve(problem, trials=cfg.trials, seed=cfg.seed)

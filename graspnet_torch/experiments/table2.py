@@ -166,8 +166,8 @@ def run_table2(cfg: Table2Cfg, out: Path) -> ExperimentReport:
 def _figure4(out: Path, results: list) -> Figure:
     """Fig. 4: the best posture of each task, with its object and contacts."""
     import graspnet_torch as gt
-    from graspnet_torch.jobs.solve_grasp import posture_panels
     from graspnet_torch.viz import render_robot
+    from graspnet_torch.viz.result import posture_panels
 
     robot = gt.load_robot("hand")
     panels = [posture_panels(robot, gt.GraspProblem.from_task(task), res)[0] for task, res in results]

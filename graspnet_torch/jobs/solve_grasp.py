@@ -34,6 +34,7 @@ from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["check_problem", "hparams_of", "job_settings", "log_hparams", "log_tensorboard", "posture_of",
            "prepare_solve", "resolve_problem", "solve_grasp", "with_robot_defaults", "write_pictures"]
@@ -344,29 +345,6 @@ def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:
     except Exception as exc:  # a picture or a log must not turn a written result into a failure
         print(f"\nwarning: {what} not written: {type(exc).__name__}: {clip(' '.join(str(exc).split()), 200)}",
               file=sys.stderr)
-
-
-def posture_panels(robot, problem: GraspProblem, result: GraspResult) -> list:
-    """Two views (:class:`~graspnet_torch.viz.Panel`) of the best trial's posture with the object,
-    obstacles and contacts (a gripper: the object's two points and its own), colliding links red."""
-    from graspnet_torch.viz import Panel
-
-    posture = posture_of(robot, result.best)
-    meshes = tuple(s.trimesh() for s in ((problem.object,) if problem.object else ()) + problem.obstacles)
-    contacts = environment_class(robot).marks(problem, result.best)  # the contacts (a gripper: its points too)
-    red: frozenset[str] = frozenset()
-    from graspnet_torch.collision.scene import has_environment
-
-    if has_environment(robot, problem):
-        from graspnet_torch.collision import CollisionScene
-
-        report = CollisionScene(robot, problem).check(posture)
-        red = frozenset({link for link, _ in report.obstacle_pairs} | set(report.object_links)
-                        | {link for pair in report.self_pairs for link in pair})
-    caption = (f"{problem.name or 'problem'}: best trial, error {result.best.error_mm:.2f} mm, "
-               f"{result.best.collisions} collision(s){' (red)' if red else ''}")
-    return [Panel(caption, posture, (12.0, -150.0), contacts, meshes, red),
-            Panel("side view", posture, (12.0, -60.0), contacts, meshes, red)]
 
 
 def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
