@@ -27,8 +27,9 @@ demo: $(STAMP)  ## solve the default problem (glass3, 20 trials, R3: no finger t
 robots: $(STAMP)  ## table of the shipped robots and a picture of each -> outputs/robots/
 	$(PY) scripts/inspect_robots.py hydra.run.dir=outputs/robots
 
-test: $(STAMP)  ## ruff check + the whole test suite on two processes (pytest -n 2; CI runs this)
+test: $(STAMP)  ## ruff check + the layers (lint-imports) + the whole test suite on two processes (pytest -n 2; CI runs this)
 	$(PY) -m ruff check .
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -n 2 --dist loadscope
 
 test-fast: $(STAMP)  ## the inner loop: every test not marked slow (pytest -m "not slow", < 1 min)
@@ -49,8 +50,9 @@ experiment: $(STAMP)  ## one experiment with its targets checked, E=<name> (conf
 docs: $(STAMP)  ## the documentation site from docs/ (mkdocs --strict: a broken link or reference fails) -> outputs/site/
 	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict
 
-lint: $(STAMP)  ## ruff check
+lint: $(STAMP)  ## ruff check + the package's layers and no import cycles (lint-imports: [tool.importlinter])
 	$(PY) -m ruff check .
+	$(VENV)/bin/lint-imports
 
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
 	$(PY) benchmarks/bench_kinematics.py
@@ -120,4 +122,4 @@ urdf: $(STAMP)  ## regenerate the URDFs from urdf/build.py
 	$(PY) urdf/build.py
 
 clean:  ## remove outputs and caches (keeps .venv)
-	rm -rf outputs multirun .pytest_cache .ruff_cache
+	rm -rf outputs multirun .pytest_cache .ruff_cache .import_linter_cache
