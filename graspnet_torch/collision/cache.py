@@ -12,16 +12,15 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 import numpy as np
 import torch
 
-if TYPE_CHECKING:
-    from graspnet_torch.collision.proxy import CollisionProxy
-    from graspnet_torch.collision.scene import CollisionScene
-    from graspnet_torch.robot.robot import Robot
-    from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CACHE_SIZE", "geometry_key", "proxy_for", "scene_for"]
 
@@ -60,8 +59,6 @@ def _cached(cache: OrderedDict[tuple, T], key: tuple, build: Callable[[], T]) ->
 def proxy_for(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
               device: torch.device | str = "cpu", clearance: float = 0.0) -> CollisionProxy:
     """The torch collision proxy of a robot and a problem (or a batch), built once per geometry."""
-    from graspnet_torch.collision.proxy import CollisionProxy
-
     problems = (problem,) if not isinstance(problem, Sequence) else tuple(problem)
     key = (id(robot), tuple(geometry_key(p) for p in problems), dtype, str(device), clearance)
     arg = problems[0] if len(problems) == 1 and not isinstance(problem, Sequence) else list(problems)
@@ -71,6 +68,4 @@ def proxy_for(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtyp
 
 def scene_for(robot: Robot, problem: GraspProblem) -> CollisionScene:
     """The FCL collision scene of a robot and a problem, built once per geometry."""
-    from graspnet_torch.collision.scene import CollisionScene
-
     return _cached(_SCENES, (id(robot), geometry_key(problem)), lambda: CollisionScene(robot, problem))

@@ -23,6 +23,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.convex import FAR, convex_pieces, pieces_distance
+from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.tasks.problem import Shape
 
 __all__ = ["GroupThresholds", "PrimitiveGroup", "group_thresholds", "primitive_groups"]
@@ -81,7 +83,6 @@ class PrimitiveGroup:
         if self.kind == "sphere":
             return (torch.linalg.vector_norm(p, dim=-1) - size[..., 0]).unsqueeze(-1)
         if self.kind == "convex":  # max over the piece's planes: (..., O, 3) against (..., O, F, 4)
-            from graspnet_torch.collision.convex import pieces_distance
 
             return pieces_distance(p, size).unsqueeze(-1)
         if self.kind == "box":
@@ -152,9 +153,6 @@ def primitive_groups(batch: list[list[Shape]], kw: dict, floor: int | None = Non
     in the mesh's frame; a problem whose mesh has fewer pieces is padded with pieces that never
     hit. Element ``floor`` (the robot's floor slab, the same in every problem) becomes a
     half-space, kind ``plane``: only a height is compared."""
-    from graspnet_torch.collision.convex import FAR, convex_pieces
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
     groups: dict[str, dict] = {}
     slots: dict[tuple[int, int], int] = {}  # (element, piece) -> the convex group's entry
     for p, elements in enumerate(batch):
@@ -219,8 +217,6 @@ def primitive_groups(batch: list[list[Shape]], kw: dict, floor: int | None = Non
 def _pad_planes(planes: np.ndarray | None, F: int, never: np.ndarray) -> np.ndarray:
     """(F, 4): a piece's planes padded with planes that are never the largest; a missing piece
     (None): ``never``, planes that put every point far outside."""
-    from graspnet_torch.collision.convex import FAR
-
     if planes is None:
         return never
     out = np.zeros((F, 4))

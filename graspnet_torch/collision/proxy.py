@@ -28,9 +28,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.convex import piece_distance
 from graspnet_torch.collision.primitives import group_thresholds, primitive_groups
+from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, self_collision_pairs
 from graspnet_torch.collision.self_collision import SelfCollisionModel
 from graspnet_torch.collision.spheres import CLUSTER, sphere_clusters
+from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.frames import Attachment, RobotLevels, link_attachments, riding_base_links
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Robot
@@ -73,8 +76,6 @@ class CollisionProxy:
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], object_tolerance: float = 0.002,
                  dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0):
-        from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, self_collision_pairs
-
         self.robot = robot
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         problem = problems[0]
@@ -185,8 +186,6 @@ class CollisionProxy:
 
     def _pairs(self, every: Tensor, problem_index: Tensor | None) -> Tensor:
         """:meth:`pairs` from every frame (n_frames, T, 3, 4)."""
-        from graspnet_torch.collision.convex import piece_distance
-
         frames = every[self._cluster_frame]  # (C, T, 3, 4)
         T = frames.shape[1]
         out = torch.zeros(T, len(self.links), self.n_elements, dtype=torch.bool, device=frames.device)
@@ -271,9 +270,6 @@ class CollisionProxy:
 
 def _elements_like(robot: Robot, problem: GraspProblem, first: list[Shape], k: int) -> list[Shape]:
     """The elements of the k-th problem of a batch, checked to match the first's kinds and order."""
-    from graspnet_torch.collision.scene import environment_obstacles
-    from graspnet_torch.errors import ProblemError
-
     elements = environment_obstacles(robot, problem) + ([problem.object] if problem.object is not None else [])
     kinds = [e.kind for e in elements]
     if kinds != [e.kind for e in first]:

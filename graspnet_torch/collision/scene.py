@@ -29,6 +29,8 @@ import numpy as np
 
 from graspnet_torch.collision.boxes import boxes_apart, link_box, shape_box
 from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry, mesh_bvh
+from graspnet_torch.collision.mesh import mesh_query, shape_points
+from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem, Shape
@@ -114,8 +116,6 @@ def _environment_object(shape: Shape):
     """An obstacle or the object as an FCL collision object at its pose in the world."""
     import fcl
 
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
     T = np.eye(4)
     T[:3, :3] = rpy_matrix_np(shape.pose[3:])
     T[:3, 3] = shape.pose[:3]
@@ -162,7 +162,6 @@ class CollisionScene:
         self.object = _environment_object(problem.object) if problem.object is not None else None
         self.touching = self.distal_links(robot, self.shapes, problem.fingers) if touching else set()
         # meshes: FCL finds where a link crosses the surface; inside and depth are measured (collision/mesh.py)
-        from graspnet_torch.collision.mesh import mesh_query
 
         elements = environment_obstacles(robot, problem)
         self._mesh_obstacles = {k: mesh_query(o) for k, o in enumerate(elements) if o.kind == "mesh"}
@@ -346,8 +345,6 @@ class CollisionScene:
     def _shape_points(self, i: int, pose: np.ndarray) -> np.ndarray:
         """Link shape i's points (:func:`~graspnet_torch.collision.mesh.shape_points`) placed where
         the last :meth:`place` put it, in the frame ``pose`` (4, 4) of a mesh."""
-        from graspnet_torch.collision.mesh import shape_points
-
         if i not in self._points:
             s = self.shapes[i]
             self._points[i] = shape_points(s.kind, s.size, s.mesh)

@@ -19,6 +19,7 @@ import numpy as np
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import confined_file, read_document
 from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.robot.meshes import package_candidates, package_roots
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg", "robot_cfg_from_setting"]
@@ -263,8 +264,6 @@ def _urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: boo
     if not raw.startswith("package://"):
         return confined_file(raw, where, bases, ConfigError, allow_outside)
     from urllib.parse import unquote
-
-    from graspnet_torch.robot.meshes import package_candidates, package_roots
 
     pkg, _, rel = raw[len("package://"):].partition("/")
     rel = unquote(rel)

@@ -8,6 +8,7 @@ import numpy as np
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.chain import UrdfModel, rpy_matrix_np
+from graspnet_torch.robot.meshes import load_link_mesh
 
 __all__ = ["Shape", "link_shapes"]
 
@@ -54,8 +55,6 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
     skipped instead and that line appended (pictures).
     """
     from pytorch_kinematics.urdf_parser_py.urdf import Box, Cylinder, Mesh, Sphere
-
-    from graspnet_torch.robot.meshes import load_link_mesh
 
     materials = {m.name: m for m in model.robot.materials}
     shapes = []

@@ -20,6 +20,7 @@ import numpy as np
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import read_document
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
 from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
 from graspnet_torch.tasks.shapes import Shape, check_free_contacts, numbers, obstacles_of, pose_degrees, unknown_keys
@@ -265,7 +266,6 @@ class GraspProblem:
             raise ValueError(f"{self.source}: not a two-point (gripper) problem")
         if self.object is None:
             return self.points.copy()
-        from graspnet_torch.robot.chain import rpy_matrix_np
 
         return self.points @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
 
@@ -361,7 +361,6 @@ class GraspProblem:
         pts = self.contacts_object()
         if self.object is None:
             return pts
-        from graspnet_torch.robot.chain import rpy_matrix_np
 
         return pts @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
 

@@ -24,6 +24,8 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_degrees, pose_to_rt
+from graspnet_torch.tasks.objects import random_pose
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import reference_posture
 
@@ -76,9 +78,6 @@ def random_hand_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] 
         pose = lo + (hi - lo) * torch.rand(6, generator=g, dtype=torch.float64)
     else:  # no box: the palm at the origin, turned uniformly at random
         import numpy as np
-
-        from graspnet_torch.robot.transforms import matrix_to_pose
-        from graspnet_torch.tasks.objects import random_pose
 
         rng = np.random.default_rng(int(torch.randint(2**31, (1,), generator=g)))
         pose = matrix_to_pose(torch.as_tensor(random_pose(rng, radius=0.0)))
@@ -141,8 +140,6 @@ def _finger_box(robot: Robot) -> tuple[Tensor, Tensor]:
 def _hand_space(robot: Robot) -> WalkSpace:
     """A free hand: ``x`` = palm pose (6: m, rad) within ``palm_bounds`` (without them: at the
     origin, any orientation), then the finger joints (F * n) within their limits."""
-    from graspnet_torch.robot.transforms import pose_to_degrees, pose_to_rt
-
     shape = (robot.n_fingers, robot.joints_per_finger)
     if robot.palm_bounds is not None:
         plo, phi = (torch.as_tensor(a, dtype=torch.float64) for a in (robot.palm_bounds.lower, robot.palm_bounds.upper))

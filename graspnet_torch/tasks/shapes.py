@@ -19,6 +19,8 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.files import confined_file
 from graspnet_torch.meshes import check_mesh_file, load_mesh
 from graspnet_torch.paths import repo_root
+from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.transforms import matrix_to_pose
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["MAX_OBSTACLES", "MAX_SCALE", "SHAPES", "Shape", "check_free_contacts", "check_mesh", "inside", "numbers",
@@ -122,8 +124,6 @@ class Shape:
         """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
         import trimesh
 
-        from graspnet_torch.robot.chain import rpy_matrix_np
-
         if self.kind == "box":
             mesh = trimesh.creation.box(extents=self.size)
         elif self.kind == "cylinder":
@@ -165,8 +165,6 @@ def obstacles_of(data: Mapping, source: str, shape: dict) -> tuple[Shape, ...]:
 
 def inside(shape: Shape, points: np.ndarray) -> np.ndarray:
     """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
     if shape.kind == "mesh":
         return np.asarray(shape.trimesh().contains(points), dtype=bool)
     p = (points - shape.pose[:3]) @ rpy_matrix_np(shape.pose[3:])  # into the shape's frame
@@ -183,8 +181,6 @@ def check_free_contacts(obstacles: Sequence[Shape], fingers: Sequence[str], posi
     per finger of ``fingers``): no fingertip could touch it collision-free."""
     points = np.asarray(positions, dtype=np.float64)
     if obj is not None:
-        from graspnet_torch.robot.chain import rpy_matrix_np
-
         points = points @ rpy_matrix_np(obj.pose[3:]).T + obj.pose[:3]
     for k, shape in enumerate(obstacles):
         hit = inside(shape, points)
@@ -196,8 +192,6 @@ def check_free_contacts(obstacles: Sequence[Shape], fingers: Sequence[str], posi
 
 def pose_matrix(pose: np.ndarray) -> np.ndarray:
     """(6,) pose (m, rad) -> (4, 4)."""
-    from graspnet_torch.robot.chain import rpy_matrix_np
-
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = rpy_matrix_np(pose[3:]), pose[:3]
     return T
@@ -206,8 +200,6 @@ def pose_matrix(pose: np.ndarray) -> np.ndarray:
 def matrix_pose(T: np.ndarray) -> np.ndarray:
     """(4, 4) -> (6,) pose (m, rad), R = Rz Ry Rx."""
     import torch
-
-    from graspnet_torch.robot.transforms import matrix_to_pose
 
     return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
 
