@@ -7,6 +7,10 @@ import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+import graspnet_torch as gt
+from graspnet_torch.solver import SolverCfg
+from graspnet_torch.threads import set_default_threads
+
 if TYPE_CHECKING:
     from graspnet_torch.solver.config import RewardCfg
     from graspnet_torch.tasks.problem import GraspProblem
@@ -54,7 +58,6 @@ def bench_args(doc: str) -> argparse.Namespace:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--check", action="store_true")
     args = ap.parse_args()
-    from graspnet_torch.threads import set_default_threads
 
     torch.set_num_threads(args.threads)
     set_default_threads(args.threads)  # the Python API's calls use it too (their own default is 1)
@@ -67,9 +70,6 @@ def loop_rate(task: str | GraspProblem, trials: int, iterations: int, repeats: i
     the loop (set-up excluded), a fixed budget with no early stop and no polish; ``refine``: the
     steps inside the loop per evaluation (FCNN refinement; a gripper's settling steps), None: the
     defaults."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver import SolverCfg
-
     best = 0.0
     for seed in range(repeats):
         fingers, gripper = {"final_refine": 0}, {"polish_iterations": 0}  # no polish after the loop

@@ -21,9 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
 from graspnet_torch.collision.problems import random_obstacle_problems
 from graspnet_torch.experiments.report import ExperimentReport, progress
 from graspnet_torch.settings import setting
+from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.table import markdown_table
 
 __all__ = ["ArmCfg", "product", "random_arm", "run_arm"]
@@ -44,9 +46,6 @@ class ArmCfg:
 def product(n: int, trials: int = 16) -> dict:
     """(environment, stop) -> grasps found ``ok`` of ``n`` (``trials`` learners each) and the median
     and max wall time (s)."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.config import SolverCfg
-
     out = {}
     cells = [(env, enough) for env in ENVIRONMENTS for enough in STOPS]
     for env, enough in progress(cells, desc="arm: the product", unit="cell"):
@@ -62,8 +61,6 @@ def product(n: int, trials: int = 16) -> dict:
 
 def random_arm(n: int, trials: int = 16) -> dict:
     """``n`` random reachable arm problems among obstacles, solved (see the module's docstring)."""
-    import graspnet_torch as gt
-
     problems = random_obstacle_problems(gt.load_robot("arm_hand"), n, seed=7)
     solved = 0
     for k, problem in enumerate(progress(problems, desc="arm: random problems", unit="problem")):

@@ -15,10 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
 from graspnet_torch.srv import SigmaCfg, SRVNetCfg
+from graspnet_torch.viz import plot_noise_study
 
 __all__ = ["NoiseStudyCfg", "run_noise_study"]
 
@@ -44,9 +46,6 @@ class NoiseStudyCfg:
 
 def run_noise_study(cfg: NoiseStudyCfg, out: Path) -> ExperimentReport:
     """Fig. 3 and its table; the figure is written into ``out``."""
-    import graspnet_torch as gt
-    from graspnet_torch.viz import plot_noise_study
-
     srv, reward = SRVNetCfg(sigma=SigmaCfg(kind=cfg.s, scale=cfg.scale)), RewardCfg(a=cfg.a)
     default = cfg.a == RewardCfg.a and cfg.s == SigmaCfg.kind and cfg.scale == SigmaCfg.scale
     setting_text = ("the paper's settings (a = 1, s(r_hat) linear with scale 3)" if default

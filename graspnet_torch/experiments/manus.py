@@ -24,9 +24,19 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
+from graspnet_torch.collision import CollisionScene
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
 from graspnet_torch.settings import setting
+from graspnet_torch.solver import RewardCfg, SolverCfg
+from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
+from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.table import markdown_table
+from graspnet_torch.tasks.manus import cube_problem, protocol_positions, random_approach
+from graspnet_torch.tasks.random import random_gripper_problems
+from graspnet_torch.viz import render_robot
+from graspnet_torch.viz.plots import _plt
+from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["PAPER_D", "ManusCfg", "approach_check", "baselines", "figure12", "protocol", "random_check", "run_manus",
            "summary"]
@@ -59,9 +69,6 @@ def summary(d_mm: np.ndarray, align: np.ndarray, coll: np.ndarray) -> dict:
 def protocol(runs: int, seed: int = 0) -> tuple[dict, list]:
     """The paper's method (the robot's defaults) at every position, every learner to its own stop;
     its summary and the per-position results."""
-    import graspnet_torch as gt
-    from graspnet_torch.tasks.manus import cube_problem, protocol_positions
-
     results = gt.solve_many([cube_problem(x, y) for x, y in protocol_positions()], trials=runs, seed=seed,
                             solver={"stop": None})  # every learner to its own stop: the paper's protocol
     d = [t.distance_mm for res in results for t in res.trials]
@@ -75,12 +82,6 @@ def baselines(runs: int, every: int) -> dict:
     every ``every``-th position, and CMA-ES (same R3, 1,000 evaluations, then the same polish) from
     the same starts."""
     import torch
-
-    from graspnet_torch.collision import CollisionScene
-    from graspnet_torch.solver import RewardCfg, SolverCfg
-    from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
-    from graspnet_torch.solver.cmaes import run_cmaes
-    from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
     robot, _ = robot_and_ik("manus")
     defaults = robot.cfg.solver_defaults
@@ -116,10 +117,6 @@ def approach_check(results: list, trials: int, seed: int = 7, every: int = 1) ->
     """At every ``every``-th position with a collision-free solution in ``results`` (the
     protocol's, one per position), an ``approach`` near it (:func:`~graspnet_torch.tasks.manus.random_approach`),
     solved with the default search window; the result's best counts (d < 1 mm, collision-free)."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.tasks.manus import cube_problem, protocol_positions, random_approach
-
     robot, _ = robot_and_ik("manus")
     rng = np.random.default_rng(seed)
     problems = []
@@ -134,10 +131,6 @@ def approach_check(results: list, trials: int, seed: int = 7, every: int = 1) ->
 def random_check(n: int, trials: int, seed: int = 11) -> dict:
     """``n`` random reachable problems (:func:`~graspnet_torch.tasks.random.random_gripper_problems`);
     solved: the best of ``trials`` learners with d < 5 mm and alignment > 0.999."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.tasks.random import random_gripper_problems
-
     problems = random_gripper_problems(robot_and_ik("manus")[0], n, seed)
     bests = [r.best for r in gt.solve_many(problems, trials=trials, seed=seed)] if problems else []
     return {"solved": sum(b.distance_mm < 5 and b.alignment > 0.999 for b in bests), "tried": n}
@@ -147,12 +140,6 @@ def figure12(out: Path, seed: int = 0) -> list[Figure]:
     """Fig. 12: R1, R2 and R of one learner against the iteration, and its configuration: the
     network learning on its own as in the paper (no polish inside the loop, which would land a
     learner within a few iterations; the polish after the loop as by default)."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.viz import render_robot
-    from graspnet_torch.viz.plots import _plt
-    from graspnet_torch.viz.result import posture_panels
-
     plt = _plt()
     problem = gt.GraspProblem.from_task("cube")
     res = gt.solve(problem, trials=8, seed=seed, solver=gt.SolverCfg(stop_clear=True, polish=gt.PolishCfg(from_r=None)))

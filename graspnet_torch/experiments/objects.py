@@ -28,10 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
+from graspnet_torch.collision.problems import real_mesh_problems as closed_on_real_meshes
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
+from graspnet_torch.solver.api import robot_and_ik
 from graspnet_torch.table import markdown_table
-from graspnet_torch.tasks.objects import REAL_OBJECTS
+from graspnet_torch.tasks.objects import REAL_OBJECTS, as_mesh, random_pose
+from graspnet_torch.viz import render_robot
+from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["ObjectsCfg", "run_objects"]
 
@@ -61,9 +66,6 @@ class ObjectsCfg:
 
 def moved_problems(cfg: ObjectsCfg, folder: Path) -> dict[tuple[str, str], list]:
     """(task, 'primitive' | 'mesh') -> the task moved to ``cfg.poses`` random poses (no bounds)."""
-    import graspnet_torch as gt
-    from graspnet_torch.tasks.objects import as_mesh, random_pose
-
     out = {}
     for task in cfg.tasks:
         base = gt.GraspProblem.from_task(task)
@@ -77,17 +79,12 @@ def moved_problems(cfg: ObjectsCfg, folder: Path) -> dict[tuple[str, str], list]
 def real_mesh_problems(cfg: ObjectsCfg) -> list:
     """``cfg.sets`` closure contact sets on each real object, each object at a random pose
     (:func:`~graspnet_torch.collision.problems.real_mesh_problems`)."""
-    import graspnet_torch as gt
-    from graspnet_torch.collision.problems import real_mesh_problems as problems
-
-    return problems(gt.load_robot("hand"), cfg.objects, np.random.default_rng(cfg.seed), cfg.sets, cfg.radius,
-                    cfg.fingers, cfg.seed)
+    return closed_on_real_meshes(gt.load_robot("hand"), cfg.objects, np.random.default_rng(cfg.seed), cfg.sets,
+                                 cfg.radius, cfg.fingers, cfg.seed)
 
 
 def _solve_all(problems: list, solver: str, cfg: ObjectsCfg, desc: str) -> dict:
     """Success, wall time and best error of each problem under one solver."""
-    import graspnet_torch as gt
-
     ok, wall, err, reasons = [], [], [], []
     for k, problem in enumerate(progress(problems, desc=desc, unit="problem")):
         t0 = time.perf_counter()
@@ -153,11 +150,6 @@ def run_objects(cfg: ObjectsCfg, out: Path) -> ExperimentReport:
 
 def _picture(problem, out: Path) -> Figure:
     """The default solver's grasp of a real-mesh contact set, two views."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.viz import render_robot
-    from graspnet_torch.viz.result import posture_panels
-
     robot, _ = robot_and_ik(problem.robot_cfg)
     result = gt.solve(problem, trials=20, seed=0)
     render_robot(robot, posture_panels(robot, problem, result), out / "objects_real_mesh.png")

@@ -15,10 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
+from graspnet_torch.collision import CollisionScene
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
+from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
+from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.table import markdown_table
+from graspnet_torch.viz import render_robot
+from graspnet_torch.viz.plots import _plt
+from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["PAPER", "REWARDS", "Fig10Cfg", "ObstaclesCfg", "anova", "cmaes_rows", "figures", "reward_cfg", "run_fig10",
            "run_tables", "tables"]
@@ -65,8 +72,6 @@ def reward_cfg(kind: str) -> RewardCfg:
 def tables(runs: int, seed: int = 0, environments: tuple[str, ...] = ("env1", "env2")) -> tuple[dict, dict]:
     """Every reward in each environment: ``runs`` independent learners (one per run, batched in
     one call; the same seed, hence the same starts and initial weights, for every reward)."""
-    import graspnet_torch as gt
-
     rows, results = {}, {}
     cells = [(env, kind) for env in environments for kind in REWARDS]
     for env, kind in progress(cells, desc="table3 rewards", unit="cell"):
@@ -133,11 +138,6 @@ def cmaes_rows(runs: int, results: dict, environments: tuple[str, ...] = ("env1"
     the same budget (2000 evaluations); the reported posture's collisions by FCL."""
     import torch
 
-    import graspnet_torch as gt
-    from graspnet_torch.collision import CollisionScene
-    from graspnet_torch.solver.api import build_environment, robot_and_ik, trial_posture
-    from graspnet_torch.solver.cmaes import run_cmaes
-
     out = {}
     for env in progress(environments, desc="table3 CMA-ES", unit="env"):
         problem = gt.GraspProblem.from_task(env)
@@ -180,8 +180,6 @@ def table_markdown(env: str, rows: dict, cma: dict | None) -> str:
 def figures(out: Path, results: dict) -> list[Figure]:
     """Figs. 6, 8 and 9 (8 and 9 from env1's learners when env1 was run, else env2's)."""
     import torch
-
-    from graspnet_torch.viz.plots import _plt
 
     plt = _plt()
     # Fig. 6: R3 and R4 with R1 = 0.99 against the iteration, R4 for c = 1..4 collisions
@@ -306,11 +304,6 @@ def run_tables(cfg: ObstaclesCfg, out: Path) -> ExperimentReport:
 
 def run_fig10(cfg: Fig10Cfg, out: Path) -> ExperimentReport:
     """Fig. 10: the best of ``trials`` learners on task ``fig10`` (a cylinder among three obstacles)."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.viz import render_robot
-    from graspnet_torch.viz.result import posture_panels
-
     problem = gt.GraspProblem.from_task("fig10")
     res = gt.solve(problem, trials=cfg.trials, seed=cfg.seed)
     robot, _ = robot_and_ik(problem.robot_cfg)

@@ -30,8 +30,14 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress
+from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.proposal import proposal_of
 from graspnet_torch.settings import setting
+from graspnet_torch.solver import api
+from graspnet_torch.solver.environments import build_environment
+from graspnet_torch.solver.proposals import proposals
 from graspnet_torch.table import markdown_table
+from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
 __all__ = ["ProposalExperimentCfg", "best_proposal_mm", "run_proposal"]
 
@@ -53,11 +59,6 @@ class ProposalExperimentCfg:
 def best_proposal_mm(robot: gt.Robot, problem: gt.GraspProblem) -> float:
     """The best of the robot's K proposals for a problem (within bounds, evaluated by its
     environment: a hand's fingers by the FCNN; no iteration), mm."""
-    from graspnet_torch.proposal import proposal_of
-    from graspnet_torch.solver import api
-    from graspnet_torch.solver.environments import build_environment
-    from graspnet_torch.solver.proposals import proposals
-
     _robot, ik = api.robot_and_ik(problem.robot_cfg or robot.name)
     env = build_environment(robot, problem, ik, gt.SolverCfg())
     with torch.inference_mode():
@@ -118,8 +119,6 @@ def _table2(seeds: int) -> str:
 def _noise(trials: int) -> tuple[str, dict]:
     from omegaconf import OmegaConf
 
-    from graspnet_torch.paths import configs_dir
-
     preset = OmegaConf.load(configs_dir() / "noise" / "sigma0.2.yaml")
     reward = gt.RewardCfg(a=float(preset.reward.a))
     srv = gt.SRVNetCfg(sigma=gt.SigmaCfg(scale=float(preset.srv.sigma.scale)))
@@ -162,8 +161,6 @@ def _arm(seeds: int) -> tuple[str, dict]:
 
 
 def _manus(positions: int, runs: int) -> tuple[str, dict]:
-    from graspnet_torch.tasks.manus import cube_problem, protocol_positions
-
     problems = [cube_problem(x, y) for x, y in protocol_positions()[:: 64 // positions][:positions]]
     variants = {"proposal + loop": _solver("proposal", stop=None), "random + loop": _solver("random", stop=None),
                 "cmaes": _solver("random", method="cmaes", stop=None)}
@@ -183,8 +180,6 @@ def _manus(positions: int, runs: int) -> tuple[str, dict]:
 
 
 def run_proposal(cfg: ProposalExperimentCfg, out: Path) -> ExperimentReport:
-    from graspnet_torch.paths import repo_root
-
     hand = gt.load_robot("hand")
     hand_text, hand_at = _hand_rows(hand, [gt.random_reachable_problem(hand, 50_000 + k) for k in range(cfg.problems)],
                                     "random hand")

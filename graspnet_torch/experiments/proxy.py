@@ -17,10 +17,17 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
+from graspnet_torch.collision import CollisionScene
+from graspnet_torch.collision.problems import real_mesh_problems
+from graspnet_torch.collision.proxy import CollisionProxy
 from graspnet_torch.experiments.report import ExperimentReport, progress
+from graspnet_torch.robot.robot import Posture
+from graspnet_torch.robot.transforms import pose_to_rt
 from graspnet_torch.settings import setting
+from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
 from graspnet_torch.table import markdown_table
-from graspnet_torch.tasks.objects import REAL_OBJECTS
+from graspnet_torch.tasks.objects import REAL_OBJECTS, as_mesh, random_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["AGREEMENT", "ProxyCfg", "agreement", "agreement_problems", "run_proxy"]
@@ -42,10 +49,6 @@ def agreement_problems(folder: Path, objects: tuple[str, ...] = tuple(REAL_OBJEC
                        tasks: tuple[str, ...] = TASKS) -> dict[str, GraspProblem]:
     """name -> problem: a closure contact set on each real object at a random pose, then each task
     moved to a random pose with its object written as a mesh into ``folder`` (one generator, seed 0)."""
-    import graspnet_torch as gt
-    from graspnet_torch.collision.problems import real_mesh_problems
-    from graspnet_torch.tasks.objects import as_mesh, random_pose
-
     rng = np.random.default_rng(0)
     out = dict(zip(objects, real_mesh_problems(gt.load_robot("hand"), objects, rng), strict=True))
     for task in tasks:
@@ -56,13 +59,6 @@ def agreement_problems(folder: Path, objects: tuple[str, ...] = tuple(REAL_OBJEC
 def agreement(problem: GraspProblem, n: int) -> tuple[int, int, int, int]:
     """(agreeing, proxy-only, FCL-only, colliding by FCL) over n configurations of the search space."""
     import torch
-
-    import graspnet_torch as gt
-    from graspnet_torch.collision import CollisionScene
-    from graspnet_torch.collision.proxy import CollisionProxy
-    from graspnet_torch.robot.robot import Posture
-    from graspnet_torch.robot.transforms import pose_to_rt
-    from graspnet_torch.solver.search_space import palm_search_space, sample_hand_configurations
 
     hand = gt.load_robot("hand")
     g = torch.Generator().manual_seed(0)

@@ -17,11 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import setting
+from graspnet_torch.solver import SolverCfg
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.tasks.random import random_hand_problem
 
 __all__ = ["SOLVED_PCT", "RandomHandCfg", "in_robot_box", "run_random_hand"]
 
@@ -44,10 +47,6 @@ def in_robot_box(problem: GraspProblem, robot: Robot) -> GraspProblem:
 
 def run_random_hand(cfg: RandomHandCfg, out: Path) -> ExperimentReport:
     """Solve the problems; the share solved, by the number of contact fingers."""
-    import graspnet_torch as gt
-    from graspnet_torch.solver import SolverCfg
-    from graspnet_torch.tasks.random import random_hand_problem
-
     robot = gt.load_robot("hand")
     errors, fingers, seconds = [], [], []
     for seed in progress(range(cfg.problems), total=cfg.problems, desc="random hand problems", unit="problem"):

@@ -23,9 +23,12 @@ from pathlib import Path
 import numpy as np
 
 import graspnet_torch as gt
+from graspnet_torch.collision.problems import random_obstacle_problems
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
 from graspnet_torch.settings import setting
 from graspnet_torch.table import markdown_table
+from graspnet_torch.tasks.manus import cube_problem, protocol_positions
+from graspnet_torch.viz.motion import write_motion_frames
 
 __all__ = ["ReachExperimentCfg", "run_reach"]
 
@@ -74,9 +77,6 @@ def _reach(row: _Row, problem: gt.GraspProblem, result: gt.GraspResult, cfg: gt.
 
 
 def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
-    from graspnet_torch.collision.problems import random_obstacle_problems
-    from graspnet_torch.tasks.manus import cube_problem, protocol_positions
-
     reach = gt.ReachCfg(enabled=True, timeout_s=cfg.timeout_s)
     arm, manus = gt.load_robot("arm_hand"), gt.load_robot("manus")
     rows: list[_Row] = []
@@ -143,8 +143,6 @@ def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
 
 def _figure(out: Path, reach: gt.ReachCfg, arm: gt.Robot) -> list[Figure]:
     """A few frames of env2's motion (the grasp of seed 0)."""
-    from graspnet_torch.viz.motion import write_motion_frames
-
     problem = gt.GraspProblem.from_task("env2")
     result = gt.solve(problem, trials=16, seed=0)
     motion = gt.plan_reach(problem, replace(result), reach, arm)

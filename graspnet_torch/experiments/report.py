@@ -20,6 +20,10 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from graspnet_torch.errors import ConfigError
+from graspnet_torch.paths import repo_root
+from graspnet_torch.settings import build, short
+
 __all__ = ["ExperimentReport", "Figure", "machine", "mean_std", "progress", "quick_settings", "require"]
 
 T = TypeVar("T")
@@ -103,8 +107,6 @@ def progress(iterable: Iterable[T], total: int | None = None, desc: str = "", un
 def require(ok: bool, message: str) -> None:
     """A settings check beyond a field's type and range: :class:`ConfigError` with ``message``."""
     if not ok:
-        from graspnet_torch.errors import ConfigError
-
         raise ConfigError(message)
 
 
@@ -112,9 +114,6 @@ def quick_settings(cls: type[T], data: Mapping[str, Any] | None, quick: bool, wh
     """``cls`` from an experiment's config: its settings, and with ``quick`` its ``quick`` block of
     overrides on top (the reduced protocol: fewer runs, the same code path); ``where`` names the
     settings in messages (``experiments.table2``)."""
-    from graspnet_torch.errors import ConfigError
-    from graspnet_torch.settings import build, short
-
     if data is not None and not isinstance(data, Mapping):
         raise ConfigError(f"{where or cls.__name__}: expected a mapping of settings, got {short(data)}")
     data = dict(data or {})
@@ -151,8 +150,6 @@ def _git_commit(root: Path) -> str:
 def machine() -> dict[str, str]:
     """The machine a reproduction ran on: CPU, cores, Python, torch and its threads, the commit."""
     import torch
-
-    from graspnet_torch.paths import repo_root
 
     return {"cpu": _cpu_name(), "cores": str(os.cpu_count()), "os": f"{platform.system()} {platform.release()}",
             "python": sys.version.split()[0], "torch": torch.__version__, "torch threads": str(torch.get_num_threads()),

@@ -32,6 +32,7 @@ import numpy as np
 
 import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress, require
+from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.config import paper_protocol
 from graspnet_torch.table import markdown_table
@@ -110,8 +111,6 @@ def table2(seeds: int) -> str:
 
 def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
     from omegaconf import OmegaConf
-
-    from graspnet_torch.paths import configs_dir
 
     rows, at = [], {}
     for sigma in progress(levels, desc="solvers: noise levels", unit="level"):
@@ -210,8 +209,6 @@ class SolversCfg:
     many: int = setting(1000, lo=8, hi=1_000_000)  # gt.solve_many's problems
 
     def __post_init__(self) -> None:
-        from graspnet_torch.paths import configs_dir
-
         presets = sorted(p.stem.removeprefix("sigma") for p in (configs_dir() / "noise").glob("sigma*.yaml"))
         require(len(self.noise_levels) > 0 and all((configs_dir() / "noise" / f"sigma{s:g}.yaml").is_file()
                                                    for s in self.noise_levels),

@@ -15,10 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, Figure, mean_std, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import SolverCfg
 from graspnet_torch.solver.config import RewardCfg
+from graspnet_torch.viz import render_robot
+from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["PAPER", "TASKS", "Table2Cfg", "run_column", "run_table2"]
 
@@ -57,8 +60,6 @@ class Table2Cfg:
 
 def run_column(task: str, seeds: range, solver: SolverCfg, desc: str = "") -> dict:
     """One single-trial run per seed; per-run errors (mm), iterations and wall times (s)."""
-    import graspnet_torch as gt
-
     out = {"total": [], "iterations": [], "time": [], "fingers": {}}
     for seed in progress(seeds, desc=desc, unit="run"):
         res = gt.solve(task, trials=1, seed=seed, solver=solver, reward=PAPER_REWARD)
@@ -73,8 +74,6 @@ def run_column(task: str, seeds: range, solver: SolverCfg, desc: str = "") -> di
 
 def run_table2(cfg: Table2Cfg, out: Path) -> ExperimentReport:
     """Table 2 and Fig. 4 (see the module's docstring); figures are written into ``out``."""
-    import graspnet_torch as gt
-
     tasks = [t for t in TASKS if t[0] in cfg.tasks]
     gt.solve(tasks[0][0], trials=1, max_iterations=50, reward=PAPER_REWARD)  # warm-up (loading, compiling): not timed
     seeds = range(cfg.seed, cfg.seed + cfg.trials)
@@ -165,10 +164,6 @@ def run_table2(cfg: Table2Cfg, out: Path) -> ExperimentReport:
 
 def _figure4(out: Path, results: list) -> Figure:
     """Fig. 4: the best posture of each task, with its object and contacts."""
-    import graspnet_torch as gt
-    from graspnet_torch.viz import render_robot
-    from graspnet_torch.viz.result import posture_panels
-
     robot = gt.load_robot("hand")
     panels = [posture_panels(robot, gt.GraspProblem.from_task(task), res)[0] for task, res in results]
     render_robot(robot, panels, out / "fig4_postures.png")

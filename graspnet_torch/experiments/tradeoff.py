@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import RewardCfg, SolverCfg
@@ -46,8 +47,6 @@ class TradeoffCfg:
 
 def final_error_mm(srv: SRVNetCfg, reward: RewardCfg, sigma_n: float, seed: int, trials: int, steps: int) -> float:
     """Noise-study final error: median over trials of the mean error of the last 100 steps (mm)."""
-    import graspnet_torch as gt
-
     res = gt.solve("block5", trials=trials, seed=seed, noise=sigma_n, srv=srv, reward=reward,
                    solver=SolverCfg.paper(threshold=None, max_iterations=steps, fingers=FingersCfg(final_refine=0)))
     total = res.outcome.history["total"].double().numpy()  # (K, T) metres
@@ -56,8 +55,6 @@ def final_error_mm(srv: SRVNetCfg, reward: RewardCfg, sigma_n: float, seed: int,
 
 def table2_means_mm(srv: SRVNetCfg, reward: RewardCfg, trials: int) -> list[float]:
     """Mean total error of the reported configurations after the Table 2 iteration budgets (mm)."""
-    import graspnet_torch as gt
-
     out = []
     for task, iterations, _paper in TABLE2:
         res = gt.solve(task, trials=trials, seed=0, srv=srv, reward=reward,

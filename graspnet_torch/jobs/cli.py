@@ -30,7 +30,9 @@ from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 from graspnet_torch.errors import ConfigError, GraspnetError, InternalError, Interrupted
+from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import Free, check_value, clip, lookup
+from graspnet_torch.solver.config import RENAMED
 
 __all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides", "robot_path_overrides", "run_cli",
            "switch_overrides", "user_errors_exit_2"]
@@ -87,8 +89,6 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _group_options(group: str) -> list[str] | None:
-    from graspnet_torch.paths import configs_dir
-
     folder = configs_dir() / group
     return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else None
 
@@ -167,8 +167,6 @@ def check_overrides(argv: list[str], schema: type) -> None:
             continue
         found = lookup(schema, key)
         if found is None:
-            from graspnet_torch.solver.config import RENAMED
-
             group, _, name = key.partition(".")
             if group == "solver" and name in RENAMED:
                 raise ConfigError(f"unknown setting '{key}' (now solver.{RENAMED[name]})")
@@ -196,8 +194,6 @@ def compose_for_check(config_name: str, argv: list[str]) -> list[tuple[dict, str
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
-
-    from graspnet_torch.paths import configs_dir
 
     args = _hydra_args(argv)
     if args.cfg or args.help or args.hydra_help or args.info or args.shell_completion or args.experimental_rerun:

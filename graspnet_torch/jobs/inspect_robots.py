@@ -18,6 +18,7 @@ from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
 from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
+from graspnet_torch.viz import Panel, render_robot
 
 __all__ = [
     "inspect_robots",
@@ -114,8 +115,6 @@ def prepare_inspect(cfg: Mapping[str, Any] | InspectRobotsJobCfg, run_dir: str |
 
 def _panels(robot: Robot, row: dict) -> list:
     """The home panels, then one per opposition (the gap goes into the row)."""
-    from graspnet_torch.viz import Panel
-
     home = robot.home_posture()
     name = robot.name
     panels = [Panel(f"{name}: home posture", home, (15.0, -60.0))]
@@ -149,7 +148,6 @@ def inspect_robots(names: Sequence[str] | None = None, out_dir: str | Path = "ou
     (its row says ``-``), never an error."""
     names = list(names) if names else available_robots()
     out_dir = Path(out_dir)
-    from graspnet_torch.viz import render_robot
 
     rows = []
     for name in names:

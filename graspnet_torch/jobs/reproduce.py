@@ -22,7 +22,12 @@ from pathlib import Path
 from typing import Any
 
 from graspnet_torch.errors import ConfigError, InternalError
+from graspnet_torch.experiments import EXPERIMENTS
+from graspnet_torch.experiments.report import machine, progress, quick_settings
+from graspnet_torch.io import atomic_write_text
+from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import Free, build, clip, setting
+from graspnet_torch.table import markdown_table
 
 __all__ = ["ReproduceJobCfg", "check_complete", "compare_numbers", "missed_targets", "prepare_reproduce", "reproduce",
            "shipped_experiments"]
@@ -58,9 +63,6 @@ def shipped_experiments() -> dict[str, Any]:
     order of :data:`~graspnet_torch.experiments.EXPERIMENTS`."""
     from omegaconf import OmegaConf
 
-    from graspnet_torch.experiments import EXPERIMENTS
-    from graspnet_torch.paths import configs_dir
-
     out = {}
     for name in EXPERIMENTS:
         data = OmegaConf.to_container(OmegaConf.load(configs_dir() / "experiment" / f"{name}.yaml"), resolve=True)
@@ -71,9 +73,6 @@ def shipped_experiments() -> dict[str, Any]:
 def prepare_reproduce(cfg: Mapping[str, Any], run_dir: str) -> ReproducePlan:
     """The job's settings checked, every experiment's settings built (a mistake is a
     :class:`ConfigError` naming the key, before any work), and the output folder checked."""
-    from graspnet_torch.experiments import EXPERIMENTS
-    from graspnet_torch.experiments.report import quick_settings
-
     job = build(ReproduceJobCfg, cfg)
     chosen = job.experiments if job.experiments is not None else shipped_experiments()
     if not isinstance(chosen, Mapping) or not chosen:
@@ -98,10 +97,6 @@ def reproduce(plan: ReproducePlan, overrides: Sequence[str] = ()) -> Path:
     """Run every experiment of ``plan`` into ``plan.out``; write ``REPRODUCTION.md`` and
     ``reproduction.json`` (atomically, once all have run) and check them (:func:`check_complete`)."""
     import torch
-
-    from graspnet_torch.experiments import EXPERIMENTS
-    from graspnet_torch.experiments.report import machine, progress
-    from graspnet_torch.io import atomic_write_text
 
     torch.set_num_threads(plan.threads)
     plan.out.mkdir(parents=True, exist_ok=True)
@@ -149,8 +144,6 @@ def _anchor(title: str) -> str:
 
 def render(reports: list, info: Mapping[str, str], seconds: float, quick: bool, overrides: Sequence[str] = ()) -> str:
     """``REPRODUCTION.md``: the machine and seeds, what does not match, then one section per experiment."""
-    from graspnet_torch.table import markdown_table
-
     command = "make reproduce-quick" if quick else "make reproduce"
     lines = ["# Reproducing Rezzoug & Gorce, \"Robotic Grasping: A Generic Neural Network Architecture\"", "",
              f"Written by `{command}` (`python scripts/reproduce.py{' ' + ' '.join(overrides) if overrides else ''}`) "

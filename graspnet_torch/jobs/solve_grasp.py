@@ -18,22 +18,29 @@ from typing import Any
 import numpy as np
 import torch
 
+from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import check_output_path
+from graspnet_torch.io import atomic_write_text, json_digest
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.motion import ReachCfg, StateLayout, Trajectory, check_start, plan_reach
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.proposal import proposal_of
+from graspnet_torch.robot.chain import UrdfModel
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
+from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, starts_from_proposals, trial_posture
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.solver.defaults import check_solver_defaults
+from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz import plot_learning_curves, render_robot
+from graspnet_torch.viz.motion import write_reach_gif
 from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["check_problem", "hparams_of", "job_settings", "log_hparams", "log_tensorboard", "posture_of",
@@ -196,9 +203,6 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
     a gripper's approach within its limits."""
     rc = problem.robot_cfg
     if problem.object is not None or problem.obstacles or rc.floor is not None or rc.self_collision:
-        from graspnet_torch.robot.chain import UrdfModel  # collisions need the URDF's collision geometry:
-        from graspnet_torch.robot.geometry import link_shapes  # every mesh found and readable, before any work
-
         link_shapes(UrdfModel(rc.urdf, rc.mesh_roots, rc.allow_outside_paths), "collision")
     robot, _ = robot_and_ik(problem.robot_cfg)  # the robot and its FCNN checkpoint (refused if corrupted); cached
     if solver.method == "srv" and not robot.shared.names and starts_from_proposals(robot, [problem], solver):
@@ -293,9 +297,6 @@ def write_replay(robot, problem: GraspProblem, result: GraspResult, env, path: P
     errors recomputed in float64) at up to ``frames`` iterations spread over the search, from the
     configurations and finger joints the loop recorded (``solver.history_postures``), for
     ``scripts/view.py``. ``env``: the problem's environment, built with the solve's settings."""
-    from graspnet_torch.io import atomic_write_text, json_digest
-    from graspnet_torch.solver.environment import Evaluation
-
     history = result.outcome.history
     K = history["config"].shape[0]
     steps = sorted(set(np.linspace(0, K - 1, min(frames, K)).round().astype(int).tolist()))
@@ -332,8 +333,6 @@ def reach_motion(robot, problem: GraspProblem, result: GraspResult, cfg: ReachCf
 
 
 def _has_environment(robot, problem: GraspProblem) -> bool:
-    from graspnet_torch.collision.scene import has_environment
-
     return has_environment(robot, problem)
 
 
@@ -350,8 +349,6 @@ def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:
 def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:
     """posture.png (the best trial), learning.png (the curves) and, with a reach motion, reach.gif
     in ``run_dir``."""
-    from graspnet_torch.viz import plot_learning_curves, render_robot
-
     path = render_robot(robot, posture_panels(robot, problem, result), run_dir / "posture.png")
     print(f"pictures: {path}", end="")
     history = result.outcome.history if result.outcome is not None else None
@@ -362,7 +359,5 @@ def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: P
                                       f"{len(result.trials)} trials", highlight=best_index)
         print(f", {curves}", end="")
     if result.trajectory is not None and result.trajectory.found:
-        from graspnet_torch.viz.motion import write_reach_gif
-
         print(f", {write_reach_gif(robot, problem, result.trajectory, run_dir / 'reach.gif')}", end="")
     print()

@@ -35,7 +35,7 @@ import torch
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
-from graspnet_torch.jobs.solve_grasp import check_problem, job_settings, with_robot_defaults
+from graspnet_torch.jobs.solve_grasp import check_problem, job_settings, prepare_solve, solve_grasp, with_robot_defaults
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.settings import clip
 from graspnet_torch.solver.api import solve_many
@@ -263,16 +263,12 @@ def _problem_setting(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> str | None:
 
 def prepare_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> None:
     """The checks of ``solve_grasp.py`` before any work: many problems or one."""
-    from graspnet_torch.jobs.solve_grasp import prepare_solve
-
     (prepare_many if is_many(_problem_setting(cfg)) else prepare_solve)(cfg, run_dir)
 
 
 def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path, overrides: Sequence[str] = ()) -> None:
     """``solve_grasp.py``: many problems (a folder, a ``.jsonl`` file) or one (``overrides``: the
     job's command line, its TensorBoard hparams)."""
-    from graspnet_torch.jobs.solve_grasp import solve_grasp
-
     if is_many(_problem_setting(cfg)):
         solve_grasps(cfg, run_dir)
     else:

@@ -24,6 +24,8 @@ from graspnet_torch.io import atomic_write_text
 from graspnet_torch.settings import clip
 from graspnet_torch.solver.environments import ENVIRONMENTS
 from graspnet_torch.table import markdown_table
+from graspnet_torch.viz.plots import _plt
+from graspnet_torch.viz.robot import save_figure
 
 ERROR_KEYS = tuple(dict.fromkeys(env.error_key for env in ENVIRONMENTS.values()))
 """The result JSON keys of the ranked error, one per kind of environment."""
@@ -113,9 +115,6 @@ def summarize_sweep(sweep: str | Path, out: str | Path | None = None) -> dict[st
 
 
 def _plot(rows: list[dict], groups: list[str], path: Path, title: str) -> Path:
-    from graspnet_torch.viz.plots import _plt
-    from graspnet_torch.viz.robot import save_figure
-
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), dpi=110)
     x_key = groups[0] if groups else None

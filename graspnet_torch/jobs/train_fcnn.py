@@ -22,6 +22,7 @@ from graspnet_torch.fcnn.checkpoint import (
     save_finger_ik,
 )
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
+from graspnet_torch.fcnn.experts import ExpertSet
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 from graspnet_torch.files import check_output_path
@@ -106,8 +107,6 @@ def _load_state(path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict:
 def _check_finger_state(path: Path, robot: Robot, finger: str, state: dict, cfg: FCNNTrainCfg) -> None:
     """The parts of a finger's training state that can be checked without building its trainer:
     the keys, the experts' tensors (loaded into an expert set of the finger's size) and the data."""
-    from graspnet_torch.fcnn.experts import ExpertSet
-
     where = f"{path}: cannot resume, the state of finger '{clip(finger, 40)}'"
     if finger not in robot.fingers:
         raise CheckpointError(f"{where} is not a finger of robot '{robot.name}'")

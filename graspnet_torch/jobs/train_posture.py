@@ -29,8 +29,10 @@ from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build
 from graspnet_torch.solver.config import SolverCfg
+from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.proposals import proposal_data, proposals
 from graspnet_torch.table import format_table
+from graspnet_torch.tasks.random import random_posed_problem
 
 __all__ = ["evaluate_proposal", "prepare_train_posture", "train_posture", "train_posture_job"]
 
@@ -44,9 +46,6 @@ def evaluate_proposal(model: PostureProposal, robot: Robot, finger_ik: FingerIK 
     the environment: a hand's fingers placed by the FCNN, no iteration) against the best of K
     uniform random configurations; errors in mm (the environment's error: E of eq. 3, or d of
     eq. 26)."""
-    from graspnet_torch.solver.environments import build_environment
-    from graspnet_torch.tasks.random import random_posed_problem
-
     g = torch.Generator().manual_seed(seed)
     ours, rand = [], []
     solver = SolverCfg()
@@ -65,9 +64,6 @@ def evaluate_proposal(model: PostureProposal, robot: Robot, finger_ik: FingerIK 
 
 def _periodic(robot: Robot, finger_ik: FingerIK | None, seed: int) -> torch.Tensor:
     """(n,) the search variables whose bounds span a full turn (compared modulo 2 pi)."""
-    from graspnet_torch.solver.environments import build_environment
-    from graspnet_torch.tasks.random import random_posed_problem
-
     env = build_environment(robot, random_posed_problem(robot, seed)[0], finger_ik, SolverCfg())
     span = (env.upper - env.lower).reshape(-1, env.n)[0]
     return span >= 2 * math.pi * (1 - 1e-6)

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.settings import clip
+from graspnet_torch.viz.viewer import load_view, serve
 
 __all__ = ["check_host", "check_port", "view_result"]
 
@@ -62,7 +63,6 @@ def view_result(argv: Sequence[str] | None = None, *, block: bool = True):
     args = parser.parse_args(argv)
     port = check_port(args.port)
     public = check_host(args.host)
-    from graspnet_torch.viz.viewer import load_view, serve
 
     t0 = time.perf_counter()
     view = load_view(args.path)

@@ -10,6 +10,7 @@ import torch
 
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.validity import MotionChecker
+from graspnet_torch.robot.ik import refine
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -32,8 +33,6 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     its contact by each of :data:`OPENINGS_M` away from the object's centre (or the contacts'
     centroid; finger inverse kinematics), then by each toward the palm (curling), then the
     fingers straightened toward their home by :data:`OPEN_TOWARD_HOME`."""
-    from graspnet_torch.robot.ik import refine
-
     robot, m = checker.robot, checker.layout.body
     if robot.n_fingers == 0:
         yield goal

@@ -28,13 +28,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from graspnet_torch.collision.scene import CollisionScene, has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path
 from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
+from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
+from graspnet_torch.solver.api import robot_and_ik
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
@@ -83,7 +88,6 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
             unit, scale = ("deg", 180 / math.pi) if revolute else ("m", 1.0)
             raise ProblemError(f"{where}.{name}: {value:g} lies outside its limits [{lo * scale:.4g}, "
                                f"{hi * scale:.4g}] {unit}")
-    from graspnet_torch.robot.transforms import rt_to_pose
 
     return Posture(palm_pose=rt_to_pose(*robot.palm_frame(body)), fingers=fingers, body=body)
 
@@ -95,7 +99,6 @@ def check_start(robot: Robot, problem: GraspProblem) -> None:
     posture = start_posture(robot, problem)
     if not robot.has_body:
         return
-    from graspnet_torch.collision.scene import CollisionScene, has_environment
 
     if has_environment(robot, problem):
         report = CollisionScene(robot, problem, touching=False).check(posture)
@@ -119,9 +122,6 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     (FCL at ``reach.resolution_deg`` / ``resolution_mm`` between consecutive rows) and timed
     within the URDF's velocity limits and ``reach.acceleration``. A motion not found within
     ``reach.timeout_s`` comes back with ``found`` false and a one-line reason."""
-    from graspnet_torch.solver.api import robot_and_ik
-    from graspnet_torch.solver.postures import trial_posture
-
     cfg = cfg or ReachCfg()
     robot = robot or robot_and_ik(problem.robot_cfg or problem.robot)[0]
     _refuse_shared(robot, problem)
@@ -239,8 +239,6 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     (their centroid; a gripper: its object points' midpoint), its orientation kept: damped least
     squares on the body joints (the palm frame's Jacobian), within the limits; None when that is
     not reached within 1 mm / 0.5 degree."""
-    from graspnet_torch.robot.ik import damped_pinv_step
-
     m = checker.layout.body
     q = torch.as_tensor(state[:m].copy())
     R0, t0 = robot.palm_frame(q)
@@ -305,8 +303,6 @@ def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     orientation kept, the fingers open), in a straight line to the grasp's palm, then the
     fingers close. The directions tried, in order: away from the contacts' centroid, away from
     the object's centre, then along each of the palm frame's axes both ways."""
-    from graspnet_torch.robot.transforms import pose_to_rt
-
     contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
     palm = goal[:3]
     R, _t = pose_to_rt(torch.as_tensor(goal[:6]))
@@ -351,8 +347,6 @@ def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajec
       rows: clear (:class:`~graspnet_torch.motion.MotionChecker`: the contact fingertips may
       touch the object only within ``reach.touch_mm`` of their contacts).
     """
-    from graspnet_torch.solver.postures import trial_posture
-
     cfg = cfg or ReachCfg()
     layout = StateLayout.of(robot, cfg.palm_speed)
     checker = MotionChecker(robot, problem, layout, cfg.touch_mm)

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import rt_to_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["MotionChecker", "StateLayout", "state_postures"]
@@ -99,8 +101,6 @@ def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> lis
     x = torch.as_tensor(np.asarray(states, dtype=np.float64))
     q = _finger_joints(robot, x, m)
     if robot.has_body:
-        from graspnet_torch.robot.transforms import rt_to_pose
-
         body = x[:, :m]
         palm = rt_to_pose(*robot.palm_frame(body))
         return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
@@ -128,8 +128,6 @@ class MotionChecker:
     """FCL checks of states and straight motions of one robot in one problem's scene."""
 
     def __init__(self, robot: Robot, problem: GraspProblem, layout: StateLayout, touch_mm: float = 40.0):
-        from graspnet_torch.collision.scene import CollisionScene
-
         self.robot, self.problem, self.layout, self.touch = robot, problem, layout, touch_mm / 1000.0
         self.scene = CollisionScene(robot, problem, touching=False)
         self.checks = 0

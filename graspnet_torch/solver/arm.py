@@ -20,6 +20,7 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
+from graspnet_torch.solver.search_space import finger_reach, finger_reach_bound
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["ArmHandEnvironment", "arm_bounds"]
@@ -121,8 +122,6 @@ class ArmHandEnvironment(FingerEnvironment):
     def check(cls, robot: Robot, problem: GraspProblem, solver: SolverCfg) -> None:
         """Refuse a contact farther from the arm's first joint than the arm's links, their
         prismatic travel and the finger can reach; and ``bounds`` that do not fit the arm."""
-        from graspnet_torch.solver.search_space import finger_reach_bound
-
         origin, arm = _arm_reach(robot)
         for contact, point in zip(problem.contacts, problem.contacts_world(), strict=True):
             reach = arm + finger_reach_bound(robot, contact.finger)
@@ -135,8 +134,6 @@ class ArmHandEnvironment(FingerEnvironment):
     def unreachable(cls, robot: Robot, problem: GraspProblem) -> list[str]:
         """The contact fingers whose contact lies farther from the arm's first joint than the arm's
         links (and prismatic travel) and the finger's sampled reach."""
-        from graspnet_torch.solver.search_space import finger_reach
-
         if not problem.contacts:
             return []
         origin, arm = _arm_reach(robot)

@@ -18,19 +18,21 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.cache import proxy_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import rt_to_pose
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
+from graspnet_torch.solver.least_squares import LMResult, levenberg_marquardt
 from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
-    from graspnet_torch.solver.least_squares import LMResult
     from graspnet_torch.solver.result import TrialResult
 
 __all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
@@ -123,8 +125,6 @@ class GripperEnvironment(Environment):
                                                        robot.cfg.gripper_points], axis=1), **kw)  # (4, 2)
         self.proxy = None
         if collisions and has_environment(robot, self.problem):
-            from graspnet_torch.collision.cache import proxy_for
-
             self.proxy = proxy_for(robot, problems, dtype=dtype, device=device, clearance=CLEARANCE_M)
             self._no_fingers = torch.zeros(1, 0, 0, **kw)
         self.counts_collisions = self.proxy is not None
@@ -258,8 +258,6 @@ class GripperEnvironment(Environment):
         trials ``trials`` (B,); goal: (B, 6) the two object points in the pairing of each row.
         Returns where each row ended (``x``, ``err``).
         """
-        from graspnet_torch.solver.least_squares import levenberg_marquardt
-
         lo, hi = (torch.as_tensor(a) for a in self._bounds)
         T = self.lower.shape[0] if self.lower.dim() == 2 else None
         trial_of = None
@@ -297,8 +295,6 @@ class GripperEnvironment(Environment):
         """Levenberg-Marquardt from x (T, n) onto both pairings of the object points at once
         (eq. 26-28), each trial keeping its better one; a trial stops once either pairing is
         within ``tol`` or ``done`` says so. ``rows``: the trials of x's rows (None: every trial, in order)."""
-        from graspnet_torch.solver.least_squares import LMResult
-
         T = x.shape[0]
         targets = self._targets64 if rows is None or self._targets64.shape[0] == 1 else self._targets64[rows.cpu()]
         targets = targets.expand(T, 2, 3)
@@ -360,8 +356,6 @@ class GripperEnvironment(Environment):
         """Per trial (of ``rows``, None: all), recomputed in float64: every body joint by name
         (m / degrees), the palm (gripper) pose, the two gripper points, d in mm, the alignment and
         ``error`` (d, metres)."""
-        from graspnet_torch.robot.transforms import rt_to_pose
-
         q = self.clamp(config, rows)
         points = self.robot.gripper_points(q)
         targets = self._targets64 if rows is None or self._targets64.shape[0] == 1 else self._targets64[rows.cpu()]

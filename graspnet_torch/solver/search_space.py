@@ -32,7 +32,9 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "finger_reach_bound",
@@ -160,8 +162,6 @@ def contact_search_frame(robot: Robot, problem: GraspProblem) -> np.ndarray:
     fingers, world = _ordered_contacts(robot, problem)
     reference = None
     if problem.object is not None:
-        from graspnet_torch.robot.chain import rpy_matrix_np
-
         reference = rpy_matrix_np(problem.object.pose[3:])[:, 2]
     return contact_frame(world, reference) @ _hand_frame_inverse(robot, fingers)
 
@@ -212,8 +212,6 @@ def sample_hand_configurations(robot: Robot, space: PalmSearchSpace, n: int,
     Returns:
         palm_pose: (n, 6) in the world (x, y, z, rx, ry, rz; m, rad); fingers: (n, F, J).
     """
-    from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
-
     lo, hi = torch.as_tensor(space.lower), torch.as_tensor(space.upper)
     local = lo + (hi - lo) * torch.rand(n, 6, generator=generator, dtype=torch.float64)
     G = torch.as_tensor(space.frame)

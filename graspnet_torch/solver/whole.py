@@ -11,7 +11,9 @@ from typing import TYPE_CHECKING, Self
 import torch
 from torch import Tensor
 
+from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
 from graspnet_torch.solver.environment import Done, Evaluation
+from graspnet_torch.solver.least_squares import levenberg_marquardt
 
 if TYPE_CHECKING:
     from graspnet_torch.collision.proxy import CollisionProxy
@@ -104,8 +106,6 @@ class WholeConfiguration:
         -> (B, 3F), and their Jacobian d tips / d x (B, 3F, m) (zero where a batch's mask is): the
         palm's columns by :func:`~graspnet_torch.robot.transforms.frame_point_jacobian`, each
         finger's R B_R dk/dq (free joints; mimic joints through their coupling)."""
-        from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
-
         B, F, j, n = x.shape[0], len(self.idx), self.robot.joints_per_finger, self.n
         R, t, Jc = self.palm_frame_jacobian(x[:, :n])
         kernel = self.ik.kernel(self.fingers)
@@ -148,8 +148,6 @@ class WholeConfiguration:
         on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
         their contacts, within bounds and limits, never into a collision the proxy sees (when
         there is one); ``prior``: its (centre, weight), see there."""
-        from graspnet_torch.solver.least_squares import levenberg_marquardt
-
         trials = None if rows is None else rows.cpu()
 
         def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:

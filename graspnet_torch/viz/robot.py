@@ -20,6 +20,7 @@ import numpy as np
 
 from graspnet_torch.io import atomic_path
 from graspnet_torch.robot.geometry import Shape, link_shapes
+from graspnet_torch.robot.meshes import decimate
 from graspnet_torch.robot.robot import Posture, Robot
 
 __all__ = ["Panel", "draw_mesh", "draw_shapes", "draw_skeleton", "drawable_shapes", "new_figure", "render_robot",
@@ -87,8 +88,6 @@ def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alph
                                                  linewidth=0.3, alpha=alpha))
             extent.append(w)
         elif s.kind == "mesh":
-            from graspnet_torch.robot.meshes import decimate
-
             mesh = decimate(s.mesh)
             w = np.asarray(mesh.vertices) @ T[:3, :3].T + T[:3, 3]
             ax.add_collection3d(Poly3DCollection(w[np.asarray(mesh.faces)], facecolors=color, shade=True,

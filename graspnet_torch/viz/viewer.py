@@ -20,15 +20,24 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from graspnet_torch.collision import CollisionScene
+from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.files import read_document
+from graspnet_torch.io import json_digest
+from graspnet_torch.motion.trajectory import Trajectory
+from graspnet_torch.motion.validity import StateLayout, state_postures
+from graspnet_torch.robot.meshes import decimate
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.settings import clip
+from graspnet_torch.solver.api import as_problem, robot_and_ik
+from graspnet_torch.solver.environments import environment_class
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz.robot import drawable_shapes
 
 if TYPE_CHECKING:
     import viser
-
-    from graspnet_torch.motion.trajectory import Trajectory
 
 __all__ = ["ResultView", "load_view", "serve"]
 
@@ -58,11 +67,6 @@ def load_view(path: str | Path) -> ResultView:
     """A run folder (its ``result.json``) or a result JSON -> :class:`ResultView`. Refuses
     (:class:`ProblemError`, one line) a missing file, one that is not a result, a result without
     its problem."""
-    from graspnet_torch.files import read_document
-    from graspnet_torch.io import json_digest
-    from graspnet_torch.solver.api import as_problem, robot_and_ik
-    from graspnet_torch.solver.postures import trial_posture
-
     path = Path(path)
     file = path / "result.json" if path.is_dir() else path
     if not file.is_file():
@@ -105,9 +109,6 @@ def load_view(path: str | Path) -> ResultView:
 def _motion(file: Path, data: Any, robot: Robot) -> Trajectory | None:
     """The result's reach motion (``trajectory`` when ``found``), refused in one line where it is
     not a motion of ``robot``."""
-    from graspnet_torch.motion.trajectory import Trajectory
-    from graspnet_torch.motion.validity import StateLayout
-
     if not isinstance(data, dict) or data.get("found") is not True:
         return None
     layout = StateLayout.of(robot)
@@ -133,7 +134,6 @@ def _shape_mesh(shape):
         return trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[1], sections=24)
     if shape.kind == "sphere":
         return trimesh.creation.icosphere(subdivisions=2, radius=shape.size[0])
-    from graspnet_torch.robot.meshes import decimate
 
     return decimate(shape.mesh)  # as the pictures draw it
 
@@ -149,9 +149,6 @@ class _Scene:
     """The viser scene of one view: one mesh per link shape, moved per posture."""
 
     def __init__(self, server: viser.ViserServer, view: ResultView):
-        from graspnet_torch.collision.scene import has_environment
-        from graspnet_torch.viz.robot import drawable_shapes
-
         self.server, self.view = server, view
         self.shapes, _errors = drawable_shapes(view.robot)
         self.handles = []
@@ -172,14 +169,10 @@ class _Scene:
         self.marks: list = []
         self.collisions = None
         if has_environment(view.robot, problem):
-            from graspnet_torch.collision import CollisionScene
-
             self.collisions = CollisionScene(view.robot, problem)
 
     def show(self, posture: Posture, trial: dict[str, Any] | None) -> list[str]:
         """Place every link at the posture, its contacts marked; returns the colliding links (red)."""
-        from graspnet_torch.solver.environments import environment_class
-
         frames = self.view.robot.link_frames(posture)
         red: set[str] = set()
         if self.collisions is not None:
@@ -230,8 +223,6 @@ def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.
 
         @iteration.on_update
         def _(_event) -> None:
-            from graspnet_torch.solver.postures import trial_posture
-
             k = labels.index(pick.value)
             fields = view.replay["trials"][int(iteration.value)][k]
             red = scene.show(trial_posture(view.robot, fields), None)
@@ -240,7 +231,6 @@ def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.
                             + (f"; colliding (red): {', '.join(red)}" if red else ""))
     if view.motion is not None:
         motion = view.motion
-        from graspnet_torch.motion.validity import StateLayout, state_postures
 
         layout = StateLayout.of(view.robot)
         slider = server.gui.add_slider("reach motion (s)", 0.0, float(motion.times[-1]), 0.02,

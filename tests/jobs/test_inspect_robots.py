@@ -69,12 +69,12 @@ def test_robots_by_path_get_generic_opposition_panels(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_a_picture_failure_is_a_warning_per_robot(tmp_path, capsys, monkeypatch):
-    import graspnet_torch.viz as viz
+    import graspnet_torch.jobs.inspect_robots as job
 
     def broken(robot, *args, **kwargs):
         raise RuntimeError(f"no picture of {robot.name}\nsecond line")
 
-    monkeypatch.setattr(viz, "render_robot", broken)
+    monkeypatch.setattr(job, "render_robot", broken)
     rows = inspect_robots(["manus"], tmp_path)
     assert rows[0]["picture"] == "-"
     assert capsys.readouterr().err.strip().splitlines() == [
