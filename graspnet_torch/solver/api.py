@@ -15,16 +15,18 @@ from graspnet_torch.fcnn.checkpoint import finger_ik_of, robot_checkpoint
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
-from graspnet_torch.robot.postures import reference_posture, trial_posture
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.environment import Environment, Report
 from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.loop import LoopOutcome, Starts, enough_succeeded, run_loop
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.tasks.reference import reference_posture
 from graspnet_torch.threads import torch_threads
 
 __all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
@@ -108,7 +110,9 @@ def _read_problem(path: str, task: str | None, size: int, mtime_ns: int) -> Gras
 
 def settings_of(robot: Robot, solver: SolverCfg | None, srv: SRVNetCfg | None, reward: RewardCfg | None,
               max_iterations: int | None) -> tuple[SolverCfg, SRVNetCfg, RewardCfg]:
-    """The settings of a solve: the given ones, else the robot's ``solver_defaults``, else the paper's."""
+    """The settings of a solve: the given ones, else the robot's ``solver_defaults`` (checked: one
+    line naming the robot's file), else the paper's."""
+    check_solver_defaults(robot.cfg)
     defaults = robot.cfg.solver_defaults
     solver = with_defaults(SolverCfg, solver, defaults.get("solver"), "solver")
     if max_iterations is not None:
@@ -236,7 +240,8 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     a trained posture proposal model starts at random, and its first such search says so."""
     if env.shared_slots or not starts_from_proposals(env.robot, env.problems, solver):
         return None  # (a hand whose fingers share joints: its proposals do not give them)
-    from graspnet_torch.proposal import posture_checkpoint, proposal_of, proposal_starts
+    from graspnet_torch.proposal import posture_checkpoint, proposal_of
+    from graspnet_torch.solver.proposals import proposal_starts
 
     model = proposal_of(env.robot)
     if model is None:

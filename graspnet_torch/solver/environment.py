@@ -258,7 +258,7 @@ class Environment(ABC):
         to collide with."""
         from graspnet_torch.collision.cache import scene_for
         from graspnet_torch.collision.scene import has_environment
-        from graspnet_torch.robot.postures import trial_posture
+        from graspnet_torch.solver.postures import trial_posture  # it imports the result, which is above
 
         rows = rows.cpu()
         pid = torch.zeros_like(rows) if self.problem_index is None else self.problem_index.cpu()[rows]

@@ -28,12 +28,12 @@ from torch import Tensor
 
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.config import RobotCfg
-from graspnet_torch.robot.postures import trial_posture
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver import api
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment
 from graspnet_torch.solver.environments import build_environment
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
