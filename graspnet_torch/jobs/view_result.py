@@ -67,18 +67,19 @@ def view_result(argv: Sequence[str] | None = None, *, block: bool = True):
     t0 = time.perf_counter()
     view = load_view(args.path)
     server = serve(view, args.host, port)
-    if public:
-        print(f"warning: serving on {args.host}: other machines that reach this one can open the page "
-              f"(the default, 127.0.0.1, serves this machine only)", file=sys.stderr, flush=True)
-    print(f"viewing {view.path} ({view.robot.name}, {len(view.postures)} trials"
-          f"{', a reach motion' if view.motion is not None else ''}) at http://{args.host}:{server.get_port()} "
-          f"(ready in {time.perf_counter() - t0:.1f} s; Ctrl-C stops)", flush=True)
-    if block:
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:  # Ctrl-C, the way to stop it: one line, exit 0
-            print("stopped (Ctrl-C)", file=sys.stderr, flush=True)
-        finally:
-            server.stop()
+    try:  # from here Ctrl-C stops the server: one line, exit 0
+        if public:
+            print(f"warning: serving on {args.host}: other machines that reach this one can open the page "
+                  f"(the default, 127.0.0.1, serves this machine only)", file=sys.stderr, flush=True)
+        print(f"viewing {view.path} ({view.robot.name}, {len(view.postures)} trials"
+              f"{', a reach motion' if view.motion is not None else ''}) at http://{args.host}:{server.get_port()} "
+              f"(ready in {time.perf_counter() - t0:.1f} s; Ctrl-C stops)", flush=True)
+        while block:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        print("stopped (Ctrl-C)", file=sys.stderr, flush=True)
+        server.stop()
+    except BaseException:
+        server.stop()
+        raise
     return server
