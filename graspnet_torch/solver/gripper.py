@@ -29,42 +29,17 @@ from graspnet_torch.robot.transforms import rt_to_pose
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 from graspnet_torch.solver.least_squares import LMResult, levenberg_marquardt
+from graspnet_torch.solver.search_space import gripper_bounds
 from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
     from graspnet_torch.solver.result import TrialResult
 
-__all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment", "gripper_bounds"]
+__all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment"]
 
 CLEARANCE_M = 0.005  # the loop and the polish keep 5 mm from obstacles, floor and own links (proxy margin)
 ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
-
-
-def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
-                   approach_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) bounds of the body joints (m / rad): the joint limits, or +- (approach_m, approach_deg)
-    about the problem's ``approach`` within them (joints the approach leaves out: their limits)."""
-    lower, upper = (a.copy() for a in robot.body_limits)
-    if problem.approach is None:
-        return lower, upper
-    names = robot.body_joint_names
-    unknown = sorted(set(problem.approach) - set(names))
-    if unknown:
-        raise ProblemError(f"{problem.source}: approach: unknown joint(s) {', '.join(unknown[:5])} of robot "
-                           f"'{robot.name}' (joints: {', '.join(names)})")
-    for k, (name, kind) in enumerate(zip(names, robot.body.joint_types, strict=True)):
-        if name not in problem.approach:
-            continue
-        value = problem.approach[name] * (math.pi / 180 if kind == "revolute" else 1.0)
-        if not lower[k] - 1e-9 <= value <= upper[k] + 1e-9:
-            unit = "degrees" if kind == "revolute" else "m"
-            scale = 180 / math.pi if kind == "revolute" else 1.0
-            raise ProblemError(f"{problem.source}: approach.{name}: {problem.approach[name]:g} lies outside its "
-                               f"limits [{lower[k] * scale:.4g}, {upper[k] * scale:.4g}] {unit}")
-        half = math.radians(approach_deg) if kind == "revolute" else approach_m
-        lower[k], upper[k] = max(lower[k], value - half), min(upper[k], value + half)
-    return lower, upper
 
 
 class GripperEnvironment(Environment):

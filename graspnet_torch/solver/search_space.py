@@ -38,7 +38,7 @@ from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "finger_reach_bound",
-           "hand_frame", "palm_search_space", "palm_space_around", "sample_hand_configurations"]
+           "gripper_bounds", "hand_frame", "palm_search_space", "palm_space_around", "sample_hand_configurations"]
 
 ORIENTATIONS = (np.array([-math.pi, -math.pi / 2, -math.pi]), np.array([math.pi, math.pi / 2, math.pi]))
 REACH_SAMPLES = 4096
@@ -230,3 +230,28 @@ def finger_reach_bound(robot: Robot, finger: str) -> float:
                  if t == "prismatic")
     return float(np.linalg.norm(f.base_in_palm[:3, 3]) + np.linalg.norm(spec.offsets[:, :3, 3], axis=1).sum() + travel)
 
+
+def gripper_bounds(robot: Robot, problem: GraspProblem, approach_m: float = 0.2,
+                   approach_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) bounds of the body joints (m / rad): the joint limits, or +- (approach_m, approach_deg)
+    about the problem's ``approach`` within them (joints the approach leaves out: their limits)."""
+    lower, upper = (a.copy() for a in robot.body_limits)
+    if problem.approach is None:
+        return lower, upper
+    names = robot.body_joint_names
+    unknown = sorted(set(problem.approach) - set(names))
+    if unknown:
+        raise ProblemError(f"{problem.source}: approach: unknown joint(s) {', '.join(unknown[:5])} of robot "
+                           f"'{robot.name}' (joints: {', '.join(names)})")
+    for k, (name, kind) in enumerate(zip(names, robot.body.joint_types, strict=True)):
+        if name not in problem.approach:
+            continue
+        value = problem.approach[name] * (math.pi / 180 if kind == "revolute" else 1.0)
+        if not lower[k] - 1e-9 <= value <= upper[k] + 1e-9:
+            unit = "degrees" if kind == "revolute" else "m"
+            scale = 180 / math.pi if kind == "revolute" else 1.0
+            raise ProblemError(f"{problem.source}: approach.{name}: {problem.approach[name]:g} lies outside its "
+                               f"limits [{lower[k] * scale:.4g}, {upper[k] * scale:.4g}] {unit}")
+        half = math.radians(approach_deg) if kind == "revolute" else approach_m
+        lower[k], upper[k] = max(lower[k], value - half), min(upper[k], value + half)
+    return lower, upper

@@ -12,7 +12,8 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.robot.robot import Posture
-from graspnet_torch.solver.gripper import GripperEnvironment, gripper_bounds
+from graspnet_torch.solver.gripper import GripperEnvironment
+from graspnet_torch.solver.search_space import gripper_bounds
 
 CUBE = {"robot": "manus", "object": {"shape": "box", "size": [0.06, 0.06, 0.06], "pose": [0.9, 0.2, 0.75, 0, 0, 30]},
         "points": [[0.0, 0.03, 0.0], [0.0, -0.03, 0.0]]}
