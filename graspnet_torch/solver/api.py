@@ -10,19 +10,26 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.cache import scene_for
+from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.checkpoint import finger_ik_of, robot_checkpoint
 from graspnet_torch.fcnn.ik import FingerIK
-from graspnet_torch.rewards import Reward
+from graspnet_torch.paths import configs_dir
+from graspnet_torch.proposal import posture_checkpoint, proposal_of
+from graspnet_torch.rewards import Reward, add_noise
 from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_cfg
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import with_defaults
+from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.defaults import check_solver_defaults
+from graspnet_torch.solver.dls import run_dls
 from graspnet_torch.solver.environment import Environment, Report
 from graspnet_torch.solver.environments import build_environment, environment_class
 from graspnet_torch.solver.loop import LoopOutcome, Starts, enough_succeeded, run_loop
 from graspnet_torch.solver.postures import trial_posture
+from graspnet_torch.solver.proposals import proposal_starts
 from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
@@ -89,7 +96,6 @@ def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
         return problem
     p = Path(str(problem))
     if not (p.suffix or p.exists()):
-        from graspnet_torch.paths import configs_dir
 
         p, task = configs_dir() / "task" / f"{problem}.yaml", str(problem)
         if not p.is_file():
@@ -190,12 +196,10 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
     t0 = time.perf_counter()
     if solver.method == "dls":
-        from graspnet_torch.solver.dls import run_dls
 
         outcome = run_dls(env, trials, seed, solver, reward, noise)
     else:
         if solver.method == "cmaes":
-            from graspnet_torch.solver.cmaes import run_cmaes
 
             outcome = run_cmaes(env, trials, seed, solver, reward, noise)
         else:
@@ -218,7 +222,6 @@ _SAID_NO_MODEL: set[str] = set()
 def starts_from_proposals(robot: Robot, problems: Sequence[GraspProblem], solver: SolverCfg) -> bool:
     """Whether an srv search of ``problems`` starts its trials from the robot's posture proposal
     model (when it has one): ``solver.start`` 'proposal', or 'auto' where nothing can collide."""
-    from graspnet_torch.collision.scene import has_environment
 
     return solver.start != "random" and not (solver.start == "auto" and any(has_environment(robot, p)
                                                                              for p in problems))
@@ -240,8 +243,6 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     a trained posture proposal model starts at random, and its first such search says so."""
     if env.shared_slots or not starts_from_proposals(env.robot, env.problems, solver):
         return None  # (a hand whose fingers share joints: its proposals do not give them)
-    from graspnet_torch.proposal import posture_checkpoint, proposal_of
-    from graspnet_torch.solver.proposals import proposal_starts
 
     model = proposal_of(env.robot)
     if model is None:
@@ -253,7 +254,6 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
         return None
     if noise.sigma == 0:
         return proposal_starts(model, env, trials, keep=None, colliding_random=solver.stop is None)
-    from graspnet_torch.rewards import add_noise
 
     reward_fn = Reward(reward, solver.max_iterations, env.reward_base)
     gen = torch.Generator(device=env.lower.device).manual_seed(seed + NOISY_RANKING_SEED)
@@ -325,11 +325,9 @@ def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Repor
     and no collision). Also the one-line reason no trial succeeded, or None."""
     from dataclasses import replace
 
-    from graspnet_torch.collision.scene import has_environment
 
     reports = None
     if has_environment(robot, problem):
-        from graspnet_torch.collision.cache import scene_for
 
         scene = scene_for(robot, problem)
         reports = scene.check_many([trial_posture(robot, f) for f in report.fields])

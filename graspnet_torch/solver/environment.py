@@ -28,7 +28,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.cache import scene_for
+from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.rewards import r1
+from graspnet_torch.solver.postures import trial_posture
 
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
@@ -256,9 +259,6 @@ class Environment(ABC):
         the result counts collisions) finds clear: the loop stops a trial only there, for the
         collision proxy can miss a link inside the object. All True where the problem has nothing
         to collide with."""
-        from graspnet_torch.collision.cache import scene_for
-        from graspnet_torch.collision.scene import has_environment
-        from graspnet_torch.solver.postures import trial_posture  # it imports the result, which is above
 
         rows = rows.cpu()
         pid = torch.zeros_like(rows) if self.problem_index is None else self.problem_index.cpu()[rows]

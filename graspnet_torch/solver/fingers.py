@@ -8,15 +8,19 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.cache import proxy_for
+from graspnet_torch.collision.scene import has_environment
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.transforms import compose, rt_to_pose, transform_points, untransform_points
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 from graspnet_torch.solver.whole import WholeConfiguration
+from graspnet_torch.tasks.problem import GraspProblem
 
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
     from graspnet_torch.robot.robot import Posture, Robot
     from graspnet_torch.solver.config import SolverCfg
     from graspnet_torch.solver.result import TrialResult
-    from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FingerEnvironment"]
 
@@ -49,8 +53,6 @@ class FingerEnvironment(WholeConfiguration, Environment):
                  device: torch.device | str = "cpu", collisions: bool = False, runs: int = 1):
         import numpy as np
 
-        from graspnet_torch.errors import ProblemError
-        from graspnet_torch.tasks.problem import GraspProblem
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         for p in problems:
@@ -93,10 +95,8 @@ class FingerEnvironment(WholeConfiguration, Environment):
         self._base64 = (self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu())
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
-        from graspnet_torch.collision.scene import has_environment
 
         if collisions and has_environment(robot, self.problem):
-            from graspnet_torch.collision.cache import proxy_for
 
             self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device)
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
@@ -145,7 +145,6 @@ class FingerEnvironment(WholeConfiguration, Environment):
                 ) -> Tensor:
         """Contacts in each contact finger's base frame. config: (B, n) -> (B, F, 3); ``palm``: its
         palm frame if already known; ``rows``: the trials of the rows (None: all, in order)."""
-        from graspnet_torch.robot.transforms import untransform_points
 
         R, t = palm if palm is not None else self.palm_frame(config)
         in_palm = untransform_points(R.unsqueeze(1), t.unsqueeze(1), self._rows(self.contacts, rows))
@@ -255,7 +254,6 @@ class FingerEnvironment(WholeConfiguration, Environment):
         ~1e-7: configurations and joints are clamped to the exact bounds and limits first."""
         import math
 
-        from graspnet_torch.robot.transforms import rt_to_pose, transform_points
 
         robot = self.robot
         exact = self.clamp(config, rows)
@@ -270,7 +268,6 @@ class FingerEnvironment(WholeConfiguration, Environment):
         R, t = self.palm_frame(exact)
         contacts = self._rows(self.contacts64, rows)
         if self.frame64 is not None:  # the search frame G -> the world: the palm G o pose, the contacts G c
-            from graspnet_torch.robot.transforms import compose
 
             G_R, G_t = (self._rows(g, rows) if g.shape[0] > 1 else g for g in self.frame64)
             R, t = compose(G_R, G_t, R, t)

@@ -17,10 +17,17 @@ from torch import Tensor
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.robot import Posture, Robot
-from graspnet_torch.robot.transforms import pose_jacobian, pose_to_rt
+from graspnet_torch.robot.transforms import compose, pose_jacobian, pose_to_rt, rt_to_pose, untransform_points
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.fingers import FingerEnvironment
-from graspnet_torch.solver.search_space import PalmSearchSpace, finger_reach_bound
+from graspnet_torch.solver.search_space import (
+    PalmSearchSpace,
+    contact_search_frame,
+    finger_reach,
+    finger_reach_bound,
+    palm_search_space,
+    palm_space_around,
+)
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["HandEnvironment"]
@@ -49,7 +56,6 @@ class HandEnvironment(FingerEnvironment):
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
                  dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
                  runs: int = 1, spaces: Sequence[PalmSearchSpace] | None = None):
-        from graspnet_torch.solver.search_space import palm_search_space
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         if robot.has_body:
@@ -87,8 +93,6 @@ class HandEnvironment(FingerEnvironment):
         the zero pose, far from the angles' bounds (the problem's own frame may put it at rx = pi,
         where a bound stops it) and from the Euler angles' singularity; the contact fingers'
         joints within ``solver.polish.warm_step_deg`` of the posture's (:meth:`near`)."""
-        from graspnet_torch.robot.transforms import pose_to_rt
-        from graspnet_torch.solver.search_space import palm_space_around
 
         R, t = pose_to_rt(posture.palm_pose.to(torch.float64))
         palm = np.eye(4)
@@ -102,7 +106,6 @@ class HandEnvironment(FingerEnvironment):
         (:func:`~graspnet_torch.solver.search_space.contact_search_frame`, whatever its
         ``palm_bounds``: the same contacts moved and turned give the same input), one slot per
         robot finger: (R, F_all, 3), mask (R, F_all)."""
-        from graspnet_torch.robot.transforms import untransform_points
 
         targets, mask = super().proposal_input()  # in the search frame G of each row
         P_R, P_t = self._proposal_frames()  # the proposal frame P in G, per row
@@ -112,7 +115,6 @@ class HandEnvironment(FingerEnvironment):
     def proposal_configs(self, configs: Tensor, rows: Tensor) -> Tensor:
         """Palm poses (B, K, 6) in the rows' proposal frames P -> in the search frame G (G^-1 P
         pose), each angle within 2 pi of the middle of its bounds."""
-        from graspnet_torch.robot.transforms import compose, rt_to_pose
 
         B, K, _ = configs.shape
         P_R, P_t = (f[rows.cpu()] for f in self._proposal_frames())
@@ -128,7 +130,6 @@ class HandEnvironment(FingerEnvironment):
         """Per row of :meth:`proposal_input`: the proposal frame P in the search frame G
         (G^-1 C_p), rotation (R, 3, 3) and translation (R, 3), float64."""
         if self._proposal is None:
-            from graspnet_torch.solver.search_space import contact_search_frame
 
             frames = np.stack([np.eye(4) if s.kind == "contacts" else  # the search frame is the proposal frame
                                np.linalg.inv(s.frame) @ contact_search_frame(self.robot, p)
@@ -158,7 +159,6 @@ class HandEnvironment(FingerEnvironment):
         """The posture's palm pose in the (first) search frame G: G^-1 o pose (1, 6); each angle
         taken within 2 pi of the middle of its bounds."""
 
-        from graspnet_torch.robot.transforms import rt_to_pose
 
         R, t = pose_to_rt(posture.palm_pose.to(torch.float64).reshape(1, 6))
         G_R, G_t = (f[:1] for f in self.frame64)
@@ -182,7 +182,6 @@ class HandEnvironment(FingerEnvironment):
             raise ProblemError(f"{problem.source}: robot '{robot.name}' has an arm; this fits free hands")
         bounds = problem.bounds()
         if bounds is None:
-            from graspnet_torch.solver.search_space import palm_search_space
 
             palm_search_space(robot, problem)
             return
@@ -199,7 +198,6 @@ class HandEnvironment(FingerEnvironment):
     def unreachable(cls, robot: Robot, problem: GraspProblem) -> list[str]:
         """The contact fingers whose contact lies farther from the box of palm positions than the
         finger's sampled reach (:func:`~graspnet_torch.solver.search_space.finger_reach`)."""
-        from graspnet_torch.solver.search_space import finger_reach, palm_search_space
 
         if not problem.contacts:
             return []

@@ -26,11 +26,14 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.fcnn.checkpoint import finger_ik_of
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver import api
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.dls import run_dls
 from graspnet_torch.solver.environment import Environment
 from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.postures import trial_posture
@@ -76,7 +79,6 @@ class Solver:
         if isinstance(robot, Robot):
             self.robot, ik = robot, finger_ik
             if ik is None:
-                from graspnet_torch.fcnn.checkpoint import finger_ik_of
 
                 ik = finger_ik_of(robot)
         else:
@@ -93,7 +95,6 @@ class Solver:
 
     def problem(self, problem: GraspProblem | str | Path) -> GraspProblem:
         """A problem, a problem file or a shipped task's name -> the problem, checked to be this robot's."""
-        from graspnet_torch.errors import ProblemError
 
         p = api.as_problem(problem)
         if p.robot != self.robot.name:
@@ -210,7 +211,6 @@ class Solver:
 
     def _land(self, problem: GraspProblem, env: Environment, x: Tensor, seed: int) -> GraspResult:
         """Levenberg-Marquardt from x (1, m) in ``env``: a result of one trial."""
-        from graspnet_torch.solver.dls import run_dls
 
         cfg = self.solver_cfg
         local = replace(cfg, method="dls", max_iterations=cfg.polish.iterations)
