@@ -44,11 +44,11 @@ H = 1e-7  # the previous implementation's forward-difference step
 
 
 def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
+    from graspnet_torch.least_squares import levenberg_marquardt
     from graspnet_torch.robot.fingers import FingerKernel
     from graspnet_torch.robot.transforms import transform_points
     from graspnet_torch.solver import SolverCfg
     from graspnet_torch.solver.api import build_environment
-    from graspnet_torch.solver.least_squares import levenberg_marquardt
 
     robot = gt.load_robot("hand")
     ik = gt.load_finger_ik(robot)

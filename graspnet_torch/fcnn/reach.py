@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from graspnet_torch.robot.ik import damped_pinv_step
+from graspnet_torch.least_squares import damped_pinv_step
 from graspnet_torch.settings import setting
 
 __all__ = ["ReachCfg", "ReachResult", "min_singular_value", "reach_motion", "reach_steps"]

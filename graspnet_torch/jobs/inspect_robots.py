@@ -14,8 +14,8 @@ import torch
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
+from graspnet_torch.least_squares import damped_pinv_step
 from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
-from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
 from graspnet_torch.viz import Panel, render_robot

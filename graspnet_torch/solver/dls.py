@@ -3,7 +3,7 @@
 Each trial is one restart: the whole configuration x (a free hand: the palm pose and the contact
 fingers' free joints; a hand on an arm: the arm's joints and those fingers; a gripper: its body
 joints, both pairings of eq. 26-28 at once) drawn uniformly within the bounds and joint limits,
-then Levenberg-Marquardt (:mod:`graspnet_torch.solver.least_squares`, float64, analytic
+then Levenberg-Marquardt (:mod:`graspnet_torch.least_squares`, float64, analytic
 Jacobian) puts the fingertips (gripper points) on the contacts: every step kept only where it
 lowers the error and, with a collision-shaped reward (R2-R4) and something to collide with, does
 not raise the collision proxy's count. A restart stops once its error is below

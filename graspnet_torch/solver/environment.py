@@ -35,9 +35,9 @@ from graspnet_torch.solver.postures import trial_posture
 
 if TYPE_CHECKING:
     from graspnet_torch.fcnn.ik import FingerIK
+    from graspnet_torch.least_squares import LMResult
     from graspnet_torch.robot.robot import Posture, Robot
     from graspnet_torch.solver.config import SolverCfg
-    from graspnet_torch.solver.least_squares import LMResult
     from graspnet_torch.solver.result import TrialResult
     from graspnet_torch.tasks.problem import GraspProblem
 

@@ -21,14 +21,13 @@ from torch import Tensor
 from graspnet_torch.collision.cache import proxy_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.least_squares import LMResult, damped_pinv_step, levenberg_marquardt
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
-from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import rt_to_pose
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
-from graspnet_torch.solver.least_squares import LMResult, levenberg_marquardt
 from graspnet_torch.solver.search_space import gripper_bounds
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -226,7 +225,7 @@ class GripperEnvironment(Environment):
     def _least_squares(self, q: Tensor, goal: Tensor, iterations: int, tol: float = 0.0,
                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
                        trials: Tensor | None = None) -> LMResult:
-        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        """Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
         on the gripper points, float64, within the bounds, never into a collision the proxy sees.
 
         q: (B, n) start, B a multiple of the trials (row r is trial r % T), or the rows of the

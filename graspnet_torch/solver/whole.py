@@ -11,15 +11,15 @@ from typing import TYPE_CHECKING, Self
 import torch
 from torch import Tensor
 
+from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
 from graspnet_torch.solver.environment import Done, Evaluation
-from graspnet_torch.solver.least_squares import levenberg_marquardt
 
 if TYPE_CHECKING:
     from graspnet_torch.collision.proxy import CollisionProxy
     from graspnet_torch.fcnn.ik import FingerIK
+    from graspnet_torch.least_squares import LMResult
     from graspnet_torch.robot.robot import Posture, Robot
-    from graspnet_torch.solver.least_squares import LMResult
 
 __all__ = ["WholeConfiguration"]
 
@@ -144,7 +144,7 @@ class WholeConfiguration:
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
                     trace: list[Tensor] | None = None, rows: Tensor | None = None,
                     prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
-        """Levenberg-Marquardt (:func:`~graspnet_torch.solver.least_squares.levenberg_marquardt`)
+        """Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
         on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
         their contacts, within bounds and limits, never into a collision the proxy sees (when
         there is one); ``prior``: its (centre, weight), see there."""

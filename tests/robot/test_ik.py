@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import torch
 
+from graspnet_torch.least_squares import damped_pinv_step, solve3_symmetric
 from graspnet_torch.robot import ChainKernel
-from graspnet_torch.robot.ik import damped_pinv_step, refine, solve3_symmetric
+from graspnet_torch.robot.ik import refine
 from tests.conftest import uniform
 
 

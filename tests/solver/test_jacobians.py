@@ -1,5 +1,5 @@
 """Every analytic Jacobian of the least-squares model against forward differences
-(:func:`~graspnet_torch.solver.least_squares.numerical_jacobian`): the palm pose's frame (small
+(:func:`~graspnet_torch.least_squares.numerical_jacobian`): the palm pose's frame (small
 angles included), the whole hand x = [palm pose, fingers], the arm + hand x = [arm joints,
 fingers], a hand with mimic joints, prismatic joints and padded fingers, the gripper's points;
 and Levenberg-Marquardt with them converges on random reachable problems."""
@@ -11,10 +11,10 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.fcnn.experts import ExpertSet
+from graspnet_torch.least_squares import numerical_jacobian
 from graspnet_torch.robot.transforms import frame_point_jacobian, pose_jacobian, pose_to_rt, transform_points
 from graspnet_torch.solver import SolverCfg
 from graspnet_torch.solver.api import build_environment
-from graspnet_torch.solver.least_squares import numerical_jacobian
 from tests.odd_hands import write_oddhand
 
 H = 1e-7  # forward differences in float64: truncation ~h |f''|, rounding ~1e-16 / h

@@ -11,10 +11,10 @@ from omegaconf import OmegaConf
 
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import build
 from graspnet_torch.solver import SolverCfg
-from graspnet_torch.solver.least_squares import levenberg_marquardt
 from graspnet_torch.solver.loop import enough_succeeded
 
 

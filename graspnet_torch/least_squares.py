@@ -1,19 +1,29 @@
-"""Batched Levenberg-Marquardt within bounds: the local solver behind every polish and ``solver=dls``.
+"""The package's one damped-least-squares step and its one Levenberg-Marquardt: batched, within bounds.
+
+Every least-squares loop of the package is a residual function handed to
+:func:`levenberg_marquardt`: fingertip positions (``solver=dls``, a hand's polish, ``robot/ik.refine``),
+a gripper's points (its settling steps and polish), two fingertips brought together
+(``jobs/inspect_robots``), a reference posture's contacts with a prior toward mid-range
+(``solver/reference_fit``); a palm or gripper frame, or a back-off target (the frame moved away,
+its orientation kept), is a model of the same kind (value: position and rotation error, Jacobian:
+the frame's). The FCNN's refinement (paper eq. 5, ``fcnn/ik.py``) keeps its own steps: the
+paper's method. Only torch: the utilities layer, so every layer above may use it.
 
 For B rows at once, each with its own goal, bounds and damping, minimise |g - f(x)| over x within
 [lo, hi], with the model's analytic Jacobian:
 
     e = g - f(x)                              (B, k)
     J = d f / d x                             (B, k, m), given by the model with its value
-    dx = J^T (J J^T + lambda^2 I)^-1 e        (robot/ik.py's damped_pinv_step, the package's one step)
+    dx = J^T (J J^T + lambda^2 I)^-1 e        (:func:`damped_pinv_step`, the package's one step)
 
 Joints at a bound that the step pushes outward leave the Jacobian and the step is solved again
-(an active set). A step is kept only where it lowers |e| and, with a collision count, does not
-raise it: never worse. Kept: lambda / 3, else lambda * 4, within [lam_min, lam_max]. A row stops
-once |e| < ``tol``, once ``done`` says so (e.g. enough rows of its problem have converged), or
-once a kept step gains less than ``min_gain`` of |e| (settled in a local minimum), and then costs
-nothing more. A row whose step was refused at lambda = lam_max would take the very same
-step again (same x, Jacobian and damping) and be refused again: it is not evaluated any more (its
+(an active set; ``active_set=False``: the step is only clamped to the bounds). A step is kept
+only where it lowers |e| and, with a collision count, does not raise it: never worse. Kept:
+lambda / 3, else lambda * 4, within [lam_min, lam_max] (lam_min = lam_max: a fixed damping). A
+row stops once |e| < ``tol``, once ``done`` says so (e.g. enough rows of its problem have
+converged), or once a kept step gains less than ``min_gain`` of |e| (settled in a local
+minimum), and then costs nothing more. A row whose step was refused at lambda = lam_max would
+take the very same step again (same x, Jacobian and damping) and be refused again: it is not evaluated any more (its
 steps still count, as if it ran them), and once every running row is such, the call ends.
 
 The model returns its value and Jacobian together, and the trial point's Jacobian is the next
@@ -29,9 +39,57 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from graspnet_torch.robot.ik import damped_pinv_step
+__all__ = ["LMResult", "Model", "damped_pinv_step", "levenberg_marquardt", "numerical_jacobian", "solve3_symmetric"]
 
-__all__ = ["LMResult", "Model", "levenberg_marquardt", "numerical_jacobian"]
+SMALL_BATCH = 256
+
+
+def solve3_symmetric(A: Tensor, b: Tensor) -> Tensor:
+    """Solve ``A x = b`` for symmetric 3x3 ``A`` by the adjugate formula.
+
+    A: (..., 3, 3); b: (..., 3) -> x: (..., 3). Singular systems give inf/nan, as division would.
+    """
+    a0, a1, a2 = A.unbind(-2)
+    c0 = torch.linalg.cross(a1, a2)
+    c1 = torch.linalg.cross(a2, a0)
+    c2 = torch.linalg.cross(a0, a1)
+    adj = torch.stack([c0, c1, c2], dim=-2)  # adj(A) = adj(A)^T for symmetric A
+    det = (a0 * c0).sum(-1, keepdim=True)
+    return (adj @ b.unsqueeze(-1)).squeeze(-1) / det
+
+
+def damped_pinv_step(J: Tensor, err: Tensor, damping: float | Tensor = 0.0) -> Tensor:
+    """Step ``J^T (J J^T + damping^2 I)^-1 err``: the one damped-least-squares step of the package
+    (the FCNN's refinement, the Levenberg-Marquardt polish, a gripper's settling steps).
+
+    J: (..., k, n); err: (..., k); damping: a number or a tensor broadcastable to the batch (...)
+    (one lambda per system) -> (..., n). Systems with fewer unknowns than equations (n < k) use the
+    equivalent ``(J^T J + damping^2 I)^-1 J^T err`` (their J J^T is singular; an undamped system that
+    is singular too gives a meaningless step, not an error: callers skip the rows they do not move,
+    such as a one-joint finger's at a singular posture). 3x3 systems are
+    solved in closed form (:func:`solve3_symmetric`) for large batches.
+    """
+    k, n = J.shape[-2], J.shape[-1]
+    Jt = J.transpose(-1, -2)
+    if n < k:
+        A = Jt @ J
+        _add_damping(A, damping)
+        return torch.linalg.solve_ex(A, (Jt @ err.unsqueeze(-1)))[0].squeeze(-1)  # a singular system: no raise
+    A = J @ Jt
+    _add_damping(A, damping)
+    if k != 3 or A.numel() <= SMALL_BATCH * 9:  # LAPACK is faster for a handful of 3x3 systems, the adjugate for many
+        y = torch.linalg.solve_ex(A, err)[0]
+    else:
+        y = solve3_symmetric(A, err)
+    return (Jt @ y.unsqueeze(-1)).squeeze(-1)
+
+
+def _add_damping(A: Tensor, damping: float | Tensor) -> None:
+    """A (..., k, k) += damping^2 I, in place (a tensor damping: one lambda per system)."""
+    if isinstance(damping, Tensor):
+        A.diagonal(dim1=-2, dim2=-1).add_((damping * damping).unsqueeze(-1))
+    elif damping:
+        A.diagonal(dim1=-2, dim2=-1).add_(damping * damping)
 
 Model = Callable[[Tensor, Tensor], tuple[Tensor, Tensor]]
 """``f(x, rows)``: x (b, m) of the rows ``rows`` (b,) -> value (b, k) and Jacobian d value / d x (b, k, m)."""
@@ -67,7 +125,7 @@ def numerical_jacobian(f: Callable[[Tensor], Tensor], x: Tensor, h: float = 1e-7
 
 def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
                         lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
-                        tol: float = 0.0, min_gain: float = 0.0,
+                        tol: float = 0.0, min_gain: float = 0.0, active_set: bool = True,
                         count: Callable[[Tensor, Tensor], Tensor] | None = None,
                         done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
                         prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
@@ -83,6 +141,8 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         iterations: most steps per row.
         lam, lam_min, lam_max: the damping's start and range.
         edge: a value within this of a bound counts as at it.
+        active_set: joints at a bound that the step pushes outward leave the Jacobian and the step
+            is solved again; False: the step is only clamped to the bounds.
         tol: a row stops once |e| < tol.
         min_gain: a row whose kept step lowered |e| by less than this fraction of it has settled
             (a local minimum above ``tol``) and stops: its last steps gain nothing worth their cost.
@@ -140,9 +200,10 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         e = gr - vr
         damping = lams[rows]
         dx = damped_pinv_step(Jr, e, damping)
-        blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
-        again = blocked.any(1).nonzero().squeeze(1)
-        if again.numel():  # joints at a bound the step pushes outward leave the Jacobian: those rows again
+        if active_set:
+            blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
+            again = blocked.any(1).nonzero().squeeze(1)
+        if active_set and again.numel():  # joints at a bound the step pushes outward leave the Jacobian
             dx = dx.index_copy(0, again, damped_pinv_step(Jr[again] * (~blocked[again]).unsqueeze(1), e[again],
                                                           damping[again]))
         new = torch.minimum(torch.maximum(xr + dx, lr), hr)
