@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import reprlib
 import types
 import typing
@@ -27,10 +28,12 @@ from collections.abc import Mapping, Sequence
 from functools import cache
 from typing import Any, Literal, TypeVar, Union
 
+import yaml
+
 from graspnet_torch.errors import ConfigError
 
-__all__ = ["MAX_ANGLE_DEG", "MAX_LENGTH_M", "Free", "build", "check_value", "clip", "lookup", "number_list", "setting",
-           "short"]
+__all__ = ["MAX_ANGLE_DEG", "MAX_LENGTH_M", "DefaultsFile", "Free", "build", "check_value", "clip", "lookup",
+           "number_list", "setting", "short", "sync_defaults"]
 
 T = TypeVar("T")
 
@@ -259,3 +262,134 @@ def number_list(value: Any, n: int | None, where: str, error: type[Exception], l
             raise error(f"{where}[{i}]: {short(v)} is not a finite number within [{_num(lo)}, {_num(hi)}]")
         out.append(float(v))
     return out
+
+
+# -- YAML files that list a dataclass's defaults (configs/solver/srv.yaml...): written from it ----------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class DefaultsFile:
+    """A YAML file under ``configs/`` whose values of ``cls``'s settings are written from the
+    dataclass's defaults (:func:`sync_defaults`, ``make sync-defaults``): the file keeps its keys,
+    order and comments, the dataclass owns the values.
+
+    Attributes:
+        path: below ``configs/``.
+        cls: the settings dataclass.
+        under: the mapping the settings sit in (``("experiments", "fig3")``); () for the top level.
+        skip: keys at that level that are not ``cls``'s settings (``defaults``, ``hydra``, ``quick``).
+        unset: a ``null`` stays where the dataclass has a value: "the robot's" (a group a robot's
+            ``solver_defaults`` sets, :func:`with_defaults`).
+        differs: keys whose value differs from the dataclass's on purpose (kept as written).
+        complete: every setting of ``cls`` must be listed (so that ``group.key=value`` overrides it).
+    """
+
+    path: str
+    cls: type
+    under: tuple[str, ...] = ()
+    skip: tuple[str, ...] = ()
+    unset: bool = False
+    differs: tuple[str, ...] = ()
+    complete: bool = True
+
+
+_KEY_LINE = re.compile(r"^(?P<indent> *)(?P<key>[A-Za-z_]\w*):(?P<rest>.*)$")
+
+
+def _split_comment(rest: str) -> tuple[str, str]:
+    """A key line's text after the colon -> (the value, the comment with the spaces before it)."""
+    quote = None
+    for i, ch in enumerate(rest):
+        if quote is not None:
+            quote = None if ch == quote else quote
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "#" and (i == 0 or rest[i - 1] == " "):
+            value = rest[:i].rstrip(" ")
+            return value, rest[len(value):]
+    return rest.rstrip(" "), ""
+
+
+def _brackets(text: str) -> int:
+    """Flow brackets ``text`` opens less those it closes (outside quotes and its comment)."""
+    value = _split_comment(text)[0]
+    value = re.sub(r"'[^']*'|\"[^\"]*\"", "", value)
+    return sum(value.count(c) for c in "[{") - sum(value.count(c) for c in "]}")
+
+
+def _plain(value: Any) -> Any:
+    """A default as YAML writes it: dataclasses as mappings, tuples as lists."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal as settings: 30 and 30.0 are the same number; a bool, None or a string only itself."""
+    number = (int, float)
+    if isinstance(a, number) and isinstance(b, number) and not isinstance(a, bool) and not isinstance(b, bool):
+        return a == b
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return type(a) is type(b) and a == b
+
+
+def _default(field: dataclasses.Field) -> Any:
+    return field.default if field.default is not dataclasses.MISSING else field.default_factory()
+
+
+def _leaves(cls: type, prefix: str = "") -> dict[str, Any]:
+    """Every setting of ``cls`` below its groups (``polish.iterations``) -> its default."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        value = _default(f)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            out.update(_leaves(type(value), f"{prefix}{f.name}."))
+        else:
+            out[f"{prefix}{f.name}"] = _plain(value)
+    return out
+
+
+def sync_defaults(text: str, spec: DefaultsFile) -> tuple[str, list[str]]:
+    """``text`` (the YAML file ``spec.path``) with every value of one of ``spec.cls``'s settings
+    written from its default where the two differ (else the line as it is), and the settings the
+    file does not list. A key that is not a setting is a :class:`ConfigError`."""
+    defaults = _leaves(spec.cls)
+    seen: set[str] = set()
+    stack: list[tuple[int, str]] = []  # the open mappings: (indent, key)
+    out = []
+    depth = 0  # brackets a flow collection left open on the lines before (`quick: {a: 1,` ...)
+    for line in text.splitlines(keepends=True):
+        m = _KEY_LINE.match(line.rstrip("\n")) if depth == 0 else None
+        depth += _brackets(_split_comment(line)[0] if m is None else m["rest"])
+        if m is None:
+            out.append(line)
+            continue
+        indent = len(m["indent"])
+        while stack and stack[-1][0] >= indent:
+            stack.pop()
+        path = [k for _, k in stack] + [m["key"]]
+        value, comment = _split_comment(m["rest"])
+        if not value.strip():  # a mapping opens
+            stack.append((indent, m["key"]))
+        n = len(spec.under)
+        if not value.strip() or tuple(path[:n]) != spec.under or len(path) == n or path[n] in spec.skip:
+            out.append(line)
+            continue
+        key = ".".join(path[n:])
+        if key not in defaults:
+            raise ConfigError(f"configs/{spec.path}: '{key}' is not a setting of {spec.cls.__name__}")
+        seen.add(key)
+        written, default = yaml.safe_load(value), defaults[key]
+        if _same(written, default) or key in spec.differs or (written is None and spec.unset):
+            out.append(line)
+            continue
+        new = " " + yaml.safe_dump(default, default_flow_style=True, width=10**6).removesuffix("\n...\n").strip()
+        end = "\n" if line.endswith("\n") else ""
+        if comment:  # the comment stays in its column where the value leaves room
+            col = len(value) + len(comment) - len(comment.lstrip(" "))
+            new = f"{new.ljust(col - 1)} {comment.lstrip(' ')}"
+        out.append(f"{m['indent']}{m['key']}:{new}{end}")
+    return "".join(out), [k for k in defaults if k not in seen]

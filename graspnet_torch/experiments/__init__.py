@@ -46,11 +46,12 @@ from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
 from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
 from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
+from graspnet_torch.settings import DefaultsFile
 
-__all__ = ["EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure", "ManusCfg",
-           "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg", "RandomHandCfg",
-           "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10", "run_manus",
-           "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_reach",
+__all__ = ["DEFAULTS_FILES", "EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure",
+           "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg",
+           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10",
+           "run_manus", "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_reach",
            "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
 
 
@@ -78,3 +79,8 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment("proposal", ProposalExperimentCfg, run_proposal),
     Experiment("reach", ReachExperimentCfg, run_reach),
 )}
+
+# configs/experiment/<name>.yaml lists its experiment's settings; their values are written from the
+# dataclass's defaults (graspnet_torch.settings.DefaultsFile); `quick` is the reduced protocol on top.
+DEFAULTS_FILES = tuple(DefaultsFile(f"experiment/{name}.yaml", e.cfg, under=("experiments", name), skip=("quick",))
+                       for name, e in EXPERIMENTS.items())

@@ -33,6 +33,7 @@ from graspnet_torch.collision.problems import real_mesh_problems as closed_on_re
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress, require
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.api import robot_and_ik
+from graspnet_torch.solver.config import DEFAULT_TRIALS
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.objects import REAL_OBJECTS, as_mesh, random_pose
 from graspnet_torch.viz import render_robot
@@ -57,7 +58,7 @@ class ObjectsCfg:
     objects: tuple[str, ...] = setting(tuple(REAL_OBJECTS), choices=tuple(REAL_OBJECTS))
     fingers: int = setting(3, lo=2, hi=5)  # contacts per real-mesh set
     solvers: tuple[str, ...] = setting(tuple(SOLVERS), choices=tuple(SOLVERS))
-    trials: int = setting(20, lo=1, hi=10_000)
+    trials: int = setting(DEFAULT_TRIALS, lo=1, hi=10_000)  # gt.solve's
     seed: int = setting(0, lo=0, hi=2**31 - 1)
 
     def __post_init__(self) -> None:
@@ -151,7 +152,7 @@ def run_objects(cfg: ObjectsCfg, out: Path) -> ExperimentReport:
 def _picture(problem, out: Path) -> Figure:
     """The default solver's grasp of a real-mesh contact set, two views."""
     robot, _ = robot_and_ik(problem.robot_cfg)
-    result = gt.solve(problem, trials=20, seed=0)
+    result = gt.solve(problem, trials=DEFAULT_TRIALS, seed=0)
     render_robot(robot, posture_panels(robot, problem, result), out / "objects_real_mesh.png")
     return Figure("objects_real_mesh.png", f"The default solver's grasp of contact set '{problem.name}' (a real mesh "
                                            f"at a random pose): {result.best.total_error_mm:.3g} mm, "

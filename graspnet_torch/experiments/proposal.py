@@ -34,6 +34,7 @@ from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.proposal import proposal_of
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import api
+from graspnet_torch.solver.config import DEFAULT_TRIALS
 from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.proposals import proposals
 from graspnet_torch.table import markdown_table
@@ -50,7 +51,7 @@ class ProposalExperimentCfg:
 
     problems: int = setting(200, lo=2, hi=100_000)  # random reachable hand problems (and TriFinger's: a quarter)
     seeds: int = setting(3, lo=1, hi=1000)  # per Table 2 task
-    noise_trials: int = setting(20, lo=1, hi=10_000)
+    noise_trials: int = setting(DEFAULT_TRIALS, lo=1, hi=10_000)  # gt.solve's
     arm_seeds: int = setting(5, lo=1, hi=1000)
     manus_positions: int = setting(16, lo=1, hi=64)
     manus_runs: int = setting(10, lo=1, hi=1000)
@@ -105,7 +106,7 @@ def _table2(seeds: int) -> str:
             err, its, wall, ok = [], [], [], []
             for s in range(seeds):
                 t0 = time.perf_counter()
-                r = gt.solve(task, trials=20, seed=s, solver=cfg)
+                r = gt.solve(task, trials=DEFAULT_TRIALS, seed=s, solver=cfg)
                 wall.append(time.perf_counter() - t0)
                 err.append(r.best.total_error_mm)
                 its.append(np.mean([t.iterations for t in r.trials]))

@@ -34,7 +34,7 @@ import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, progress, require
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import setting
-from graspnet_torch.solver.config import paper_protocol
+from graspnet_torch.solver.config import DEFAULT_TRIALS, paper_protocol
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
@@ -99,13 +99,13 @@ def table2(seeds: int) -> str:
             err, wall = [], []
             for s in range(seeds):
                 t0 = time.perf_counter()
-                res = gt.solve(task, trials=20, seed=s, solver=cfg)
+                res = gt.solve(task, trials=DEFAULT_TRIALS, seed=s, solver=cfg)
                 wall.append(time.perf_counter() - t0)
                 err.append(res.total_error_mm)
             e = np.asarray(err)
             rows.append([task, name, f"{np.mean(e < 1) * 100:.0f}", f"{np.median(e):.2g}", f"{e.max():.2g}",
                          f"{_median_ms(wall):.0f}"])
-    return (f"#### Table 2 tasks\n\n20 trials, seeds 0-{seeds - 1}; the best trial of each solve.\n\n"
+    return (f"#### Table 2 tasks\n\n{DEFAULT_TRIALS} trials, seeds 0-{seeds - 1}; the best trial of each solve.\n\n"
             + markdown_table(["task", "solver", "< 1 mm %", "median error mm", "worst mm", "median wall ms"], rows))
 
 
@@ -199,12 +199,12 @@ class SolversCfg:
     """``+experiment=solvers``."""
 
     problems: int = setting(100, lo=4, hi=100_000)  # random reachable hand problems
-    trials: int = setting(20, lo=1, hi=10_000)
+    trials: int = setting(DEFAULT_TRIALS, lo=1, hi=10_000)  # gt.solve's
     seeds: int = setting(5, lo=1, hi=1000)  # per Table 2 task
     arm_seeds: int = setting(5, lo=1, hi=1000)
     manus_positions: int = setting(16, lo=1, hi=64)
     manus_runs: int = setting(30, lo=1, hi=10_000)
-    noise_trials: int = setting(20, lo=1, hi=10_000)
+    noise_trials: int = setting(DEFAULT_TRIALS, lo=1, hi=10_000)
     noise_levels: tuple[float, ...] = setting((0.05, 0.1, 0.2), lo=0.0, hi=10.0)
     many: int = setting(1000, lo=8, hi=1_000_000)  # gt.solve_many's problems
 

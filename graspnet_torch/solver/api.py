@@ -22,7 +22,7 @@ from graspnet_torch.robot.config import RobotCfg, available_robots, load_robot_c
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.cmaes import run_cmaes
-from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import DEFAULT_TRIALS, NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.dls import run_dls
 from graspnet_torch.solver.environment import Environment, Report
@@ -145,17 +145,19 @@ def result_of(robot: Robot, problem: GraspProblem, env: Environment, outcome: Lo
                        settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome, failure=failure)
 
 
-def solve(problem: GraspProblem | str | Path, *, trials: int = 20, seed: int = 0, max_iterations: int | None = None,
-          solver: SolverCfg | None = None, srv: SRVNetCfg | None = None, reward: RewardCfg | None = None,
-          noise: NoiseCfg | float | None = None, robot: Robot | None = None, finger_ik: FingerIK | None = None,
-          device: str | torch.device = "cpu", threads: int | None = None) -> GraspResult:
+def solve(problem: GraspProblem | str | Path, *, trials: int = DEFAULT_TRIALS, seed: int = 0,
+          max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
+          reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None, robot: Robot | None = None,
+          finger_ik: FingerIK | None = None, device: str | torch.device = "cpu", threads: int | None = None
+          ) -> GraspResult:
     """Find the palm pose and finger joints that put each fingertip on its contact.
 
     Args:
         problem: a :class:`GraspProblem`, a problem file path, or the name of a shipped task.
-        trials: independent learners run as one batch; the result reports each and the best.
+        trials: independent learners run as one batch (default :data:`DEFAULT_TRIALS`); the result
+            reports each and the best.
         seed: all randomness (initial weights, random starts, exploration, sensor noise).
-        max_iterations: overrides ``solver.max_iterations``.
+        max_iterations: overrides ``solver.max_iterations`` (its one default; None: not overridden).
         solver: settings (so are srv, reward, noise); ``None``: the robot's (its config's
             ``solver_defaults``: the paper's section 5.1 for the hand, 6.3 for the arm) over the
             paper's defaults.
@@ -261,7 +263,7 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
                            keep=max(1, model.heads // 4), colliding_random=solver.stop is None)
 
 
-def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = 20, seed: int = 0,
+def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = DEFAULT_TRIALS, seed: int = 0,
                max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
                robot: Robot | None = None, finger_ik: FingerIK | None = None,

@@ -9,11 +9,12 @@ from graspnet_torch.paths import configs_dir
 from graspnet_torch.rewards import NoiseCfg, RewardCfg  # the reward's own settings, re-exported
 from graspnet_torch.settings import build, setting
 
-__all__ = ["RENAMED", "SOLVERS", "CmaesCfg", "FingersCfg", "GripperCfg", "NoiseCfg", "PolishCfg", "RewardCfg",
-           "SolverCfg", "paper_protocol"]
+__all__ = ["DEFAULT_TRIALS", "RENAMED", "SOLVERS", "CmaesCfg", "FingersCfg", "GripperCfg", "NoiseCfg", "PolishCfg",
+           "RewardCfg", "SolverCfg", "paper_protocol"]
 
 
 SOLVERS = ("srv", "cmaes", "dls")
+DEFAULT_TRIALS = 20  # learners per problem, run as one batch: gt.solve, gt.solve_many, gt.Solver, the solve_grasp job
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver import api
-from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.config import DEFAULT_TRIALS, NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.dls import run_dls
 from graspnet_torch.solver.environment import Environment
 from graspnet_torch.solver.environments import build_environment
@@ -72,7 +72,7 @@ class Solver:
     (:mod:`graspnet_torch.collision.cache`), problem files once per file version.
     """
 
-    def __init__(self, robot: str | Path | RobotCfg | Robot = "hand", *, trials: int = 20, seed: int = 0,
+    def __init__(self, robot: str | Path | RobotCfg | Robot = "hand", *, trials: int = DEFAULT_TRIALS, seed: int = 0,
                  max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                  reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
                  finger_ik: FingerIK | None = None, device: str | torch.device = "cpu", threads: int | None = None):
