@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-retarget bench-proposal bench-solvers report-arm report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-retarget bench-proposal bench-solvers report-arm report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -53,6 +53,9 @@ docs: $(STAMP)  ## the documentation site from docs/ (mkdocs --strict: a broken 
 lint: $(STAMP)  ## ruff check + the package's layers and no import cycles (lint-imports: [tool.importlinter])
 	$(PY) -m ruff check .
 	$(VENV)/bin/lint-imports
+
+sync-defaults: $(STAMP)  ## write the defaults the YAML files under configs/ list from the settings dataclasses (their one source)
+	$(PY) scripts/sync_defaults.py
 
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
 	$(PY) benchmarks/bench_kinematics.py
