@@ -146,8 +146,10 @@ class SolverCfg:
 
     The search's settings are the top-level keys; the polish, CMA-ES and each kind of robot's
     environment have their own group (:class:`PolishCfg`, :class:`CmaesCfg`, :class:`FingersCfg`,
-    :class:`GripperCfg`). Every default is the dataclass's (``configs/solver/srv.yaml`` lists the
-    same values; a robot config's ``solver_defaults`` may override them for that robot).
+    :class:`GripperCfg`). Every default is defined here only: ``configs/solver/srv.yaml`` lists the
+    same values, written from this class (``make sync-defaults``; ``tests/test_defaults_files.py``
+    fails where they differ), and a robot config's ``solver_defaults`` may override them for that
+    robot. ``trials`` is not a solver setting: its default is :data:`DEFAULT_TRIALS`.
 
     Attributes:
         method: 'srv', 'cmaes' or 'dls'.
