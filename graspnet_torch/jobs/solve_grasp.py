@@ -31,7 +31,7 @@ from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, starts_from_proposals, trial_posture
-from graspnet_torch.solver.config import RewardCfg, SolverCfg
+from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.solver.environments import build_environment, environment_class
@@ -79,7 +79,8 @@ def posture_of(robot, trial: TrialResult):
     return trial_posture(robot, trial)
 
 
-def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...], every: int = 10) -> None:
+def log_tensorboard(log_dir: Path, result: GraspResult, fingers: tuple[str, ...],
+                    every: int = SolveGraspJobCfg.log_every) -> None:
     """Per trial: reinforcement, total and per-finger error, what the solver has of expected
     reinforcement and mean sigma (SRV) or step size (CMA-ES) and, when it counted them (rewards
     R2-R4 with an object or obstacles), collisions; x: the iteration (CMA-ES: evaluations used).
@@ -123,10 +124,11 @@ def hparams_of(result: GraspResult, overrides: Sequence[str] = ()) -> tuple[dict
     over the solver, seed, trials, noise sigma and reward slope it ran with) and its metrics
     (success, best error in mm, iterations, wall time, collisions): TensorBoard's hparams."""
     settings = result.settings
-    hp: dict[str, Any] = {"solver": settings.get("solver", "srv"),
+    hp: dict[str, Any] = {"solver": settings.get("solver", SolverCfg.method),  # a result without them: the defaults
                           "seed": result.seed if result.seed is not None else 0,
                           "trials": settings.get("trials", len(result.trials)),
-                          "noise_sigma": settings.get("noise_sigma", 0.0), "reward_a": settings.get("reward_a", 1.0)}
+                          "noise_sigma": settings.get("noise_sigma", NoiseCfg.sigma),
+                          "reward_a": settings.get("reward_a", RewardCfg.a)}
     for item in overrides:
         key, sep, value = str(item).partition("=")
         if not sep or key.startswith(("hydra", "~")):

@@ -41,15 +41,17 @@ __all__ = ["as_problem", "build_environment", "failure_reason", "reference_postu
 # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
+ROBOTS_KEPT = 8  # robots (with their FCNNs) kept built per process: shipped ones by name, others by config
+PROBLEMS_KEPT = 64  # problem files kept read (one per file version)
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=ROBOTS_KEPT)
 def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK | None]:
     robot = Robot.from_config(robot_name)
     return robot, finger_ik_of(robot)
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=ROBOTS_KEPT)
 def _shipped_cfg(robot_name: str) -> RobotCfg:
     return load_robot_cfg(robot_name)
 
@@ -69,7 +71,7 @@ def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
     if key not in _BUILT:
         built = Robot(robot)
         _BUILT[key] = (built, finger_ik_of(built))
-        while len(_BUILT) > 8:
+        while len(_BUILT) > ROBOTS_KEPT:
             _BUILT.pop(next(iter(_BUILT)))
     return _BUILT[key]
 
@@ -109,7 +111,7 @@ def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
     return _read_problem(str(p), task, stat.st_size, stat.st_mtime_ns)
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=PROBLEMS_KEPT)
 def _read_problem(path: str, task: str | None, size: int, mtime_ns: int) -> GraspProblem:
     return GraspProblem.from_task(task) if task is not None else GraspProblem.from_file(path)
 
@@ -228,6 +230,7 @@ def starts_from_proposals(robot: Robot, problems: Sequence[GraspProblem], solver
     return solver.start != "random" and not (solver.start == "auto" and any(has_environment(robot, p)
                                                                              for p in problems))
 NOISY_RANKING_SEED = 7919  # the noisy observations that rank the proposals: their own stream
+NOISY_KEPT_SHARE = 4  # with sensor noise the trials start at the best 1/NOISY_KEPT_SHARE of the K ranked proposals
 
 
 def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward: RewardCfg, noise: NoiseCfg
@@ -260,7 +263,7 @@ def _starts(env: Environment, trials: int, seed: int, solver: SolverCfg, reward:
     reward_fn = Reward(reward, solver.max_iterations, env.reward_base)
     gen = torch.Generator(device=env.lower.device).manual_seed(seed + NOISY_RANKING_SEED)
     return proposal_starts(model, env, trials, lambda ev: add_noise(reward_fn(ev, 1), noise.sigma, gen),
-                           keep=max(1, model.heads // 4), colliding_random=solver.stop is None)
+                           keep=max(1, model.heads // NOISY_KEPT_SHARE), colliding_random=solver.stop is None)
 
 
 def solve_many(problems: Sequence[GraspProblem | str | Path], *, trials: int = DEFAULT_TRIALS, seed: int = 0,
@@ -348,6 +351,9 @@ def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Repor
     return out, failure
 
 
+COLLISIONS_NAMED = 3  # a "colliding" failure names this many of the most frequent colliding pairs
+
+
 def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult], reports: Sequence | None,
                    landed: Sequence[bool], tolerance_mm: float) -> str:
     """Why no trial is a grasp, in one line: a contact out of reach of the search space (no palm
@@ -372,7 +378,7 @@ def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialRe
                 what[f"{link} in the object"] = what.get(f"{link} in the object", 0) + 1
             for a, b in rep.self_pairs:
                 what[f"{a} with {b}"] = what.get(f"{a} with {b}", 0) + 1
-        common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:3])
+        common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:COLLISIONS_NAMED])
         return (f"colliding: all {len(landed)} configuration(s) that reached the contacts collide (FCL: {common})")
     best = min(trials, key=lambda t: t.error_mm)
     return (f"far: the budget ended with the best trial {env.describe(best)} after {best.iterations} iteration(s) "
