@@ -10,6 +10,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
+from graspnet_torch.kinds import KINDS, RobotKind, robot_kind  # registers the robot kinds
 from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
 from graspnet_torch.robot import (
     ChainKernel,
@@ -50,6 +51,7 @@ from graspnet_torch.threads import set_default_threads
 __version__ = "0.1.0"
 
 __all__ = [
+    "KINDS",
     "ChainKernel",
     "ChainSpec",
     "CheckpointError",
@@ -76,6 +78,7 @@ __all__ = [
     "RewardCfg",
     "Robot",
     "RobotCfg",
+    "RobotKind",
     "SRVFunction",
     "SRVNetCfg",
     "Shape",
@@ -94,6 +97,7 @@ __all__ = [
     "plan_reach",
     "random_reachable_problem",
     "random_sequence",
+    "robot_kind",
     "set_default_threads",
     "solve",
     "solve_many",

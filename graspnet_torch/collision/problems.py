@@ -25,9 +25,9 @@ import torch
 from graspnet_torch.collision.mesh import MeshQuery, mesh_query
 from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Posture, Robot
-from graspnet_torch.robot.transforms import matrix_to_pose, rt_to_pose
+from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np, rpy_to_matrix_np, rt_to_pose
 from graspnet_torch.tasks.objects import random_pose, real_objects
 from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture, Shape
 
@@ -40,14 +40,13 @@ def closure_problem(robot: Robot, obj: Shape, seed: int, fingers: int = 3, attem
     ``obj``, from a collision-free posture whose fingertips touch its surface (module docstring).
     Deterministic in ``seed``; a free hand only. Raises ValueError after ``attempts`` draws
     without one."""
-    if robot.has_body or robot.n_fingers < fingers:
+    if not robot_kind(robot).closure or robot.n_fingers < fingers:
         raise ValueError(f"robot '{robot.name}': closure problems need a free hand of at least {fingers} fingers")
     rng = np.random.default_rng(seed)
     if obj.kind == "mesh":
         local_query, T = mesh_query(obj)
     else:
-        local_query, T = MeshQuery(replace(obj, pose=np.zeros(6)).trimesh()), np.eye(4)
-        T[:3, :3], T[:3, 3] = rpy_matrix_np(obj.pose[3:]), obj.pose[:3]
+        local_query, T = MeshQuery(replace(obj, pose=np.zeros(6)).trimesh()), pose_to_matrix_np(obj.pose)
 
     def inside(points: np.ndarray) -> np.ndarray:  # world points inside the object, up to its surface
         return local_query.winding((points - T[:3, 3]) @ T[:3, :3]) > 0.5
@@ -160,7 +159,7 @@ def _problem(robot: Robot, obj: Shape, chosen: list[int], pose: torch.Tensor, q:
              name: str) -> GraspProblem:
     """The problem whose contacts are the chosen fingertips (object frame) at a posture."""
     tips = robot.fingertips_world(pose, q).numpy()
-    R = rpy_matrix_np(obj.pose[3:])
+    R = rpy_to_matrix_np(obj.pose[3:])
     contacts = tuple(Contact(robot.finger_names[f], (tips[f] - obj.pose[:3]) @ R) for f in chosen)
     reference = ReferencePosture(pose.numpy().copy(), {robot.finger_names[f]: q[f].numpy().copy() for f in chosen})
     return GraspProblem(robot=robot.name, contacts=contacts, object=obj, name=name, reference=reference,

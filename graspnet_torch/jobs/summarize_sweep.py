@@ -21,13 +21,12 @@ import yaml
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.io import atomic_write_text
+from graspnet_torch.robot.kinds import KINDS
 from graspnet_torch.settings import clip
-from graspnet_torch.solver.environments import ENVIRONMENTS
 from graspnet_torch.table import markdown_table
 from graspnet_torch.viz.plots import _plt
 from graspnet_torch.viz.robot import save_figure
 
-ERROR_KEYS = tuple(dict.fromkeys(env.error_key for env in ENVIRONMENTS.values()))
 """The result JSON keys of the ranked error, one per kind of environment."""
 
 __all__ = ["collect_sweep", "summarize_sweep"]
@@ -61,9 +60,10 @@ def collect_sweep(sweep: str | Path) -> tuple[list[str], list[dict]]:
             data = json.loads(result_path.read_text())
         except (UnicodeDecodeError, json.JSONDecodeError):
             data = None
-        error = next((data[key] for key in ERROR_KEYS if key in data), None) if isinstance(data, dict) else None
+        error_keys = tuple(dict.fromkeys(row.environment.error_key for row in KINDS.values()))  # every kind's
+        error = next((data[key] for key in error_keys if key in data), None) if isinstance(data, dict) else None
         if not isinstance(error, int | float):
-            raise ConfigError(f"{clip(str(result_path), 200)}: not a grasp result (no {' or '.join(ERROR_KEYS)})")
+            raise ConfigError(f"{clip(str(result_path), 200)}: not a grasp result (no {' or '.join(error_keys)})")
         rows.append({"job": str(job.relative_to(root)), "settings": settings,
                      "success": bool(data.get("success")), "error_mm": float(error),
                      "iterations": int(data.get("iterations", 0)), "wall_time_s": float(data.get("wall_time_s", 0.0)),

@@ -26,6 +26,7 @@ from graspnet_torch.proposal.data import ProposalData
 from graspnet_torch.proposal.model import PostureProposal, ProposalCfg
 from graspnet_torch.proposal.train import ProposalTrainer
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build
 from graspnet_torch.solver.config import SolverCfg
@@ -204,9 +205,9 @@ def prepare_train_posture(cfg: Mapping[str, Any] | TrainPostureJobCfg, run_dir: 
         raise ConfigError("robot: give robot=NAME (configs/robot/) or robot=PATH (a robot YAML) to train its "
                           "posture proposals")
     robot = Robot(robot_cfg)
-    if robot.kind != "gripper" and robot.n_fingers < 2:
-        raise ConfigError(f"robot '{robot_cfg.name}' needs at least two fingers (or gripper points) for posture "
-                          f"proposals")
+    if robot.n_fingers < robot_kind(robot).min_fingers:
+        raise ConfigError(f"robot '{robot_cfg.name}' needs at least {robot_kind(robot).min_fingers} fingers "
+                          f"for posture proposals")
     if robot.shared.names:
         raise ConfigError(f"robot '{robot_cfg.name}': its fingers share joints ({', '.join(robot.shared.names)}); "
                           f"posture proposals do not propose them yet (its trials start at random)")
@@ -218,8 +219,7 @@ def prepare_train_posture(cfg: Mapping[str, Any] | TrainPostureJobCfg, run_dir: 
         raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
     if job.resume and state_path.is_file():
         _load_state(state_path, robot, job.posture, job.seed)
-    if robot.n_fingers:
-        finger_ik_of(robot)  # the FCNN places the fingers of the training data: refuse now when it is missing
+    finger_ik_of(robot)  # the FCNN places the fingers of the training data: refuse now when it is missing
     return job, robot_cfg
 
 

@@ -34,7 +34,7 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     centroid; finger inverse kinematics), then by each toward the palm (curling), then the
     fingers straightened toward their home by :data:`OPEN_TOWARD_HOME`."""
     robot, m = checker.robot, checker.layout.body
-    if robot.n_fingers == 0:
+    if not problem.fingers:  # a gripper's jaws: nothing to open
         yield goal
         return
     posture = checker.posture(goal)
@@ -45,10 +45,8 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     palm = posture.palm_pose[:3].numpy()
     out = np.where(norms > 1e-6, out / np.maximum(norms, 1e-12), (palm - contacts) /
                    np.maximum(np.linalg.norm(palm - contacts, axis=1, keepdims=True), 1e-12))
-    if robot.has_body:
-        tips = robot.fingertips_world_from_body(posture.body, posture.fingers)
-    else:
-        tips = robot.fingertips_world(posture.palm_pose, posture.fingers)
+    head = robot.head.values(posture)
+    tips = robot.head.fingertips(head, posture.fingers)
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
     rows = [robot.finger_index(f) for f in problem.fingers]
     res = (cfg.resolution_deg, cfg.resolution_mm)
@@ -59,10 +57,7 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     for direction, distance in [(out, d) for d in OPENINGS_M] + [(inward, d) for d in OPENINGS_M]:
         targets = tips.clone()
         targets[rows] = torch.as_tensor(contacts + distance * direction)
-        if robot.has_body:
-            bases = robot.world_to_bases_from_body(targets, posture.body)
-        else:
-            bases = robot.world_to_bases(targets, posture.palm_pose)
+        bases = robot.head.world_to_bases(targets, head)
         q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, 40)
         candidates.append(q[mask].numpy())
     home = robot.home_posture(torch.float64).fingers[mask].numpy()

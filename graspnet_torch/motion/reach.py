@@ -30,12 +30,12 @@ import torch
 
 from graspnet_torch.collision.scene import CollisionScene, has_environment
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path
 from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
-from graspnet_torch.robot.ik import damped_pinv_step
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
 from graspnet_torch.solver.api import robot_and_ik
@@ -50,6 +50,7 @@ __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_r
 PLANNER = "RRTConnect"
 DETOUR_DEG, DETOUR_M = 15.0, 0.05  # a detour searches this far around the stretch it replaces
 COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
+BACK_OFF_STEPS, BACK_OFF_DAMPING = 40, 1e-2  # the back-off's least squares: most steps, its fixed damping (m)
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -60,7 +61,7 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
     if not problem.start:
         return home
     where = f"{problem.source}: start"
-    if not robot.has_body:
+    if not robot.head.anchored:
         raise ProblemError(f"{where}: robot '{robot.name}' has no body (a free hand's motion is its approach)")
     body, fingers = home.body.clone(), home.fingers.clone()
     finger_slots = {name: (k, i) for k, f in enumerate(robot.fingers.values())
@@ -97,7 +98,7 @@ def check_start(robot: Robot, problem: GraspProblem) -> None:
     its limits, or colliding (FCL, with the fingers as given)."""
     _refuse_shared(robot, problem)
     posture = start_posture(robot, problem)
-    if not robot.has_body:
+    if not robot.head.anchored:  # a free palm starts at its approach, not at a configuration
         return
 
     if has_environment(robot, problem):
@@ -134,7 +135,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     acceleration = np.full_like(velocity, cfg.acceleration)
     res = (cfg.resolution_deg, cfg.resolution_mm)
     deadline = t0 + cfg.timeout_s
-    if robot.has_body:
+    if robot.head.anchored:
         corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline)
     else:
         corners, reason = _hand_path(robot, problem, checker, goal, cfg)
@@ -154,7 +155,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
         # (the detour moves the joints that segment moves)
         u, v = corners[j], corners[j + 1]
         moving = np.nonzero(np.abs(v - u) > 1e-12)[0]
-        if not robot.has_body or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
+        if not robot.head.anchored or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
             reason = "a straight part of the motion collides between its rows at the check step"
             break
         for divide in (1, 8):  # the detour's motions checked at the step (an eighth where that is not enough)
@@ -206,7 +207,7 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     opened = start.copy()
     opened[m:] = pre[m:]
     res = (cfg.resolution_deg, cfg.resolution_mm)
-    if robot.n_fingers and checker.first_collision(start, opened, *res) is not None:
+    if problem.fingers and checker.first_collision(start, opened, *res) is not None:
         return None, "opening the fingers at the start collides"
 
     coarse = (cfg.resolution_deg * COARSE, cfg.resolution_mm * COARSE)  # the planner's step (then checked finer)
@@ -229,7 +230,7 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
         path, reason = _plan(checker, opened, pre, range(m), cfg, coarse, deadline)
     if path is None:
         return None, reason or "no collision-free path"
-    corners = [start, *path, *final] + ([goal] if robot.n_fingers else [])
+    corners = [start, *path, *final] + ([goal] if problem.fingers else [])  # a gripper's pre-grasp is its goal
     return _distinct(np.stack(corners)), ""
 
 
@@ -237,25 +238,30 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
                 ) -> np.ndarray | None:
     """The state with the palm (a gripper's frame) moved ``distance`` away from the contacts
     (their centroid; a gripper: its object points' midpoint), its orientation kept: damped least
-    squares on the body joints (the palm frame's Jacobian), within the limits; None when that is
-    not reached within 1 mm / 0.5 degree."""
+    squares on the body joints (the palm frame as a residual on the one Levenberg-Marquardt, at a
+    fixed damping, clamped to the limits); None when that is not reached within 1 mm / 0.5 degree."""
     m = checker.layout.body
     q = torch.as_tensor(state[:m].copy())
     R0, t0 = robot.palm_frame(q)
-    targets = np.asarray(problem.contacts_world() if robot.n_fingers else problem.points_world(), dtype=np.float64)
+    targets = np.asarray(problem.contacts_world() if problem.fingers else problem.points_world(), dtype=np.float64)
     away = t0.numpy() - targets.mean(0)
     if np.linalg.norm(away) < 1e-9:
         return None
     goal_t = t0 + torch.as_tensor(distance * away / np.linalg.norm(away))
     lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
-    for _ in range(40):
-        R, t, J = robot.palm_frame_jacobian(q)
-        E = R0 @ R.T
-        w = 0.5 * torch.stack([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
-        err = torch.cat([goal_t - t, w])
-        if float(err[:3].norm()) < 1e-4 and float(w.norm()) < 1e-3:
-            break
-        q = torch.minimum(torch.maximum(q + damped_pinv_step(J, err, 1e-2), lo), hi)
+
+    def frame(x: torch.Tensor, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The palm frame as a residual model: its position, then minus its turn back to R0
+        (vee of the skew part of R0 R^T; d/dq: the frame Jacobian's rotation rows)."""
+        R, t, J = robot.palm_frame_jacobian(x)
+        E = R0 @ R.transpose(-1, -2)
+        w = 0.5 * torch.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0],
+                               E[..., 1, 0] - E[..., 0, 1]], -1)
+        return torch.cat([t, -w], -1), J
+
+    goal = torch.cat([goal_t, torch.zeros(3, dtype=torch.float64)])
+    fixed = {"lam": BACK_OFF_DAMPING, "lam_min": BACK_OFF_DAMPING, "lam_max": BACK_OFF_DAMPING}
+    q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, active_set=False, tol=1e-4, **fixed).x[0]
     R, t = robot.palm_frame(q)
     E = R0 @ R.T
     if float((goal_t - t).norm()) > 1e-3 or float(torch.arccos(((E.trace() - 1) / 2).clamp(-1, 1))) > math.radians(0.5):
@@ -355,7 +361,7 @@ def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajec
     goal = checker.state(trial_posture(robot, trial))
     if np.max(np.abs(x[-1] - goal)) > 1e-6:
         out.append(f"the last row differs from the reported configuration by {np.max(np.abs(x[-1] - goal)):.3g}")
-    if robot.has_body:
+    if robot.head.anchored:
         start = checker.state(start_posture(robot, problem))
         if np.max(np.abs(x[0] - start)) > 1e-6:
             out.append(f"the first row differs from the start by {np.max(np.abs(x[0] - start)):.3g}")

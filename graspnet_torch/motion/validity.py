@@ -18,8 +18,8 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.robot.heads import urdf_velocity
 from graspnet_torch.robot.robot import Posture, Robot
-from graspnet_torch.robot.transforms import rt_to_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["MotionChecker", "StateLayout", "state_postures"]
@@ -47,30 +47,11 @@ class StateLayout:
 
     @classmethod
     def of(cls, robot: Robot, palm_speed: float = 0.5) -> StateLayout:
-        names, revolute, lower, upper, velocity = [], [], [], [], []
-        if robot.has_body:
-            lo, hi = robot.body_limits
-            for k, (name, kind) in enumerate(zip(robot.body_joint_names, robot.body.joint_types, strict=True)):
-                names.append(name)
-                revolute.append(kind != "prismatic")
-                lower.append(lo[k])
-                upper.append(hi[k])
-                velocity.append(_urdf_velocity(robot, name))
-            body = len(names)
-        else:
-            for axis in "xyz":
-                names.append(f"palm_{axis}")
-                revolute.append(False)
-                lower.append(-math.inf)
-                upper.append(math.inf)
-                velocity.append(palm_speed)
-            for axis in "xyz":
-                names.append(f"palm_r{axis}")
-                revolute.append(True)
-                lower.append(-math.inf)
-                upper.append(math.inf)
-                velocity.append(palm_speed * 2)
-            body = 6
+        """The robot's head values (:attr:`Robot.head`: a free palm's pose or the body joints), then
+        every finger's free joints by URDF name."""
+        head = robot.head
+        names, revolute = list(head.names), list(head.revolute)
+        lower, upper, velocity = list(head.lower), list(head.upper), list(head.velocity(palm_speed))
         flo, fhi = robot.finger_limits
         for k, finger in enumerate(robot.fingers.values()):
             chain = finger.chain
@@ -80,9 +61,9 @@ class StateLayout:
                 revolute.append(chain.spec.joint_types[chain.free[i]] != "prismatic")
                 lower.append(flo[k, i])
                 upper.append(fhi[k, i])
-                velocity.append(_urdf_velocity(robot, name))
+                velocity.append(urdf_velocity(robot, name))
         return cls(tuple(names), np.asarray(revolute), np.asarray(lower), np.asarray(upper), np.asarray(velocity),
-                   body)
+                   head.n)
 
     def steps(self, a: np.ndarray, b: np.ndarray, resolution_deg: float, resolution_mm: float) -> int:
         """How many equal steps from a to b keep every variable's step within the resolution."""
@@ -96,32 +77,16 @@ class StateLayout:
 
 def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> list[Posture]:
     """The :class:`Posture` of each state (B, n) (internal units), the palm poses of a robot with a
-    body by one batched forward kinematics."""
-    m = layout.body
+    body by one batched forward kinematics (:meth:`Head.postures <graspnet_torch.robot.heads.Head.postures>`)."""
     x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-    q = _finger_joints(robot, x, m)
-    if robot.has_body:
-        body = x[:, :m]
-        palm = rt_to_pose(*robot.palm_frame(body))
-        return [Posture(palm_pose=palm[k], fingers=q[k], body=body[k]) for k in range(x.shape[0])]
-    none = torch.zeros(0, dtype=torch.float64)
-    return [Posture(palm_pose=x[k, :6], fingers=q[k], body=none) for k in range(x.shape[0])]
+    return robot.head.postures(x[:, :layout.body], _finger_joints(robot, x, layout.body))
 
 
 def _finger_joints(robot: Robot, x: torch.Tensor, m: int) -> torch.Tensor:
     """States (B, n) -> every finger's free joints (B, F, j), padded: the columns after the first m."""
     q = torch.zeros(x.shape[0], robot.n_fingers, robot.joints_per_finger, dtype=torch.float64)
-    if robot.n_fingers:
-        q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
+    q[:, torch.as_tensor(robot.finger_mask)] = x[:, m:]
     return q
-
-
-def _urdf_velocity(robot: Robot, joint: str) -> float:
-    limit = robot.urdf.joints[joint].limit
-    v = None if limit is None else limit.velocity
-    if v is None or not math.isfinite(float(v)) or float(v) <= 0:
-        raise ValueError(f"{robot.cfg.urdf}: joint '{joint}' has no velocity limit (<limit velocity=...>)")
-    return float(v)
 
 
 class MotionChecker:
@@ -131,7 +96,7 @@ class MotionChecker:
         self.robot, self.problem, self.layout, self.touch = robot, problem, layout, touch_mm / 1000.0
         self.scene = CollisionScene(robot, problem, touching=False)
         self.checks = 0
-        if robot.n_fingers:
+        if problem.fingers:  # contacts, one per finger
             self._rows = [robot.finger_index(f) for f in problem.fingers]
             self._targets = torch.as_tensor(np.asarray(problem.contacts_world(), dtype=np.float64))
             groups = [(f,) for f in problem.fingers]
@@ -147,14 +112,13 @@ class MotionChecker:
         gripper: one column, both marked points, either pairing)."""
         robot, m = self.robot, self.layout.body
         x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-        if robot.n_fingers == 0:
+        if not self.problem.fingers:  # a gripper's two points
             points = robot.gripper_points(x[:, :m])
             d = torch.minimum((points - self._targets).norm(dim=-1).amax(-1),
                               (points - self._targets.flip(0)).norm(dim=-1).amax(-1))
             return (d <= self.touch).numpy()[:, None]
         q = _finger_joints(robot, x, m)
-        tips = robot.fingertips_world_from_body(x[:, :m], q) if robot.has_body else \
-            robot.fingertips_world(x[:, :6], q)
+        tips = robot.head.fingertips(x[:, :m], q)
         return ((tips[:, self._rows] - self._targets).norm(dim=-1) <= self.touch).numpy()
 
     def arrived(self, states: np.ndarray) -> np.ndarray:
@@ -171,19 +135,15 @@ class MotionChecker:
 
     def state(self, posture: Posture) -> np.ndarray:
         """The state (1-D) of a posture."""
-        head = posture.body if self.robot.has_body else posture.palm_pose
-        fingers = posture.fingers[torch.as_tensor(self.robot.finger_mask)] if self.robot.n_fingers else \
-            torch.zeros(0, dtype=torch.float64)
+        head = self.robot.head.values(posture)
+        fingers = posture.fingers[torch.as_tensor(self.robot.finger_mask)]
         return np.concatenate([head.numpy().astype(np.float64), fingers.numpy().astype(np.float64)])
 
     def link_frames(self, states: np.ndarray) -> tuple[list[str], np.ndarray]:
         """The links' names and world poses (B, L, 4, 4) in states (B, n)."""
         robot, m = self.robot, self.layout.body
         x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-        q = _finger_joints(robot, x, m)
-        if robot.has_body:
-            return robot.link_frames_of(x[:, :m], q)
-        return robot.link_frames_of(None, q, x[:, :6])
+        return robot.head.link_frames(x[:, :m], _finger_joints(robot, x, m))
 
     def clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear (module docstring)."""

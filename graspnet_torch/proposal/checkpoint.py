@@ -40,8 +40,7 @@ def posture_checkpoint(robot: Robot) -> Path:
 def robot_signature(robot: Robot) -> dict:
     """What a proposal model depends on: the robot's kind, the joints of its search variables and
     its target slots (finger names, or a gripper's two points)."""
-    return {"kind": robot.kind, "fingers": list(robot.finger_names) if robot.n_fingers else [],
-            "body_joints": list(robot.body_joint_names) if robot.has_body else []}
+    return {"kind": robot.kind, "fingers": list(robot.finger_names), "body_joints": list(robot.body_joint_names)}
 
 
 def _train_hint(robot: Robot) -> str:

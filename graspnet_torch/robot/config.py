@@ -19,6 +19,7 @@ import numpy as np
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import confined_file, read_document
 from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.robot.kinds import ProblemSchema, robot_kind
 from graspnet_torch.robot.meshes import package_candidates, package_roots
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
@@ -74,39 +75,6 @@ class PoseBounds:
     def to_degrees(self) -> dict[str, list[float]]:
         conv = np.array([1, 1, 1, 180 / math.pi, 180 / math.pi, 180 / math.pi])
         return {"min": (self.lower * conv).tolist(), "max": (self.upper * conv).tolist()}
-
-
-@dataclass(frozen=True)
-class ProblemSchema:
-    """What a problem file gives for a robot, by the robot's structure (its ``kind``).
-
-    Attributes:
-        targets: ``contacts`` (one point per finger) or ``points`` (a gripper's two object points).
-        bounds: the key of the search bounds a problem may give: ``palm_bounds`` (a free hand's
-            palm box), ``bounds`` (an arm's joint ranges), or None.
-        reference: the key that places a reference posture's palm: ``palm_pose`` (a free hand) or
-            ``arm_joints`` (an arm), or None (no reference posture).
-        extra: other keys this kind takes (a gripper's ``approach`` configuration).
-    """
-
-    targets: str
-    bounds: str | None
-    reference: str | None
-    extra: tuple[str, ...] = ()
-
-    @property
-    def keys(self) -> tuple[str, ...]:
-        """The kind-specific keys this robot's problems may give."""
-        own = (self.targets, self.bounds, "reference" if self.reference else None, *self.extra)
-        return tuple(k for k in own if k is not None)
-
-
-PROBLEM_SCHEMAS = {
-    "hand": ProblemSchema("contacts", "palm_bounds", "palm_pose"),
-    "arm_hand": ProblemSchema("contacts", "bounds", "arm_joints", ("start",)),
-    "gripper": ProblemSchema("points", None, None, ("approach", "start")),
-}
-"""Robot kind -> the kind-specific keys of its problems (the rest: object, obstacles, texts)."""
 
 
 @dataclass(frozen=True)
@@ -177,8 +145,9 @@ class RobotCfg:
 
     @property
     def problem_schema(self) -> ProblemSchema:
-        """The kind-specific keys of this robot's problem files (:data:`PROBLEM_SCHEMAS`)."""
-        return PROBLEM_SCHEMAS[self.kind]
+        """The kind-specific keys of this robot's problem files (its kind's row:
+        :func:`graspnet_torch.robot.kinds.robot_kind`)."""
+        return robot_kind(self).schema
 
     @property
     def cli_name(self) -> str:

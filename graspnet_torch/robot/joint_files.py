@@ -30,6 +30,7 @@ class JointValues:
     n_fingers: int
     joints_per_finger: int
     body_joint_names: tuple[str, ...]
+    body_joint_types: tuple[str, ...]
 
     def finger_all_joint_names(self, name: str) -> tuple[str, ...]:
         """Every movable joint on a finger's URDF chain from the palm to its tip, in chain order:
@@ -148,10 +149,11 @@ class JointValues:
                 for n, v, t in zip(self.body_joint_names, q.tolist(), self.body.joint_types, strict=True)}
 
     def body_joints_from_file(self, values: dict[str, float]) -> Tensor:
-        """The inverse of :meth:`body_joints_to_file`: (m,) float64 (rad or m)."""
+        """The inverse of :meth:`body_joints_to_file`: (m,) float64 (rad or m); a robot without a
+        body: (0,)."""
         d = math.pi / 180
         return torch.tensor([values[n] * (d if t == "revolute" else 1.0)
-                             for n, t in zip(self.body_joint_names, self.body.joint_types, strict=True)],
+                             for n, t in zip(self.body_joint_names, self.body_joint_types, strict=True)],
                             dtype=torch.float64)
 
     def joint_values(self, posture: Posture) -> dict[str, float]:

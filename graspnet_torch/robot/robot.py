@@ -21,6 +21,7 @@ import math
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -32,6 +33,7 @@ from graspnet_torch.robot.config import ChainCfg, PoseBounds, RobotCfg, load_rob
 from graspnet_torch.robot.fingers import FingerChain, FingerKernel
 from graspnet_torch.robot.joint_files import JointValues
 from graspnet_torch.robot.kernel import ChainKernel
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.kinematics import Kinematics
 from graspnet_torch.robot.link_frames import LinkFrames
 from graspnet_torch.robot.shared import SharedJoints, find_shared_joints
@@ -197,12 +199,19 @@ class Robot(Kinematics, JointValues, LinkFrames):
     @cached_property
     def finger_mask(self) -> np.ndarray:
         """(F, n) bool: True for a finger's free joints, False for padding."""
-        n = self.joints_per_finger
-        return np.array([[i < f.n_joints for i in range(n)] for f in self.fingers.values()], dtype=bool).reshape(-1, n)
+        mask = np.zeros((self.n_fingers, self.joints_per_finger), dtype=bool)  # (0, 0) without fingers
+        for k, f in enumerate(self.fingers.values()):
+            mask[k, :f.n_joints] = True
+        return mask
 
     @property
     def body_joint_names(self) -> tuple[str, ...]:
         return self.body.joint_names if self.body is not None else ()
+
+    @property
+    def body_joint_types(self) -> tuple[str, ...]:
+        """The body joints' types (``revolute``, ``prismatic``), URDF order; () without a body."""
+        return tuple(self.body.joint_types) if self.body is not None else ()
 
     @property
     def has_body(self) -> bool:
@@ -214,6 +223,12 @@ class Robot(Kinematics, JointValues, LinkFrames):
         body chain with two marked gripper points, no fingers): which environment solves it
         (:attr:`RobotCfg.kind <graspnet_torch.robot.config.RobotCfg.kind>`)."""
         return self.cfg.kind
+
+    @cached_property
+    def head(self) -> Any:
+        """How its palm is placed (its kind's :class:`~graspnet_torch.robot.heads.Head`: a free
+        palm pose or the body joints): motions, checks and pictures ask it, not the kind."""
+        return robot_kind(self).head(self)
 
     @property
     def dof(self) -> int:

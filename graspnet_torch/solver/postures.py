@@ -23,7 +23,7 @@ def trial_posture(robot: Robot, trial: TrialResult | Mapping[str, Any]) -> Postu
     palm = get("palm_pose")
     pose = torch.tensor(palm[:3] + [a * d for a in palm[3:]], dtype=torch.float64)
     joints = get("joints") or {}
-    q = robot.finger_joints_from_file(joints) if robot.n_fingers else torch.zeros(0, 0, dtype=torch.float64)
-    body = robot.body_joints_from_file(get("arm_joints")) if robot.has_body else torch.zeros(0, dtype=torch.float64)
+    q = robot.finger_joints_from_file(joints)
+    body = robot.body_joints_from_file(get("arm_joints") or {})
     shared = robot.shared_joints_of(robot.finger_values_from_file(joints)) if robot.shared.n else None
     return Posture(palm_pose=pose, fingers=q, body=body, shared=shared)

@@ -2,15 +2,18 @@
 search space and limits gives the contacts (or, for a gripper, the object points), so a solution is
 known to exist.
 
-==============================  ==================================================================
-:func:`random_hand_problem`     a free hand: the palm within ``palm_bounds`` (or anywhere turned)
-:func:`random_arm_problem`      a hand on an arm: the arm's joints within their limits
-:func:`random_reachable_problem`  either of the two, by ``robot.kind`` (``gt.random_reachable_problem``)
+================================  ================================================================
+:func:`random_hand_problem`       a free hand: the palm within ``palm_bounds`` (or anywhere turned)
+:func:`random_arm_problem`        a hand on an arm: the arm's joints within their limits
+:func:`random_reachable_problem`  the generator of the robot's kind (``gt.random_reachable_problem``)
 :func:`random_gripper_problems`   a two-point gripper (MANUS): its gripper points as object points
-:func:`random_sequence`         frames of a smooth random walk of a posture (tracking, retargeting)
-==============================  ==================================================================
+:func:`random_sequence`           frames of a smooth random walk of a posture (tracking, retargeting)
+:func:`random_posed_problem`      a random posture and the problem it solves (proposal training)
+================================  ================================================================
 
-Each is deterministic in its seed. Problems among obstacles that must clear their posture are made
+Which generator, walk space and posed problem a robot gets is its kind's row
+(:func:`graspnet_torch.robot.kinds.robot_kind`): ``random_problem``, ``walk_space``,
+``posed_problem``. Each is deterministic in its seed. Problems among obstacles that must clear their posture are made
 where collisions are known (:mod:`graspnet_torch.collision.problems`).
 """
 
@@ -23,14 +26,16 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_degrees, pose_to_rt
 from graspnet_torch.tasks.objects import random_pose
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import reference_posture
 
-__all__ = ["CONTACT_GENERATORS", "SEQUENCE_SPACES", "random_arm_problem", "random_gripper_problems",
-           "random_hand_problem", "random_posed_problem", "random_reachable_problem", "random_sequence"]
+__all__ = ["WalkSpace", "arm_walk_space", "hand_walk_space", "random_arm_problem", "random_gripper_problems",
+           "random_hand_problem", "random_posed_fingers", "random_posed_gripper", "random_posed_problem",
+           "random_reachable_problem", "random_sequence"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -68,8 +73,7 @@ def random_hand_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] 
     uniform within the robot's ``palm_bounds`` (without them: at the origin, turned uniformly at
     random), every free finger joint uniform within its limits, the joints the fingers share
     (:attr:`Robot.shared`) too, ``n_fingers`` fingers (see :func:`random_reachable_problem`)."""
-    if robot.has_body:
-        raise ValueError(f"robot '{robot.name}' has an arm: use random_arm_problem")
+    _check_generator(robot, random_hand_problem)
     g = torch.Generator().manual_seed(seed)
     q = _finger_joints(robot, g)
     if robot.palm_bounds is not None:
@@ -89,28 +93,22 @@ def random_arm_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] |
     """A hand on an arm: its problem whose contacts are the fingertips of a random posture: every
     arm joint and free finger joint uniform within its limits, ``n_fingers`` fingers (see
     :func:`random_reachable_problem`)."""
-    if not robot.has_body:
-        raise ValueError(f"robot '{robot.name}' has no arm: use random_hand_problem")
+    _check_generator(robot, random_arm_problem)
     g = torch.Generator().manual_seed(seed)
     q = _finger_joints(robot, g)
     body = _uniform(robot.body_limits, g)
     return _fingers_problem(robot, robot.fingertips_world_from_body(body, q), g, seed, n_fingers)
 
 
-CONTACT_GENERATORS = {"hand": random_hand_problem, "arm_hand": random_arm_problem}
-"""``robot.kind`` -> the generator of its contact problems (a gripper has none: see
-:func:`random_gripper_problems`)."""
-
-
 def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None) -> GraspProblem:
     """A problem whose contacts are the fingertips of a random posture of a robot with fingers: the
-    generator of the robot's kind (``robot.kind``): :func:`random_hand_problem` for a free hand,
-    :func:`random_arm_problem` for a hand on an arm.
+    generator of the robot's kind (its row's ``random_problem``): :func:`random_hand_problem` for a
+    free hand, :func:`random_arm_problem` for a hand on an arm.
 
     ``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2 to all)
     chosen at random touch their fingertips. Deterministic in ``seed``.
     """
-    generator = CONTACT_GENERATORS.get(robot.kind)
+    generator = robot_kind(robot).random_problem
     if generator is None:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
     return generator(robot, seed, n_fingers)
@@ -137,7 +135,7 @@ def _finger_box(robot: Robot) -> tuple[Tensor, Tensor]:
     return lo, hi
 
 
-def _hand_space(robot: Robot) -> WalkSpace:
+def hand_walk_space(robot: Robot) -> WalkSpace:
     """A free hand: ``x`` = palm pose (6: m, rad) within ``palm_bounds`` (without them: at the
     origin, any orientation), then the finger joints (F * n) within their limits."""
     shape = (robot.n_fingers, robot.joints_per_finger)
@@ -158,7 +156,7 @@ def _hand_space(robot: Robot) -> WalkSpace:
     return WalkSpace(torch.cat([plo, flo]), torch.cat([phi, fhi]), place, reference)
 
 
-def _arm_space(robot: Robot) -> WalkSpace:
+def arm_walk_space(robot: Robot) -> WalkSpace:
     """A hand on an arm: ``x`` = the arm's joints (m) within their limits, then the finger joints."""
     m, shape = len(robot.body_joint_names), (robot.n_fingers, robot.joints_per_finger)
     blo, bhi = (torch.as_tensor(a, dtype=torch.float64) for a in robot.body_limits)
@@ -174,10 +172,6 @@ def _arm_space(robot: Robot) -> WalkSpace:
     return WalkSpace(torch.cat([blo, flo]), torch.cat([bhi, fhi]), place, reference)
 
 
-SEQUENCE_SPACES: dict[str, Callable[[Robot], WalkSpace]] = {"hand": _hand_space, "arm_hand": _arm_space}
-"""``robot.kind`` -> the space its posture walks in for :func:`random_sequence`."""
-
-
 def _turn_deg(R0: Tensor, R1: Tensor) -> float:
     """The angle (degrees) of the rotation from ``R0`` (3, 3) to ``R1`` (3, 3)."""
     c = (float(torch.trace(R0.T @ R1)) - 1) / 2
@@ -188,15 +182,15 @@ def random_sequence(robot: Robot, seed: int, frames: int, n_fingers: int | Seque
                     step_m: float = 0.01, step_deg: float = 5.0) -> list[GraspProblem]:
     """``frames`` problems along a smooth random walk of a posture (tracking, retargeting).
 
-    The posture starts uniform in the robot's search space (:data:`SEQUENCE_SPACES`, by
-    ``robot.kind``: a free hand's palm pose within ``palm_bounds`` and its finger joints within their
-    limits; a hand on an arm: its arm and finger joints) and moves with some persistence of
+    The posture starts uniform in the robot's search space (its kind's ``walk_space``: a free
+    hand's palm pose within ``palm_bounds`` and its finger joints within their limits; a hand on
+    an arm: its arm and finger joints) and moves with some persistence of
     direction, reflected at the bounds. Every step is halved until each contact fingertip moves at
     most ``step_m`` (m) and the palm turns at most ``step_deg`` (degrees). The same ``n_fingers``
     fingers (see :func:`random_reachable_problem`) touch their fingertips in every frame; each
     problem carries the posture that made it as its ``reference``. Deterministic in ``seed``.
     """
-    make_space = SEQUENCE_SPACES.get(robot.kind)
+    make_space = robot_kind(robot).walk_space
     if make_space is None:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
     if frames < 1 or step_m <= 0 or step_deg <= 0:
@@ -257,21 +251,38 @@ def random_gripper_problems(robot: Robot, n: int, seed: int = 11) -> list[GraspP
 def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None
                          ) -> tuple[GraspProblem, Posture]:
     """A random posture of any robot and the problem it solves (what a posture proposal model
-    learns from): for robots with fingers, a posture uniform in the robot's walk space
-    (:data:`SEQUENCE_SPACES`: a free hand's palm within its search space, an arm's joints) with
-    ``n_fingers`` contact fingers (see :func:`random_reachable_problem`); for a gripper, its body
-    joints uniform within their limits and the two gripper points as the object's (in either
-    order). Deterministic in ``seed``."""
-    if robot.kind == "gripper":
-        g = torch.Generator().manual_seed(seed)
-        lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
-        q = lo + (hi - lo) * torch.rand(len(lo), generator=g, dtype=torch.float64)
-        points = robot.gripper_points(q.unsqueeze(0))[0].tolist()
-        if bool(torch.rand((), generator=g) < 0.5):
-            points = points[::-1]
-        problem = GraspProblem.from_mapping({"robot": robot.name, "points": points},
-                                            source=f"random posed problem {seed} of {robot.name}")
-        home = robot.home_posture(torch.float64)
-        return problem, Posture(palm_pose=home.palm_pose, fingers=home.fingers, body=q)
+    learns from): its kind's ``posed_problem`` (:func:`random_posed_fingers`,
+    :func:`random_posed_gripper`). Deterministic in ``seed``."""
+    return robot_kind(robot).posed_problem(robot, seed, n_fingers)
+
+
+def random_posed_fingers(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None
+                         ) -> tuple[GraspProblem, Posture]:
+    """A robot with fingers: a posture uniform in its walk space (its kind's ``walk_space``: a free
+    hand's palm within its search space, an arm's joints) with ``n_fingers`` contact fingers (see
+    :func:`random_reachable_problem`), and the problem it solves."""
     problem = random_sequence(robot, seed, 1, n_fingers)[0]
     return problem, reference_posture(robot, problem)
+
+
+def random_posed_gripper(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None
+                         ) -> tuple[GraspProblem, Posture]:
+    """A two-point gripper: its body joints uniform within their limits and the two gripper points
+    as the object's (in either order); ``n_fingers`` is unused."""
+    g = torch.Generator().manual_seed(seed)
+    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+    q = lo + (hi - lo) * torch.rand(len(lo), generator=g, dtype=torch.float64)
+    points = robot.gripper_points(q.unsqueeze(0))[0].tolist()
+    if bool(torch.rand((), generator=g) < 0.5):
+        points = points[::-1]
+    problem = GraspProblem.from_mapping({"robot": robot.name, "points": points},
+                                        source=f"random posed problem {seed} of {robot.name}")
+    home = robot.home_posture(torch.float64)
+    return problem, Posture(palm_pose=home.palm_pose, fingers=home.fingers, body=q)
+
+
+def _check_generator(robot: Robot, generator: Callable) -> None:
+    """Refuse a generator that is not the one of the robot's kind."""
+    if robot_kind(robot).random_problem is not generator:
+        raise ValueError(f"robot '{robot.name}' ({robot.kind}): its random problems come from "
+                         f"random_reachable_problem, not {generator.__name__}")
