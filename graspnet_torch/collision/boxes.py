@@ -27,7 +27,8 @@ import numpy as np
 
 from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.geometry import Shape as LinkShape
-from graspnet_torch.tasks.shapes import Shape, pose_matrix
+from graspnet_torch.robot.transforms import pose_to_matrix_np
+from graspnet_torch.tasks.shapes import Shape
 
 __all__ = ["BOX_MARGIN_M", "boxes_apart", "link_box", "shape_box"]
 
@@ -64,7 +65,7 @@ def link_box(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
 
 def shape_box(shape: Shape) -> tuple[np.ndarray, np.ndarray]:
     """An obstacle's or object's box: its pose (4, 4) in the world and half extents (3,)."""
-    pose = pose_matrix(np.asarray(shape.pose, dtype=np.float64))
+    pose = pose_to_matrix_np(np.asarray(shape.pose, dtype=np.float64))
     if shape.kind == "mesh":
         mesh = load_mesh(Path(shape.mesh).resolve(), shape.scale)
         T, half = _vertices_box(np.asarray(mesh.vertices, dtype=np.float64))

@@ -26,7 +26,7 @@ import numpy as np
 
 from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh
-from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 
 __all__ = ["MeshQuery", "mesh_query", "point_triangle_distance", "shape_points"]
 
@@ -220,9 +220,7 @@ def mesh_query(shape) -> tuple[MeshQuery, np.ndarray]:
     """A mesh shape's (a problem's ``Shape``) :class:`MeshQuery` in its own frame (its convex
     pieces stand for the inside of a mesh that is not closed; cached per file and scale), and its
     pose (4, 4) in the world."""
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
-    return _query(Path(shape.mesh).resolve(), shape.scale), T
+    return _query(Path(shape.mesh).resolve(), shape.scale), pose_to_matrix_np(shape.pose)
 
 
 @lru_cache(maxsize=32)

@@ -24,7 +24,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.collision.convex import FAR, convex_pieces, pieces_distance
-from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.transforms import rpy_to_matrix_np
 from graspnet_torch.tasks.problem import Shape
 
 __all__ = ["GroupThresholds", "PrimitiveGroup", "group_thresholds", "primitive_groups"]
@@ -157,7 +157,7 @@ def primitive_groups(batch: list[list[Shape]], kw: dict, floor: int | None = Non
     slots: dict[tuple[int, int], int] = {}  # (element, piece) -> the convex group's entry
     for p, elements in enumerate(batch):
         for k, e in enumerate(elements):
-            R, t = rpy_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
+            R, t = rpy_to_matrix_np(e.pose[3:]), np.asarray(e.pose[:3], dtype=np.float64)
             if e.kind == "mesh":
                 pieces = convex_pieces(e.mesh, e.scale)
                 entries = [("convex", pieces.planes[j], pieces.centres[j], pieces.radii[j])

@@ -30,9 +30,9 @@ import numpy as np
 from graspnet_torch.collision.boxes import boxes_apart, link_box, shape_box
 from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry, mesh_bvh
 from graspnet_torch.collision.mesh import mesh_query, shape_points
-from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.tasks.problem import GraspProblem, Shape
 
 __all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "has_environment", "self_collision_pairs"]
@@ -116,9 +116,7 @@ def _environment_object(shape: Shape):
     """An obstacle or the object as an FCL collision object at its pose in the world."""
     import fcl
 
-    T = np.eye(4)
-    T[:3, :3] = rpy_matrix_np(shape.pose[3:])
-    T[:3, 3] = shape.pose[:3]
+    T = pose_to_matrix_np(shape.pose)
     if shape.kind == "mesh":
         geometry = mesh_bvh(Path(shape.mesh).resolve(), shape.scale)
     else:

@@ -24,30 +24,23 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.robot.urdf_checks import check_urdf
 from graspnet_torch.settings import clip
 
 if TYPE_CHECKING:  # pragma: no cover
     import pytorch_kinematics as pk
 
-__all__ = ["ChainSpec", "UrdfModel", "rpy_matrix_np"]
+__all__ = ["ChainSpec", "UrdfModel", "origin_matrix"]
 
 
-def rpy_matrix_np(rpy) -> np.ndarray:
-    """float64 ``Rz(y) Ry(p) Rx(r)`` of URDF rpy angles (radians)."""
-    r, p, y = (float(a) for a in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def _origin_matrix(origin) -> np.ndarray:
-    T = np.eye(4)
-    if origin is not None:
-        T[:3, :3] = rpy_matrix_np(origin.rpy if origin.rpy is not None else (0, 0, 0))
-        T[:3, 3] = origin.xyz if origin.xyz is not None else (0, 0, 0)
-    return T
+def origin_matrix(origin) -> np.ndarray:
+    """(4, 4) float64 of a URDF ``<origin>`` (None, or missing xyz / rpy: zeros)."""
+    if origin is None:
+        return np.eye(4)
+    xyz = origin.xyz if origin.xyz is not None else (0, 0, 0)
+    rpy = origin.rpy if origin.rpy is not None else (0, 0, 0)
+    return pose_to_matrix_np([*xyz, *rpy])
 
 
 @dataclass(frozen=True)
@@ -213,7 +206,7 @@ class UrdfModel:
             if joint.type != "fixed":
                 raise ConfigError(f"{what}: joint '{joint.name}' between '{root}' and '{tip}' is "
                                   f"{joint.type}, expected only fixed joints")
-            T = T @ self._link_offset(joint.child) @ _origin_matrix(joint.origin)
+            T = T @ self._link_offset(joint.child) @ origin_matrix(joint.origin)
         return T
 
     def serial_chain(self, root: str, tip: str) -> pk.SerialChain:
@@ -224,7 +217,7 @@ class UrdfModel:
         return pk.SerialChain(self.chain, tip, root)
 
     def _link_offset(self, link: str) -> np.ndarray:
-        return _origin_matrix(getattr(self.links[link], "origin", None))
+        return origin_matrix(getattr(self.links[link], "origin", None))
 
     def chain_spec(self, root: str, tip: str, what: str = "chain") -> ChainSpec:
         """float64 constants of the serial chain from ``root`` to ``tip``.
@@ -240,7 +233,7 @@ class UrdfModel:
         for frame_name in frames[1:]:  # the root frame is the chain's origin
             frame = sc.find_frame(frame_name)
             urdf_joint = self.joints[frame.joint.name]
-            current = current @ self._link_offset(frame_name) @ _origin_matrix(urdf_joint.origin)
+            current = current @ self._link_offset(frame_name) @ origin_matrix(urdf_joint.origin)
             if frame.joint.joint_type == "fixed":
                 continue
             offsets.append(current)

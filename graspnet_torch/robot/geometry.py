@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.robot.chain import UrdfModel, rpy_matrix_np
+from graspnet_torch.robot.chain import UrdfModel, origin_matrix
 from graspnet_torch.robot.meshes import load_link_mesh
 
 __all__ = ["Shape", "link_shapes"]
@@ -36,14 +36,6 @@ class Shape:
     origin: np.ndarray
     rgba: tuple[float, float, float, float] = GREY
     mesh: object = None
-
-
-def _origin(origin) -> np.ndarray:
-    T = np.eye(4)
-    if origin is not None:
-        T[:3, :3] = rpy_matrix_np(origin.rpy or (0, 0, 0))
-        T[:3, 3] = origin.xyz or (0, 0, 0)
-    return T
 
 
 def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] | None = None) -> list[Shape]:
@@ -92,5 +84,5 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
             else:
                 raise ConfigError(f"{model.path.name}: link '{link.name}' has {type(g).__name__} "
                                   f"{source} geometry; only box, cylinder, sphere and mesh are supported")
-            shapes.append(Shape(link.name, kind, size, _origin(el.origin), rgba, mesh))
+            shapes.append(Shape(link.name, kind, size, origin_matrix(el.origin), rgba, mesh))
     return shapes

@@ -4,13 +4,17 @@ A pose is ``(x, y, z, rx, ry, rz)``: a translation in metres and fixed-axis roll
 radians with ``R = Rz(rz) @ Ry(ry) @ Rx(rx)`` (the URDF ``rpy`` convention). Files a person reads
 give the angles in degrees; :func:`pose_from_degrees` / :func:`pose_to_degrees` convert.
 
-All functions broadcast over leading batch dimensions.
+The torch functions broadcast over leading batch dimensions. The ``*_np`` functions are their
+float64 numpy twins for one pose (files, problems, URDF origins, FCL objects), the only numpy
+implementation of these conversions in the package.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -19,13 +23,16 @@ __all__ = [
     "frame_point_jacobian",
     "invert",
     "matrix_to_pose",
+    "matrix_to_pose_np",
     "matrix_to_rpy",
     "pose_from_degrees",
     "pose_jacobian",
     "pose_to_degrees",
     "pose_to_matrix",
+    "pose_to_matrix_np",
     "pose_to_rt",
     "rpy_to_matrix",
+    "rpy_to_matrix_np",
     "rt_to_pose",
     "transform_points",
     "untransform_points",
@@ -183,3 +190,31 @@ def pose_to_degrees(pose: Tensor) -> Tensor:
     """(..., 6) pose with angles in radians -> angles in degrees (translation untouched)."""
     scale = torch.tensor([1.0, 1.0, 1.0, 1 / _DEG, 1 / _DEG, 1 / _DEG], dtype=pose.dtype, device=pose.device)
     return pose * scale
+
+
+def rpy_to_matrix_np(rpy: Sequence[float] | np.ndarray) -> np.ndarray:
+    """float64 numpy :func:`rpy_to_matrix` of one set of angles.
+
+    Args:
+        rpy: (3,) angles (rx, ry, rz) in radians (e.g. a URDF ``<origin rpy>``).
+    Returns:
+        (3, 3) ``Rz(rz) @ Ry(ry) @ Rx(rx)``.
+    """
+    r, p, y = (float(a) for a in rpy)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def pose_to_matrix_np(pose: Sequence[float] | np.ndarray) -> np.ndarray:
+    """float64 numpy :func:`pose_to_matrix` of one pose: (6,) ``(x, y, z, rx, ry, rz)`` -> (4, 4)."""
+    T = np.eye(4)
+    T[:3, :3] = rpy_to_matrix_np(pose[3:6])
+    T[:3, 3] = pose[:3]
+    return T
+
+
+def matrix_to_pose_np(T: np.ndarray) -> np.ndarray:
+    """float64 numpy :func:`matrix_to_pose` of one matrix: (4, 4) -> (6,) (m, rad)."""
+    return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()

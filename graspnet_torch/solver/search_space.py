@@ -32,9 +32,8 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.robot import Robot
-from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
+from graspnet_torch.robot.transforms import compose, pose_to_rt, rpy_to_matrix_np, rt_to_pose
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["PalmSearchSpace", "contact_frame", "contact_search_frame", "finger_reach", "finger_reach_bound",
@@ -162,7 +161,7 @@ def contact_search_frame(robot: Robot, problem: GraspProblem) -> np.ndarray:
     fingers, world = _ordered_contacts(robot, problem)
     reference = None
     if problem.object is not None:
-        reference = rpy_matrix_np(problem.object.pose[3:])[:, 2]
+        reference = rpy_to_matrix_np(problem.object.pose[3:])[:, 2]
     return contact_frame(world, reference) @ _hand_frame_inverse(robot, fingers)
 
 

@@ -20,8 +20,8 @@ import numpy as np
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import read_document
 from graspnet_torch.paths import configs_dir
-from graspnet_torch.robot.chain import rpy_matrix_np
 from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
+from graspnet_torch.robot.transforms import rpy_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
 from graspnet_torch.tasks.shapes import Shape, check_free_contacts, numbers, obstacles_of, pose_degrees, unknown_keys
 
@@ -267,7 +267,7 @@ class GraspProblem:
         if self.object is None:
             return self.points.copy()
 
-        return self.points @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
+        return self.points @ rpy_to_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
 
     @staticmethod
     def _reference(data: Any, contacts: list[Contact], robot_cfg: RobotCfg, source: str) -> ReferencePosture | None:
@@ -362,7 +362,7 @@ class GraspProblem:
         if self.object is None:
             return pts
 
-        return pts @ rpy_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
+        return pts @ rpy_to_matrix_np(self.object.pose[3:]).T + self.object.pose[:3]
 
     def to_mapping(self) -> dict:
         """The problem as a problem-file mapping (degrees)."""

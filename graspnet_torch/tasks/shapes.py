@@ -19,8 +19,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.files import confined_file
 from graspnet_torch.meshes import check_mesh_file, load_mesh
 from graspnet_torch.paths import repo_root
-from graspnet_torch.robot.chain import rpy_matrix_np
-from graspnet_torch.robot.transforms import matrix_to_pose
+from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np, rpy_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["MAX_OBSTACLES", "MAX_SCALE", "SHAPES", "Shape", "check_free_contacts", "check_mesh", "inside", "numbers",
@@ -118,7 +117,7 @@ class Shape:
 
     def moved(self, transform: np.ndarray) -> Shape:
         """The shape moved and turned by a rigid transform (4, 4) of the world."""
-        return replace(self, pose=matrix_pose(transform @ pose_matrix(self.pose)))
+        return replace(self, pose=matrix_to_pose_np(transform @ pose_to_matrix_np(self.pose)))
 
     def trimesh(self):
         """The shape as a trimesh.Trimesh in the world (imports trimesh)."""
@@ -132,10 +131,7 @@ class Shape:
             mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
         else:
             mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
-        T = np.eye(4)
-        T[:3, :3] = rpy_matrix_np(self.pose[3:])
-        T[:3, 3] = self.pose[:3]
-        return mesh.apply_transform(T)
+        return mesh.apply_transform(pose_to_matrix_np(self.pose))
 
 
 def check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
@@ -167,7 +163,7 @@ def inside(shape: Shape, points: np.ndarray) -> np.ndarray:
     """(N,) whether world points lie inside a shape (closed primitives; a mesh by trimesh)."""
     if shape.kind == "mesh":
         return np.asarray(shape.trimesh().contains(points), dtype=bool)
-    p = (points - shape.pose[:3]) @ rpy_matrix_np(shape.pose[3:])  # into the shape's frame
+    p = (points - shape.pose[:3]) @ rpy_to_matrix_np(shape.pose[3:])  # into the shape's frame
     if shape.kind == "box":
         return np.all(np.abs(p) < np.asarray(shape.size) / 2, axis=1)
     if shape.kind == "cylinder":
@@ -181,25 +177,11 @@ def check_free_contacts(obstacles: Sequence[Shape], fingers: Sequence[str], posi
     per finger of ``fingers``): no fingertip could touch it collision-free."""
     points = np.asarray(positions, dtype=np.float64)
     if obj is not None:
-        points = points @ rpy_matrix_np(obj.pose[3:]).T + obj.pose[:3]
+        points = points @ rpy_to_matrix_np(obj.pose[3:]).T + obj.pose[:3]
     for k, shape in enumerate(obstacles):
         hit = inside(shape, points)
         if hit.any():
             names = ", ".join(fingers[i] for i in np.nonzero(hit)[0])
             raise ProblemError(f"{source}: obstacles[{k}] ({shape.kind}) contains the {names} contact: no "
                                f"fingertip can reach it without a collision")
-
-
-def pose_matrix(pose: np.ndarray) -> np.ndarray:
-    """(6,) pose (m, rad) -> (4, 4)."""
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rpy_matrix_np(pose[3:]), pose[:3]
-    return T
-
-
-def matrix_pose(T: np.ndarray) -> np.ndarray:
-    """(4, 4) -> (6,) pose (m, rad), R = Rz Ry Rx."""
-    import torch
-
-    return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
 

@@ -15,8 +15,7 @@ from graspnet_torch.collision.boxes import boxes_apart, link_box
 from graspnet_torch.collision.geometry import fcl_geometry, link_geometry
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
-from graspnet_torch.robot.transforms import rt_to_pose
-from graspnet_torch.tasks.shapes import pose_matrix
+from graspnet_torch.robot.transforms import pose_to_matrix_np, rt_to_pose
 
 
 def _box(T: np.ndarray, half: np.ndarray):
@@ -78,7 +77,7 @@ def _direct(robot, problem, posture):
         objects.setdefault(s.link, []).append(fcl.CollisionObject(link_geometry(s), fcl.Transform(T[:3, :3], T[:3, 3])))
     obstacles = []
     for o in environment_obstacles(robot, problem):
-        T = pose_matrix(o.pose)
+        T = pose_to_matrix_np(o.pose)
         obstacles.append(fcl.CollisionObject(fcl_geometry(o.kind, o.size), fcl.Transform(T[:3, :3], T[:3, 3])))
 
     def hit(xs, ys):

@@ -10,7 +10,7 @@ import torch
 import trimesh
 
 from graspnet_torch.collision.primitives import PrimitiveGroup, group_thresholds, primitive_groups
-from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.tasks.problem import Shape
 
 KW = {"dtype": torch.float64, "device": "cpu"}
@@ -24,9 +24,7 @@ def _mesh(shape: Shape) -> trimesh.Trimesh:
         mesh = trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[1], sections=1024)
     else:
         mesh = trimesh.creation.icosphere(subdivisions=6, radius=shape.size[0])
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = rpy_matrix_np(shape.pose[3:]), shape.pose[:3]
-    return mesh.apply_transform(T)
+    return mesh.apply_transform(pose_to_matrix_np(shape.pose))
 
 
 SHAPES = [

@@ -120,7 +120,7 @@ def test_a_solve_searches_the_shared_joints_and_checks_from_the_urdf_alone(tmp_p
 
     from graspnet_torch.fcnn.train import FCNNTrainCfg
     from graspnet_torch.jobs.train_fcnn import train_fcnn
-    from graspnet_torch.tasks.shapes import pose_matrix
+    from graspnet_torch.robot.transforms import pose_to_matrix_np
 
     robot = gt.load_robot(write_coupled_hand(tmp_path))
     tiny = FCNNTrainCfg(epochs=3, targets_per_epoch=64, train_steps=10, batch_size=64, val_targets=200, val_every=2)
@@ -144,7 +144,7 @@ def test_a_solve_searches_the_shared_joints_and_checks_from_the_urdf_alone(tmp_p
     fk = chain.forward_kinematics(th)
     pose = np.asarray(out["palm_pose"], dtype=np.float64)
     palm = fk["palm"].get_matrix()[0].numpy()
-    world = pose_matrix(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(palm)
+    world = pose_to_matrix_np(np.concatenate([pose[:3], np.radians(pose[3:])])) @ np.linalg.inv(palm)
     for contact, target in zip(problem.contacts, problem.contacts_world(), strict=True):
         tip = (world @ fk[COUPLED_TIPS[contact.finger]].get_matrix()[0].numpy())[:3, 3]
         assert np.linalg.norm(tip - target) * 1000 == pytest.approx(out["fingertip_error_mm"][contact.finger],

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from graspnet_torch.robot import transforms as tf
-from graspnet_torch.robot.chain import rpy_matrix_np
+from graspnet_torch.robot.transforms import rpy_to_matrix_np
 
 
 def _elementary(axis: int, a: float) -> np.ndarray:
@@ -31,7 +31,7 @@ def test_rpy_is_fixed_axis_zyx_product(rx, ry, rz):
     expected = _elementary(2, rz) @ _elementary(1, ry) @ _elementary(0, rx)
     got = tf.rpy_to_matrix(torch.tensor([rx, ry, rz], dtype=torch.float64)).numpy()
     np.testing.assert_allclose(got, expected, atol=1e-14)
-    np.testing.assert_allclose(rpy_matrix_np((rx, ry, rz)), expected, atol=1e-14)
+    np.testing.assert_allclose(rpy_to_matrix_np((rx, ry, rz)), expected, atol=1e-14)
 
 
 @settings(max_examples=60, deadline=None)
@@ -56,6 +56,14 @@ def test_pose_matrix_round_trip_batched(gen):
     assert T.shape == (7, 3, 4, 4)
     np.testing.assert_allclose(tf.matrix_to_pose(T).numpy(), pose.numpy(), atol=1e-12)
     np.testing.assert_allclose(T[..., 3, :].numpy(), np.broadcast_to([0, 0, 0, 1], (7, 3, 4)))
+
+
+def test_numpy_twins_match_torch(gen):
+    pose = torch.rand(6, generator=gen, dtype=torch.float64) * 6 - 3
+    T = tf.pose_to_matrix_np(pose.numpy())
+    np.testing.assert_allclose(T, tf.pose_to_matrix(pose).numpy(), atol=1e-15)
+    np.testing.assert_allclose(tf.pose_to_matrix_np(pose.tolist()), T, atol=0)
+    np.testing.assert_allclose(tf.matrix_to_pose_np(T), tf.matrix_to_pose(tf.pose_to_matrix(pose)).numpy(), atol=1e-15)
 
 
 def test_points_round_trip_and_inverse(gen):
