@@ -21,7 +21,7 @@ from torch import Tensor
 from graspnet_torch.collision.cache import proxy_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.least_squares import LMResult, damped_pinv_step, levenberg_marquardt
+from graspnet_torch.least_squares import LMResult, levenberg_marquardt
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.robot import Posture, Robot
@@ -39,6 +39,14 @@ __all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment"]
 
 CLEARANCE_M = 0.005  # the loop and the polish keep 5 mm from obstacles, floor and own links (proxy margin)
 ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
+# _refine (solver.gripper.settle): the settling steps' damping lambda (m), fixed: a couple of steps
+# per proposal, each kept only where it lowers the point error, none adapting lambda
+SETTLE_DAMPING = 0.05
+# _least_squares (the polish, solver=dls): lambda's start, smallest and largest (m); it falls by 3
+# after a kept step and grows by 4 after a refused one (least_squares.levenberg_marquardt)
+POLISH_DAMPING = (1e-2, 1e-4, 10.0)
+# _least_squares: a joint within this of its bound (m or rad) is at it (the active set's test)
+BOUND_EDGE = 1e-9
 
 
 class GripperEnvironment(Environment):
@@ -172,31 +180,31 @@ class GripperEnvironment(Environment):
         return self.targets[trials], self.lower[trials], self.upper[trials], self.problem_index[trials]
 
     def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor
-                ) -> tuple[Tensor, Tensor, Tensor]:
-        """``steps`` damped least-squares steps (lambda = 0.05, the closed-form Jacobian of
-        :meth:`kinematics`, no collision test) towards each trial's nearer pairing, within the
-        bounds, each kept where it lowers the point error: the learner proposes, a few local steps
-        settle the proposal, and the settled configuration is what is evaluated and reported.
-        Returns it (T, n) with its chain frames (T, n, 4, 4) and gripper points (T, 2, 3)."""
+                ) -> tuple[Tensor, Tensor | None, Tensor]:
+        """``steps`` Levenberg-Marquardt steps (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
+        at the fixed damping :data:`SETTLE_DAMPING` (the closed-form Jacobian of :meth:`kinematics`,
+        no collision test, each step clamped to the bounds, no active set) of the gripper points
+        towards each trial's nearer pairing, each kept where it lowers the point error: the learner
+        proposes, a few local steps settle the proposal, and the settled configuration is what is
+        evaluated and reported. q: (T, n), targets: (T or 1, 2, 3), lower, upper: (T or 1, n).
+        Returns it (T, n) with its chain frames (T, n, 4, 4; None without a proxy, their one
+        user) and gripper points (T, 2, 3)."""
         T = q.shape[0]
         tg = targets.expand(T, 2, 3)
-        levels, pts, J = self.kinematics(q, jacobian=True)
-        swap = _pairing(pts, tg)
-        goal = torch.where(swap.view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
-        err = (goal - pts.reshape(T, 6)).norm(dim=-1)
-        lam = torch.full((T,), 0.05, dtype=q.dtype, device=q.device)
-        for step in range(steps):
-            new = torch.minimum(torch.maximum(q + damped_pinv_step(J, goal - pts.reshape(T, 6), lam), lower), upper)
-            new_levels, new_pts, _ = self.kinematics(new)
-            new_err = (goal - new_pts.reshape(T, 6)).norm(dim=-1)
-            better = new_err < err
-            q = torch.where(better.unsqueeze(1), new, q)
-            levels = torch.where(better.view(-1, 1, 1, 1), new_levels, levels)
-            pts = torch.where(better.view(-1, 1, 1), new_pts, pts)
-            err = torch.minimum(new_err, err)
-            if step + 1 < steps:
-                J = self._jacobian(levels, pts)
-        return q, levels, pts
+        lower, upper = lower.expand(T, -1), upper.expand(T, -1)
+        q = torch.minimum(torch.maximum(q, lower), upper)  # as the LM starts: its first model call is at this q
+        start = [self.kinematics(q, jacobian=True)]
+        goal = torch.where(_pairing(start[0][1], tg).view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
+
+        def points(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+            _levels, pts, J = start.pop() if start else self.kinematics(x, jacobian=True)  # first: at q
+            return pts.reshape(-1, 6), J
+
+        solved = levenberg_marquardt(points, goal, q, lower, upper, steps,
+                                     lam=SETTLE_DAMPING, lam_min=SETTLE_DAMPING, lam_max=SETTLE_DAMPING,
+                                     active_set=False)
+        levels = self.kinematics(solved.x)[0] if self.proxy is not None else None
+        return solved.x, levels, solved.value.view(T, 2, 3)
 
     def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
         """Polish the reported configurations: ``solver.gripper.polish_iterations`` damped least-squares steps (float64)
@@ -247,8 +255,9 @@ class GripperEnvironment(Environment):
             pid = None if trial_of is None else self.problem_index[trial_of[rows]]
             return self._count(x, pid)
 
-        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=1e-2, lam_min=1e-4, lam_max=10.0,
-                                   edge=1e-9, tol=tol, done=done, trace=trace,
+        lam, lam_min, lam_max = POLISH_DAMPING
+        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=lam, lam_min=lam_min, lam_max=lam_max,
+                                   edge=BOUND_EDGE, tol=tol, done=done, trace=trace,
                                    count=count if self.proxy is not None else None)
 
     # solver=dls: the whole configuration is the body's joints (no fingers)
