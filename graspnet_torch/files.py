@@ -29,9 +29,17 @@ from graspnet_torch.errors import GraspnetError
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import clip, short
 
-__all__ = ["MAX_DOCUMENT_BYTES", "MAX_EXPANDED_VALUES", "MAX_MESH_BYTES", "allowed_roots", "check_output_path",
-           "confined_file",
-           "parse_document", "read_document"]
+__all__ = [
+    "MAX_DOCUMENT_BYTES",
+    "MAX_EXPANDED_VALUES",
+    "MAX_MESH_BYTES",
+    "allowed_roots",
+    "check_output_path",
+    "confined_file",
+    "parse_document",
+    "read_document",
+    "regular_file_stat",
+]
 
 MAX_DOCUMENT_BYTES = 1 << 20  # a problem or config file: 1 MiB (the shipped ones are about 1 KiB)
 MAX_MESH_BYTES = 64 << 20  # a mesh file named by a problem or URDF: 64 MiB
@@ -91,6 +99,18 @@ def _path_text(path: Any, what: str, error: type[GraspnetError]) -> str:
     return path
 
 
+def regular_file_stat(path: Path, missing: GraspnetError, not_regular: GraspnetError) -> os.stat_result:
+    """The ``os.stat`` of a file that must exist and be a regular file; raises ``missing`` or
+    ``not_regular`` (the caller's error, its message naming what and where)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        raise missing from None
+    if not stat.S_ISREG(st.st_mode):
+        raise not_regular
+    return st
+
+
 def read_document(path: str | os.PathLike, what: str, error: type[GraspnetError],
                   max_bytes: int = MAX_DOCUMENT_BYTES) -> Any:
     """The parsed content of a YAML (or ``.json``) file, refused with one line naming ``path``.
@@ -102,12 +122,8 @@ def read_document(path: str | os.PathLike, what: str, error: type[GraspnetError]
     """
     text = _path_text(path, what, error)
     p = Path(text)
-    try:
-        st = os.stat(p)
-    except OSError:
-        raise error(f"{what} not found: {clip(text, 200)}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise error(f"{clip(text, 200)}: the {what} is not a regular file")
+    st = regular_file_stat(p, error(f"{what} not found: {clip(text, 200)}"),
+                           error(f"{clip(text, 200)}: the {what} is not a regular file"))
     if st.st_size > max_bytes:
         raise error(f"{clip(text, 200)}: {st.st_size} bytes; a {what} may have at most {max_bytes} bytes")
     try:

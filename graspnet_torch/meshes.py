@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.errors import ConfigError, GraspnetError
-from graspnet_torch.files import MAX_MESH_BYTES
+from graspnet_torch.files import MAX_MESH_BYTES, regular_file_stat
 from graspnet_torch.settings import MAX_LENGTH_M, clip
 
 __all__ = ["FACES_VARIABLE", "MAX_MESH_FACES", "MESH_FORMATS", "MIN_THICKNESS_M", "check_mesh_file", "load_mesh",
@@ -84,12 +84,8 @@ def check_mesh_file(path: str | os.PathLike, where: str, error: type[GraspnetErr
     """
     p = Path(path)
     mesh_format(p, where, error)
-    try:
-        st = os.stat(p)
-    except OSError:
-        raise error(f"{where}: file not found: {clip(str(p), 120)}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise error(f"{where}: {clip(p.name, 80)} is not a regular file")
+    st = regular_file_stat(p, error(f"{where}: file not found: {clip(str(p), 120)}"),
+                           error(f"{where}: {clip(p.name, 80)} is not a regular file"))
     s = tuple(float(v) for v in np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)))
     reason = _reason(str(p.resolve()), st.st_mtime_ns, st.st_size, s, solid, max_mesh_faces())
     if reason:

@@ -10,13 +10,6 @@ from graspnet_torch.tasks.random import arm_walk_space, random_arm_problem, rand
 __all__ = ["ARM_HAND"]
 
 ARM_HAND = register_kind(RobotKind(
-    name="arm_hand",
-    description="fingers on a body chain: the arm's joints carry the palm, the FCNN places the fingers",
-    schema=ProblemSchema("contacts", "bounds", "arm_joints", ("start",)),
-    head=BodyChain,
-    environment=ArmHandEnvironment,
-    posed_problem=random_posed_fingers,
-    random_problem=random_arm_problem,
-    walk_space=arm_walk_space,
-    min_fingers=2,
-))
+    "arm_hand", "fingers on a body chain: the arm's joints carry the palm, the FCNN places the fingers",
+    ProblemSchema("contacts", "bounds", "arm_joints", ("start",)), BodyChain, ArmHandEnvironment,
+    random_posed_fingers, random_problem=random_arm_problem, walk_space=arm_walk_space, min_fingers=2))

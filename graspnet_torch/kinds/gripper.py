@@ -11,10 +11,5 @@ from graspnet_torch.tasks.random import random_posed_gripper
 __all__ = ["GRIPPER"]
 
 GRIPPER = register_kind(RobotKind(
-    name="gripper",
-    description="a body chain with two marked gripper points (MANUS): its joints put them on the object's two points",
-    schema=ProblemSchema("points", None, None, ("approach", "start")),
-    head=BodyChain,
-    environment=GripperEnvironment,
-    posed_problem=random_posed_gripper,
-))
+    "gripper", "a body chain with two marked gripper points (MANUS): its joints put them on the object's two points",
+    ProblemSchema("points", None, None, ("approach", "start")), BodyChain, GripperEnvironment, random_posed_gripper))

@@ -10,14 +10,6 @@ from graspnet_torch.tasks.random import hand_walk_space, random_hand_problem, ra
 __all__ = ["HAND"]
 
 HAND = register_kind(RobotKind(
-    name="hand",
-    description="a free palm with fingers: 6 pose values, the FCNN places the fingers",
-    schema=ProblemSchema("contacts", "palm_bounds", "palm_pose"),
-    head=FreePalm,
-    environment=HandEnvironment,
-    posed_problem=random_posed_fingers,
-    random_problem=random_hand_problem,
-    walk_space=hand_walk_space,
-    closure=True,
-    min_fingers=2,
-))
+    "hand", "a free palm with fingers: 6 pose values, the FCNN places the fingers",
+    ProblemSchema("contacts", "palm_bounds", "palm_pose"), FreePalm, HandEnvironment, random_posed_fingers,
+    random_problem=random_hand_problem, walk_space=hand_walk_space, closure=True, min_fingers=2))

@@ -56,7 +56,7 @@ class RobotKind:
 
     Attributes:
         name: the kind, as :attr:`RobotCfg.kind` names it.
-        description: one line for people (the docs, ``inspect_robots``).
+        description: one line for people (what the kind is; the docs list it).
         schema: the kind-specific keys of its problem files.
         head: ``Robot -> Head``: how its palm is placed (:mod:`graspnet_torch.robot.heads`).
         environment: its :class:`~graspnet_torch.solver.environment.Environment` subclass.

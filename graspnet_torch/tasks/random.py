@@ -235,12 +235,10 @@ def random_gripper_problems(robot: Robot, n: int, seed: int = 11) -> list[GraspP
     """``n`` problems of a two-point gripper (MANUS): a random configuration (every body joint
     uniform within its limits) puts the gripper's two points, which become the object's two points
     (no object, no table; every other problem lists them in reverse order)."""
-    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
     gen = torch.Generator().manual_seed(seed)
     problems = []
     for k in range(n):
-        q = lo + (hi - lo) * torch.rand(1, len(lo), generator=gen, dtype=torch.float64)
-        pts = robot.gripper_points(q)[0].tolist()
+        pts = robot.gripper_points(_uniform(robot.body_limits, gen)[None])[0].tolist()
         if k % 2:
             pts = pts[::-1]
         problems.append(GraspProblem.from_mapping({"name": f"random{k}", "robot": robot.name, "points": pts},
@@ -270,8 +268,7 @@ def random_posed_gripper(robot: Robot, seed: int, n_fingers: int | Sequence[int]
     """A two-point gripper: its body joints uniform within their limits and the two gripper points
     as the object's (in either order); ``n_fingers`` is unused."""
     g = torch.Generator().manual_seed(seed)
-    lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
-    q = lo + (hi - lo) * torch.rand(len(lo), generator=g, dtype=torch.float64)
+    q = _uniform(robot.body_limits, g)
     points = robot.gripper_points(q.unsqueeze(0))[0].tolist()
     if bool(torch.rand((), generator=g) < 0.5):
         points = points[::-1]
