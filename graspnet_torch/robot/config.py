@@ -178,10 +178,7 @@ class RobotCfg:
             if not isinstance(data.get(key), str) or not data[key]:
                 raise ConfigError(f"{source}: '{key}' must be a non-empty string")
         fingers = {}
-        raw_fingers = {} if data.get("fingers") is None else data["fingers"]
-        if not isinstance(raw_fingers, Mapping):
-            raise ConfigError(f"{source}: 'fingers' must map finger names to {{base, tip}}")
-        for fname, chain in raw_fingers.items():
+        for fname, chain in _mapping(data, "fingers", source, "finger names to {base, tip}").items():
             if not isinstance(fname, str) or not fname:
                 raise ConfigError(f"{source}: fingers: a finger name must be a string, got {short(fname)}")
             fingers[fname] = _finger(chain, f"{source}: fingers.{clip(fname, 40)}", data["palm_link"])
@@ -196,10 +193,7 @@ class RobotCfg:
         if not fingers and not points:
             raise ConfigError(f"{source}: a robot needs 'fingers' or 'gripper_points'")
         home = {}
-        raw_home = {} if data.get("home") is None else data["home"]
-        if not isinstance(raw_home, Mapping):
-            raise ConfigError(f"{source}: 'home' must map joint names to numbers")
-        for joint, value in raw_home.items():
+        for joint, value in _mapping(data, "home", source, "joint names to numbers").items():
             home[clip(joint, 80)] = number_list([value], 1, f"{source}: home.{clip(joint, 40)}", ConfigError,
                                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
         bases = (Path(folder), repo_root()) if folder is not None else (repo_root(),)
@@ -283,6 +277,14 @@ def _chain(value: Any, where: str) -> ChainCfg:
     if not all(isinstance(value[k], str) and value[k] for k in ("base", "tip")):
         raise ConfigError(f"{where}: base and tip must be link names")
     return ChainCfg(value["base"], value["tip"])
+
+
+def _mapping(data: Mapping[str, Any], key: str, source: str, what: str) -> Mapping:
+    """``data[key]`` that must be a mapping (``what`` it maps); missing or null: empty."""
+    raw = {} if data.get(key) is None else data[key]
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"{source}: '{key}' must map {what}")
+    return raw
 
 
 def available_robots() -> list[str]:
