@@ -18,6 +18,7 @@ __all__ = ["OPENINGS_M", "OPEN_TOWARD_HOME", "finger_by_finger", "finger_links",
 
 OPENINGS_M = (0.04, 0.03, 0.02, 0.01)  # the pre-grasp: contact fingertips this far back from their contacts
 OPEN_TOWARD_HOME = (1.0, 0.75, 0.5, 0.25)  # else: the fingers this far from the grasp's toward their home
+OPENING_IK_STEPS = 40  # least-squares steps that put the fingertips on an opening's targets
 
 
 def opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> np.ndarray | None:
@@ -58,7 +59,7 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
         targets = tips.clone()
         targets[rows] = torch.as_tensor(contacts + distance * direction)
         bases = robot.head.world_to_bases(targets, head)
-        q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, 40)
+        q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, OPENING_IK_STEPS)
         candidates.append(q[mask].numpy())
     home = robot.home_posture(torch.float64).fingers[mask].numpy()
     grasp = goal[m:]

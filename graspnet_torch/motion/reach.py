@@ -51,6 +51,8 @@ PLANNER = "RRTConnect"
 DETOUR_DEG, DETOUR_M = 15.0, 0.05  # a detour searches this far around the stretch it replaces
 COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
 BACK_OFF_STEPS, BACK_OFF_DAMPING = 40, 1e-2  # the back-off's least squares: most steps, its fixed damping (m)
+BACK_OFF_TOL_M, BACK_OFF_TOL_DEG = 1e-3, 0.5  # a back-off counts when its palm lies this near its target
+DETOUR_FINER = 8  # a detour whose motions are not clear at the check step is planned again at 1/8 of it
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -158,7 +160,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
         if not robot.head.anchored or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
             reason = "a straight part of the motion collides between its rows at the check step"
             break
-        for divide in (1, 8):  # the detour's motions checked at the step (an eighth where that is not enough)
+        for divide in (1, DETOUR_FINER):  # the detour's motions checked at the step (finer where that is not enough)
             detour, reason = _plan(checker, u, v, moving, cfg, (res[0] / divide, res[1] / divide), deadline,
                                    local=True)
             if detour is None or len(detour) > 2:
@@ -239,7 +241,8 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     """The state with the palm (a gripper's frame) moved ``distance`` away from the contacts
     (their centroid; a gripper: its object points' midpoint), its orientation kept: damped least
     squares on the body joints (the palm frame as a residual on the one Levenberg-Marquardt, at a
-    fixed damping, clamped to the limits); None when that is not reached within 1 mm / 0.5 degree."""
+    fixed damping, clamped to the limits); None when that is not reached within
+    :data:`BACK_OFF_TOL_M` / :data:`BACK_OFF_TOL_DEG`."""
     m = checker.layout.body
     q = torch.as_tensor(state[:m].copy())
     R0, t0 = robot.palm_frame(q)
@@ -264,7 +267,8 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, active_set=False, tol=1e-4, **fixed).x[0]
     R, t = robot.palm_frame(q)
     E = R0 @ R.T
-    if float((goal_t - t).norm()) > 1e-3 or float(torch.arccos(((E.trace() - 1) / 2).clamp(-1, 1))) > math.radians(0.5):
+    turn = float(torch.arccos(((E.trace() - 1) / 2).clamp(-1, 1)))
+    if float((goal_t - t).norm()) > BACK_OFF_TOL_M or turn > math.radians(BACK_OFF_TOL_DEG):
         return None
     out = state.copy()
     out[:m] = q.numpy()
