@@ -10,7 +10,6 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
-from graspnet_torch.kinds import KINDS, RobotKind, robot_kind  # registers the robot kinds
 from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
 from graspnet_torch.robot import (
     ChainKernel,
@@ -37,6 +36,7 @@ from graspnet_torch.solver import (
     solve,
     solve_many,
 )
+from graspnet_torch.solver.kinds import KINDS, RobotKind, robot_kind  # registers the robot kinds
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
 from graspnet_torch.tasks import (
     Contact,

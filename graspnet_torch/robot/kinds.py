@@ -8,9 +8,9 @@ a free palm pose or a body chain's joints), the environment that solves it, its 
 its walk space for sequences, whether closure contact sets exist for it.
 
 The registry lives here, in the robot layer, so that every layer can ask it; the rows are made in
-:mod:`graspnet_torch.kinds`, one module per kind, above the solver whose environments they name,
+:mod:`graspnet_torch.solver.kinds`, one module per kind, above the solver whose environments they name,
 and registered when :mod:`graspnet_torch` is imported (which every import of one of its modules
-does first). Adding a robot kind: one module in ``graspnet_torch/kinds/`` with its row.
+does first). Adding a robot kind: one module in ``graspnet_torch/solver/kinds/`` with its row.
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ class RobotKind:
 
 
 KINDS: dict[str, RobotKind] = {}
-"""Kind name -> its row, filled by :mod:`graspnet_torch.kinds` (see the module docstring)."""
+"""Kind name -> its row, filled by :mod:`graspnet_torch.solver.kinds` (see the module docstring)."""
 
 
 def register_kind(row: RobotKind) -> RobotKind:

@@ -12,9 +12,9 @@ parts it adds in their layers: its environment, head, random problems) and regis
 import below.
 """
 
-from graspnet_torch.kinds.arm_hand import ARM_HAND
-from graspnet_torch.kinds.gripper import GRIPPER
-from graspnet_torch.kinds.hand import HAND
 from graspnet_torch.robot.kinds import KINDS, RobotKind, robot_kind
+from graspnet_torch.solver.kinds.arm_hand import ARM_HAND
+from graspnet_torch.solver.kinds.gripper import GRIPPER
+from graspnet_torch.solver.kinds.hand import HAND
 
 __all__ = ["ARM_HAND", "GRIPPER", "HAND", "KINDS", "RobotKind", "robot_kind"]
