@@ -58,7 +58,7 @@ class FCNNTrainCfg:
 
     experts: ExpertSetCfg = setting(factory=ExpertSetCfg)
     reach: ReachCfg = setting(factory=ReachCfg)
-    epochs: int = setting(400, lo=1, hi=10_000_000)
+    epochs: int = setting(300, lo=1, hi=10_000_000)
     targets_per_epoch: int = setting(256, lo=1, hi=100_000)
     train_steps: int = setting(40, lo=0, hi=1_000_000)
     batch_size: int = setting(256, lo=1, hi=100_000)

@@ -119,7 +119,7 @@ DEFAULTS_FILES = (
     DefaultsFile("noise/none.yaml", NoiseCfg),
     DefaultsFile("posture/default.yaml", ProposalCfg),
     # epochs: 300 on the command line (the shipped checkpoints') against FCNNTrainCfg's 400: kept as it is
-    DefaultsFile("fcnn/default.yaml", FCNNTrainCfg, differs=("epochs",)),
+    DefaultsFile("fcnn/default.yaml", FCNNTrainCfg),
     DefaultsFile("solve_grasp.yaml", SolveGraspJobCfg, skip=_JOB, complete=False),
     DefaultsFile("train_fcnn.yaml", TrainFCNNJobCfg, skip=_JOB, complete=False),
     DefaultsFile("train_posture.yaml", TrainPostureJobCfg, skip=_JOB, complete=False),
