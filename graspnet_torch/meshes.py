@@ -18,7 +18,8 @@ anything is built from them.
 
 :func:`load_trimesh` is trimesh's loader with the side files a mesh names (OBJ materials and
 textures, glTF buffers) limited to regular files of at most ``MAX_MESH_BYTES`` in the mesh's folder;
-:func:`load_mesh` is the one mesh of a file a problem's object or obstacle is built from (cached).
+:func:`load_mesh` is the one loader of a mesh file, a problem's object or obstacle or a URDF link's
+(cached).
 """
 
 from __future__ import annotations
@@ -99,16 +100,31 @@ def load_trimesh(path: str | os.PathLike, **kwargs):
     return trimesh.load(Path(path), force="mesh", resolver=_resolver(Path(path)), **kwargs)
 
 
-@lru_cache(maxsize=32)
-def load_mesh(path: Path, scale: float = 1.0):
-    """A mesh file as one ``trimesh.Trimesh`` (a scene's geometry concatenated; vertices split by
-    texture seams or normals merged, so that a closed surface is watertight), scaled; cached per
-    process: do not modify it. A user's file is checked first (:func:`check_mesh_file`, from the
-    problem's validation)."""
-    mesh = load_trimesh(Path(path))
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)
-    if scale != 1.0:
-        mesh.apply_scale(scale)
+def load_mesh(path: str | os.PathLike, scale=1.0, merge: bool = True):
+    """A mesh file as one ``trimesh.Trimesh`` (a scene's geometry concatenated), scaled: the one
+    loader of the package's meshes, a problem's object or obstacle and a URDF link's alike.
+
+    Args:
+        path: the file (a problem's or a URDF's, already resolved and checked by
+            :func:`check_mesh_file`).
+        scale: one number or (3,) per axis, applied to the vertices.
+        merge: also merge vertices split by texture seams or normals, so that a closed surface is
+            watertight (a problem's shapes); False leaves trimesh's processing alone (a link's mesh).
+    Returns:
+        The mesh, cached per (file, modification time, scale, merge) and shared: do not modify it.
+    """
+    p = Path(path)
+    s = tuple(float(v) for v in np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)))
+    return _load(p, os.stat(p).st_mtime_ns, s, merge)
+
+
+@lru_cache(maxsize=256)
+def _load(path: Path, mtime_ns: int, scale: tuple[float, float, float], merge: bool):
+    mesh = load_trimesh(path)
+    if merge:
+        mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    if scale != (1.0, 1.0, 1.0):
+        mesh.apply_scale(np.asarray(scale))
     return mesh
 
 

@@ -13,15 +13,15 @@ Only files within the robot's own folders are read (:func:`mesh_roots`: the URDF
 robot config's folder, the repository, installed packages), unless the robot config allows any
 path (``allow_outside_paths``); a URI outside gets the same message whether or not a file is there.
 
-Loaded meshes are cached per (file, modification time, scale): the returned ``trimesh.Trimesh``
-objects are shared and must not be modified in place.
+Meshes are loaded by :func:`graspnet_torch.meshes.load_mesh` (the package's one loader, without
+its vertex merging), cached per (file, modification time, scale): the returned
+``trimesh.Trimesh`` objects are shared and must not be modified in place.
 """
 
 from __future__ import annotations
 
 import importlib.util
 from collections.abc import Sequence
-from functools import lru_cache
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -29,7 +29,7 @@ import numpy as np
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import allowed_roots
-from graspnet_torch.meshes import check_mesh_file, load_trimesh
+from graspnet_torch.meshes import check_mesh_file, load_mesh
 from graspnet_torch.settings import clip
 
 __all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "mesh_roots", "package_candidates",
@@ -129,18 +129,6 @@ def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh", roots: Seq
     raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' not found (looked in {clip(looked, 400)})")
 
 
-@lru_cache(maxsize=256)
-def _load(path: str, mtime: float, scale: tuple[float, float, float]):
-    import trimesh
-
-    mesh = load_trimesh(path, process=True)
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ValueError("no triangles")
-    if scale != (1.0, 1.0, 1.0):
-        mesh.apply_scale(np.asarray(scale))
-    return mesh
-
-
 def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mesh", roots: Sequence[str | Path] = (),
                    allow_outside: bool = False):
     """The ``trimesh.Trimesh`` a URDF ``<mesh>`` names, in its own frame with ``scale`` (3 numbers,
@@ -151,7 +139,10 @@ def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mes
     s = np.broadcast_to(np.asarray(scale if scale is not None else 1.0, dtype=np.float64), (3,))
     check_mesh_file(path, f"{what}: mesh '{clip(uri, 160)}'", ConfigError, s)  # before trimesh parses it
     try:
-        return _load(str(path.resolve()), path.stat().st_mtime, tuple(float(v) for v in s))
+        mesh = load_mesh(path.resolve(), s, merge=False)
+        if len(mesh.faces) == 0:
+            raise ValueError("no triangles")
+        return mesh
     except Exception as exc:  # trimesh raises assorted types on unreadable or foreign files
         reason = clip(" ".join(f"{type(exc).__name__}: {exc}".split()), 160)
         raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' ({path}) could not be loaded ({reason})") from None
