@@ -15,7 +15,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from graspnet_torch.least_squares import damped_pinv_step
+from graspnet_torch.least_squares import damped_pinv_step, levenberg_marquardt
 
 __all__ = ["limited_step", "refine"]
 
@@ -44,20 +44,36 @@ def refine(
     lower: Tensor,
     upper: Tensor,
     iterations: int,
-    damping: float = 1e-3,
+    damping: float = 1e-2,
+    damping_range: tuple[float, float] = (1e-6, 1e3),
 ) -> tuple[Tensor, Tensor]:
-    """Iterative improvement of eq. 5 within the joint limits (see :func:`limited_step`).
+    """Position IK within the joint limits: the positions' residual handed to the package's one
+    Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`: a step kept
+    only where it lowers the distance, the damping adapted, joints at a limit that the step pushes
+    outward out of the step).
 
     Args:
-        fk_jacobian: q (..., n) -> (p (..., 3), J (..., 3, n)), e.g. ``ChainKernel.position_jacobian``.
+        fk_jacobian: q (..., n) -> (p (..., 3), J (..., 3, n)), e.g. ``ChainKernel.position_jacobian``
+            or ``Robot.fingertips_base_jacobian``; each position depends on its own row of q only.
         q: (..., n) start postures; targets: (..., 3); lower, upper: (n,) or broadcastable limits.
-        iterations: number of steps.
-        damping: lambda of the damped pseudo-inverse (metres); keeps steps bounded near singularities.
+        iterations: most steps.
+        damping: lambda's start (metres); ``damping_range``: its least and largest.
     Returns:
-        q: (..., n) refined postures within limits; error: (..., ) distance to the targets (m).
+        q: (..., n) refined postures within limits; error: (...,) distance to the targets (m).
     """
-    p, J = fk_jacobian(q)
-    for _ in range(iterations):
-        q = limited_step(J, targets - p, q, lower, upper, damping)
-        p, J = fk_jacobian(q)
-    return q, torch.linalg.vector_norm(targets - p, dim=-1)
+    shape, n = q.shape, q.shape[-1]
+    start = q.reshape(-1, n)
+    B = start.shape[0]
+    lo, hi = (torch.broadcast_to(b, shape).reshape(B, n) for b in (lower, upper))
+    goal = torch.broadcast_to(targets, (*shape[:-1], 3)).reshape(B, 3)
+    whole = torch.minimum(torch.maximum(start, lo), hi)  # every row valid: fk_jacobian may want them all
+
+    def positions(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+        every = x.shape[0] == B
+        p, J = fk_jacobian((x if every else whole.index_copy(0, rows, x)).view(shape))
+        p, J = p.reshape(B, 3), J.reshape(B, 3, n)
+        return (p, J) if every else (p[rows], J[rows])
+
+    solved = levenberg_marquardt(positions, goal, start, lo, hi, iterations, lam=damping,
+                                 lam_min=damping_range[0], lam_max=damping_range[1])
+    return solved.x.view(shape), solved.err.view(shape[:-1])

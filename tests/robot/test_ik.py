@@ -1,4 +1,4 @@
-"""Damped pseudo-inverse steps (eq. 5) against the formulas they implement."""
+"""Damped pseudo-inverse steps (eq. 5) against the formulas they implement; refine (the LM) on chains."""
 
 from __future__ import annotations
 
@@ -45,6 +45,21 @@ def test_refine_reduces_error_and_respects_limits(hand, gen):
     assert (q >= lo).all() and (q <= hi).all()
     assert torch.median(e) < 0.01 * torch.median(e0)
     assert torch.allclose(e, torch.linalg.norm(kernel.position(q) - targets, dim=-1))
+
+
+def test_refine_on_every_finger_at_once_never_worsens_a_finger(hand, gen):
+    """robot/ik.refine is the LM of least_squares: a (F, n) batch through the robot's fingertips
+    (one call for all fingers), each finger's distance never above its start's, within limits."""
+    lo, hi = (torch.as_tensor(a) for a in hand.finger_limits)  # (F, n)
+    for _ in range(5):
+        q0 = lo + (hi - lo) * torch.rand(lo.shape, generator=gen, dtype=torch.float64)
+        tips, _ = hand.fingertips_base_jacobian(q0)
+        targets = tips + 0.02 * torch.randn(tips.shape, generator=gen, dtype=torch.float64)
+        e0 = torch.linalg.norm(tips - targets, dim=-1)
+        q, e = refine(hand.fingertips_base_jacobian, q0, targets, lo, hi, 40)
+        assert q.shape == q0.shape and e.shape == e0.shape
+        assert (q >= lo).all() and (q <= hi).all() and (e <= e0).all()
+        assert torch.allclose(e, torch.linalg.norm(hand.fingertips_base_jacobian(q)[0] - targets, dim=-1))
 
 
 def test_step_for_chains_with_fewer_than_three_joints(gen):
