@@ -10,11 +10,12 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from torch import Tensor
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
-from graspnet_torch.least_squares import damped_pinv_step
+from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
@@ -59,18 +60,19 @@ def _base_rotations(robot: Robot, dtype: torch.dtype) -> torch.Tensor:
 
 def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: int = 48, iterations: int = 150,
                        damping: float = 1e-3, tol: float = 1e-9, seed: int = 0) -> tuple[Posture, float]:
-    """Bring the tips of fingers ``a`` and ``b`` together (their midpoint) by damped least squares
-    over both fingers' joints, within the joint limits, from ``start`` and ``restarts - 1`` random
-    configurations; the other fingers stay as in ``start``. Padded or fixed slots (lower == upper)
-    do not move.
+    """Bring the tips of fingers ``a`` and ``b`` together (their gap to zero) over both fingers'
+    joints, within the joint limits, from ``start`` and ``restarts - 1`` random configurations:
+    the gap's residual handed to the package's one Levenberg-Marquardt
+    (:func:`~graspnet_torch.least_squares.levenberg_marquardt`; lambda starts at ``damping``). The
+    other fingers stay as in ``start``; padded or fixed slots (lower == upper) do not move.
 
-    With e = tip_a - tip_b (palm frame) and J = [J_a, -J_b] (3, 2n), each step is
-    dq = -J^T (J J^T + damping^2 I)^-1 e, clipped to 0.2 rad (or m) per joint, then clamped to
-    the limits; it stops once some start is within ``tol`` (m). Returns the posture and the
-    remaining tip-to-tip distance (m)."""
+    Residual e = tip_a - tip_b (3,) in the palm frame, Jacobian [J_a, -J_b] (3, 2n); every start
+    stops once one of them is within ``tol`` (m). Returns the posture of the start nearest to a
+    closed gap and that gap (m)."""
     ia, ib = robot.finger_index(a), robot.finger_index(b)
     dtype = torch.float64
     lo, hi = (torch.as_tensor(x, dtype=dtype) for x in robot.finger_limits)  # (F, n)
+    n = lo.shape[1]
     free = (hi > lo)[[ia, ib]]  # (2, n)
     gen = torch.Generator().manual_seed(seed)
     q = start.fingers.to(dtype).clone().expand(restarts, *lo.shape).clone()  # (S, F, n)
@@ -78,21 +80,25 @@ def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: i
     q[1:, [ia, ib]] = rand[:, [ia, ib]]
     q = torch.minimum(torch.maximum(q, lo), hi)
     R = _base_rotations(robot, dtype)[[ia, ib]]  # (2, 3, 3)
-    for _ in range(iterations):
-        tips = robot.fingertips_palm(q)  # (S, F, 3)
-        e = tips[:, ia] - tips[:, ib]  # (S, 3)
-        if float(torch.linalg.vector_norm(e, dim=-1).min()) < tol:
-            break
-        _, J = robot.fingertips_base_jacobian(q)  # (S, F, 3, n) in each base frame
-        Jp = (R @ J[:, [ia, ib]]) * free[:, None, :]  # (S, 2, 3, n) palm frame; fixed slots still
-        Jab = torch.cat([Jp[:, 0], -Jp[:, 1]], dim=-1)  # (S, 3, 2n)
-        dq = -damped_pinv_step(Jab, e, damping)  # (S, 2n)
-        dq = dq.clamp(-0.2, 0.2).view(-1, 2, lo.shape[1])
-        q[:, [ia, ib]] = torch.minimum(torch.maximum(q[:, [ia, ib]] + dq, lo[[ia, ib]]), hi[[ia, ib]])
-    tips = robot.fingertips_palm(q)
-    gaps = torch.linalg.vector_norm(tips[:, ia] - tips[:, ib], dim=-1)
-    best = int(torch.argmin(gaps))
-    return replace(start, fingers=q[best].to(start.fingers.dtype)), float(gaps[best])
+
+    def gap(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:  # x (b, 2n) -> e (b, 3), J (b, 3, 2n)
+        qq = q[rows].clone()
+        qq[:, [ia, ib]] = x.view(-1, 2, n)
+        tips = robot.fingertips_palm(qq)  # (b, F, 3)
+        _, J = robot.fingertips_base_jacobian(qq)  # (b, F, 3, n) in each base frame
+        Jp = (R @ J[:, [ia, ib]]) * free[:, None, :]  # (b, 2, 3, n) palm frame; fixed slots still
+        return tips[:, ia] - tips[:, ib], torch.cat([Jp[:, 0], -Jp[:, 1]], dim=-1)
+
+    def one_closed(converged: Tensor) -> Tensor:  # every start stops once one has closed the gap
+        return converged.any().expand_as(converged)
+
+    solved = levenberg_marquardt(gap, torch.zeros(3, dtype=dtype), q[:, [ia, ib]].reshape(restarts, 2 * n),
+                                 lo[[ia, ib]].reshape(-1), hi[[ia, ib]].reshape(-1), iterations, lam=damping,
+                                 tol=tol, done=one_closed)
+    best = int(torch.argmin(solved.err))
+    fingers = q[best].clone()
+    fingers[[ia, ib]] = solved.x[best].view(2, n)
+    return replace(start, fingers=fingers.to(start.fingers.dtype)), float(solved.err[best])
 
 
 def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, float]:
