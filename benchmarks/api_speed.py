@@ -1,11 +1,14 @@
 """The Python API from a plain program: ``gt.solve_many``'s throughput and ``gt.Solver.solve``'s
 per-call overhead on random hand problems, with the API's default thread count beside torch's own.
 
-    python benchmarks/api_speed.py [--problems 1000] [--calls 200] [--check]
+    python benchmarks/api_speed.py [--problems 1000] [--seeds 10000,20000,30000,60000] [--calls 200] [--check]
 
-- ``gt.solve_many``: P random reachable problems of the shipped hand with 3-5 contact fingers
-  (mixed subsets), T = 4 trials each (as benchmarks/polish.py's), one call after a warm-up call:
-  problems per second. Target >= 1,000.
+- ``gt.solve_many``: on each seed set (``--seeds``: problem k of the set with base b is
+  ``gt.random_reachable_problem(hand, b + k, (3, 5))``), P random reachable problems of the shipped
+  hand with 3-5 contact fingers (mixed subsets), T = 4 trials each (as benchmarks/polish.py's), one
+  call after a warm-up call: problems per second, each set's and the minimum over the sets. A set
+  with a problem no trial solves runs that problem's trials to the iteration budget while the
+  others have stopped; the minimum is what the target holds for. Target >= 1,000 (the minimum).
 - ``gt.Solver("hand").solve``: N random reachable problems of 2-5 fingers (random subsets), one
   call each after a first call on another problem; per-call overhead = the call's wall time minus
   its search (the result's ``outcome.wall_time_s``: the proposal starts, the loop and the finish;
@@ -64,32 +67,46 @@ def solver_overhead(problems: list[gt.GraspProblem]) -> tuple[float, float]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--problems", type=int, default=1000, help="problems of the solve_many call")
+    ap.add_argument("--problems", type=int, default=1000, help="problems of each solve_many call")
+    ap.add_argument("--seeds", default="10000,20000,30000,60000",
+                    help="the solve_many seed sets: comma-separated bases b (problem k: seed b + k)")
     ap.add_argument("--calls", type=int, default=200, help="gt.Solver.solve calls")
     ap.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     args = ap.parse_args()
+    bases = [int(b) for b in args.seeds.split(",")]
     own = torch.get_num_threads()
     print(f"torch threads: {own} (torch's own, this process); the API's default: {default_threads()}")
     hand = gt.load_robot("hand")
-    many = [gt.random_reachable_problem(hand, 10_000 + k, (3, 5)) for k in range(args.problems)]
+    sets = {b: [gt.random_reachable_problem(hand, b + k, (3, 5)) for k in range(args.problems)] for b in bases}
     calls = [gt.random_reachable_problem(hand, 40_000 + k, (2, 5)) for k in range(args.calls + 1)]
+    rates: dict[str, dict[int, float]] = {}
     figures = {}
     for name, threads in (("API default", default_threads()), ("torch's own", None)):
         gt.set_default_threads(threads)
-        rate, solved, iterations = solve_many_rate(many)
+        rates[name] = {}
+        for b, many in sets.items():
+            rate, solved, iterations = solve_many_rate(many)
+            rates[name][b] = rate
+            print(f"{name} ({threads or own} thread(s)): gt.solve_many, seeds {b}+k: {rate:,.0f} problems/s "
+                  f"({solved:.1f} % solved, at most {iterations} iterations)")
         median, p90 = solver_overhead(calls)
-        figures[name] = (rate, median, p90)
-        print(f"{name} ({threads or own} thread(s)): gt.solve_many {rate:,.0f} problems/s ({solved:.1f} % solved, "
-              f"at most {iterations} iterations); gt.Solver.solve overhead median {median:.2f} ms, p90 {p90:.2f} ms")
+        figures[name] = (median, p90)
+        print(f"{name} ({threads or own} thread(s)): gt.Solver.solve overhead median {median:.2f} ms, p90 {p90:.2f} ms")
     gt.set_default_threads(1)
-    (rate, median, p90), (peer_rate, peer_median, peer_p90) = figures["API default"], figures["torch's own"]
+    (median, p90), (peer_median, peer_p90) = figures["API default"], figures["torch's own"]
+    mine, peer = rates["API default"], rates["torch's own"]
     print(f"\n| call | API default ({default_threads()} thread) | torch's own ({own}) | ratio |")
     print("|---|---|---|---|")
-    print(f"| gt.solve_many, {args.problems} problems x {MANY_TRIALS} trials: problems/s | {rate:,.0f} | "
-          f"{peer_rate:,.0f} | {rate / peer_rate:.2f} |")
+    what = f"gt.solve_many, {args.problems} problems x {MANY_TRIALS} trials"
+    for b in bases:
+        print(f"| {what}, seeds {b}+k: problems/s | {mine[b]:,.0f} | {peer[b]:,.0f} | {mine[b] / peer[b]:.2f} |")
+    rate, peer_rate = min(mine.values()), min(peer.values())
+    print(f"| {what}, minimum over the {len(bases)} seed sets: problems/s | {rate:,.0f} | {peer_rate:,.0f} | "
+          f"{rate / peer_rate:.2f} |")
     print(f"| gt.Solver.solve overhead, median ms | {median:.2f} | {peer_median:.2f} | {median / peer_median:.2f} |")
     print(f"| gt.Solver.solve overhead, p90 ms | {p90:.2f} | {peer_p90:.2f} | {p90 / peer_p90:.2f} |")
-    checks = [(f"gt.solve_many {rate:,.0f} problems/s >= {PROBLEMS_PER_S:,.0f}", rate >= PROBLEMS_PER_S),
+    checks = [(f"gt.solve_many {rate:,.0f} problems/s (minimum over seed sets {args.seeds}) >= "
+               f"{PROBLEMS_PER_S:,.0f}", rate >= PROBLEMS_PER_S),
               (f"gt.Solver.solve overhead median {median:.2f} ms <= {OVERHEAD_MS:g} ms", median <= OVERHEAD_MS)]
     return check_targets(checks, args.check)
 

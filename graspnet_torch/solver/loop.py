@@ -29,7 +29,7 @@ from torch import Tensor
 from graspnet_torch.rewards import Reward, add_noise
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
-from graspnet_torch.solver.tracker import Tracker, enough_succeeded
+from graspnet_torch.solver.tracker import Curves, Tracker, enough_succeeded
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
 __all__ = ["LoopOutcome", "Starts", "enough_succeeded", "run_loop"]
@@ -115,6 +115,74 @@ class LoopOutcome:
         return self.evaluation.error
 
 
+def _take(ev: Evaluation, rows: Tensor) -> Evaluation:
+    """The evaluation of the rows ``rows`` (R,) of ``ev``."""
+    return Evaluation(**{k: v[rows.to(v.device)] for k, v in ev.tensors().items()})
+
+
+def _spread(value: Tensor, rows: Tensor, trials: int) -> Tensor:
+    """(T, ...) zeros but for the rows ``rows`` (R,): ``value`` (R, ...)."""
+    return value.new_zeros((trials, *value.shape[1:])).index_copy(0, rows.to(value.device), value)
+
+
+class _Rows:
+    """The rows a loop runs on: every trial's (:attr:`rows` None, T rows) until most trials have
+    stopped, then only those of the trials :attr:`rows` (R,) (sorted), the ones still active when
+    the loop last compacted (:meth:`select`) and which it keeps running. Their tracker is a part
+    of every trial's (:meth:`Tracker.part`), handed back by :meth:`whole`; per-trial bounds,
+    sensor noise and an environment that evaluates every trial at once follow the rows."""
+
+    def __init__(self, env: Environment, trials: int, span: Tensor):
+        self.env, self.trials, self._span = env, trials, span
+        self.rows: Tensor | None = None
+        self.lower, self.span = env.lower, span  # (n,) or the rows' (R, n)
+        self._every: Tracker | None = None  # every trial's tracker, once the loop runs on some rows
+        self._o: Tensor | None = None  # (T, n) every trial's last output, for an environment without subsets
+
+    def select(self, keep: Tensor, best: Tracker, o_prev: Tensor) -> Tracker:
+        """From now on run on the rows ``keep`` (R,) of the current ones, whose tracker is ``best``
+        and last outputs ``o_prev``; returns the tracker of the rows kept."""
+        rows = keep if self.rows is None else self.rows[keep]
+        if not self.env.subsets:  # the trials dropped now keep their last output
+            self._o = o_prev if self.rows is None else self._o.index_copy(0, self.rows, o_prev)
+        if self.rows is None:
+            self._every = best
+        else:
+            self._every.absorb(best, self.rows)
+        if self.env.lower.dim() > 1:
+            self.lower, self.span = self.env.lower[rows], self._span[rows]
+        self.rows = rows
+        return self._every.part(rows)
+
+    def whole(self, best: Tracker) -> Tracker:
+        """Every trial's tracker, given the tracker ``best`` of the current rows."""
+        if self.rows is None:
+            return best
+        self._every.absorb(best, self.rows)
+        return self._every
+
+    def evaluate(self, o: Tensor) -> Evaluation:
+        """The rows' evaluation of their outputs ``o`` (R, n), for an environment that evaluates
+        every trial at once (no subsets): the others at their last outputs."""
+        ev = self.env.evaluate(torch.addcmul(self.env.lower, self._span, self._o.index_copy(0, self.rows, o)))
+        return _take(ev, self.rows)
+
+    def observe(self, r: Tensor, sigma: float, gen: torch.Generator) -> Tensor:
+        """The observed reinforcement (R,) of the rows' ``r`` (eq. 15): every trial's noise drawn."""
+        if self.rows is None or sigma <= 0:
+            return add_noise(r, sigma, gen)
+        return r + sigma * torch.randn(self.trials, generator=gen, dtype=r.dtype, device=r.device)[self.rows]
+
+    def confirm(self, best: Tracker, idx: Tensor) -> Tensor:
+        """:meth:`Environment.confirm` of the rows ``idx`` (B,) of the tracker ``best``."""
+        if self.rows is None:
+            return self.env.confirm(best.config, best.evaluation, idx)
+        trials = self.rows[idx]
+        ev = Evaluation(**{k: _spread(v[idx.to(v.device)], trials, self.trials)
+                           for k, v in best.evaluation.tensors().items()})
+        return self.env.confirm(_spread(best.config[idx], trials, self.trials), ev, trials)
+
+
 def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
              reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Starts | None = None
              ) -> LoopOutcome:
@@ -148,25 +216,14 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
     threshold = solver.stop_threshold
     if solver.report not in ("best", "final"):
         raise ValueError(f"solver.report must be 'best' or 'final', got '{solver.report}'")
-    hist: dict[str, list] = {}
+    curves = Curves()
     with torch.inference_mode(not net.autograd):  # ~30 % less overhead per op; results are cloned out below
         t0 = time.perf_counter()
         best_config, best_ev, best_r, iterations = _iterate(env, net, solver, reward_fn, noise, gen, o_prev,
-                                                            threshold, hist, t0, every, given)
+                                                            threshold, curves, t0, every, given)
         wall = time.perf_counter() - t0
     best_config, best_r, iterations, best_ev = best_config.clone(), best_r.clone(), iterations.clone(), best_ev.clone()
-    history = None
-    if solver.history and hist.get("time"):
-        history = {key: torch.stack(v).clone() for key, v in hist.items() if key != "time"}
-        history["expected"] = history["expected"].mean(-1)  # mean over the SRV units
-        history["sigma"] = history["sigma"].mean(-1)
-        K = history["total"].shape[0]
-        stop = (iterations.clamp(max=K) - 1).view(1, -1)  # hold each curve at its stop
-        after = torch.arange(K, device=device).view(-1, 1) > stop
-        for key, v in history.items():
-            held = v.gather(0, stop.view(1, -1, *([1] * (v.dim() - 2))).expand(1, *v.shape[1:]))
-            history[key] = torch.where(after.view(K, -1, *([1] * (v.dim() - 2))), held, v)
-        history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
+    history = curves.tensors(iterations) if solver.history else None
     if threshold is None:
         success = torch.zeros(T, dtype=torch.bool, device=device)
     elif solver.stop_rule == "grasp" and noise.sigma == 0:
@@ -179,13 +236,17 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
 
 
 def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
-             gen: torch.Generator, o_prev: Tensor, threshold: float | None, hist: dict[str, list],
+             gen: torch.Generator, o_prev: Tensor, threshold: float | None, curves: Curves,
              t0: float, given: bool = False, some: Tensor | None = None
              ) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
     """The iterations; returns the reported configuration, its evaluation, its (noise-free)
     reinforcement and the iteration count of every trial. With ``given`` starts (every trial's;
     or ``some`` (T,) bool: those trials') the first iteration evaluates the start itself (the
-    networks, placed there, learn from the second on)."""
+    networks, placed there, learn from the second on).
+
+    Once most trials have stopped (a quarter of the rows still run, 64 rows or more), the loop
+    runs on the rows of the trials still active only (:class:`_Rows`): every per-trial tensor
+    below (R, ...) is then theirs, in trial order. The random draws stay every trial's."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
@@ -202,41 +263,37 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     confirm = grasp_rule and env.counts_collisions  # a grasp stops a trial once FCL, too, finds it clear
     tolerance = solver.tolerance_mm / 1000
-    live = None  # the trials whose networks still run, once most have stopped (None: all)
-    r_hat = sigma = None
+    part = _Rows(env, T, span)  # the rows the loop runs: all, until most trials have stopped
+    ev = None
     for k in range(solver.max_iterations):
+        rows = part.rows
         x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
         noise_k = torch.randn(T, n, generator=gen, dtype=dtype, device=device)  # every trial's draw, always
-        if live is None:
-            step = net(x, noise_k)
-            o, r_hat, sigma = (o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
-            if some is not None and k == 0:
-                o = torch.where(some.unsqueeze(1), o_prev, o)
-        else:  # the stopped trials' outputs are never used: their rows keep stale values
-            step = net(x[live], noise_k[live])
-            o = o_prev.index_copy(0, live, step.o)
-            r_hat, sigma = r_hat.index_copy(0, live, step.r_hat), sigma.index_copy(0, live, step.sigma)
-        config = torch.addcmul(env.lower, span, o)  # (13)
-        if best.all_active or best.n_active * 2 > T or not env.subsets:
+        step = net(x, noise_k if rows is None else noise_k[rows])
+        o, r_hat, sigma = (o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
+        if some is not None and k == 0:
+            o = torch.where(some.unsqueeze(1), o_prev, o)
+        config = torch.addcmul(part.lower, part.span, o)  # (13)
+        if rows is None and (best.all_active or best.n_active * 2 > T or not env.subsets):
             ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
-        else:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
+        elif env.subsets:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
             idx = best.active.nonzero().squeeze(1)
-            ev = ev.put(idx, env.evaluate(config[idx], idx), config)
+            ev = ev.put(idx, env.evaluate(config[idx], idx if rows is None else rows[idx]), config)
+        else:  # an environment evaluated whole: every trial's configuration, the stopped ones' where they stopped
+            ev = part.evaluate(o)
         config = ev.config  # the configuration evaluated (where the environment settled the proposal)
         r = reward(ev, k + 1)  # (14), (20)-(23)
-        observed = add_noise(r, noise.sigma, gen)  # (15)
+        observed = part.observe(r, noise.sigma, gen)  # (15)
         if (given or some is not None) and k == 0:  # the start itself was evaluated: nothing drawn to learn
             # from; the networks expect what the start got (narrow exploration near a grasp), but for
             # a colliding start (R3/R4 weigh its collisions more with every iteration): wide
             clear = None if ev.collisions is None else ev.collisions.to(device) == 0
             if some is not None:
                 net.reinforce(observed, ~some)  # the others learn from their first draw
-            rows = some if clear is None else clear if some is None else some & clear
-            net.place(o_prev, observed, rows=rows)
-        elif live is None:
-            net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
+            clear_rows = some if clear is None else clear if some is None else some & clear
+            net.place(o_prev, observed, rows=clear_rows)
         else:
-            net.reinforce(observed[live], best.active[live])
+            net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
         best.rescore(k + 1)
         best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
         shown = config  # each trial's configuration this iteration (a landed one: where the polish put it)
@@ -250,23 +307,19 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                 pending = pending & ~near
                 landed = _polish_near(env, near, best, reward, k + 1, threshold, solver,
                                       tolerance if grasp_rule else None,
-                                      landed_only=k == 0 and first_from != polish_from)
+                                      landed_only=k == 0 and first_from != polish_from, rows=rows)
                 observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
                 r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
                 ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
                 if solver.history_postures:
                     shown = torch.where(landed.unsqueeze(1), best.config, shown)
         if solver.history:
-            for key, value in (("reinforcement", r), ("observed", observed), ("expected", r_hat),
-                               ("sigma", sigma), ("total", ev.error), ("errors", ev.finger_errors),
-                               ("collisions", ev.collisions), ("alignment", ev.alignment)):
-                if value is not None:
-                    hist.setdefault(key, []).append(value)
+            values = {"reinforcement": r, "observed": observed, "expected": r_hat, "sigma": sigma, "total": ev.error,
+                      "errors": ev.finger_errors, "collisions": ev.collisions, "alignment": ev.alignment}
             if solver.history_postures:  # each trial's configuration and finger joints: the viewer's replay
-                hist.setdefault("config", []).append(shown.clone())
-                if ev.joints is not None:
-                    hist.setdefault("joints", []).append(ev.joints.clone())
-            hist.setdefault("time", []).append(time.perf_counter() - t0)
+                values["config"] = shown.clone()
+                values["joints"] = None if ev.joints is None else ev.joints.clone()
+            curves.add(rows, time.perf_counter() - t0, values)
         o_new = o if best.all_active else torch.where(best.active.unsqueeze(1), o, o_prev)
         o_prev2, o_prev = o_prev, o_new
         if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
@@ -276,18 +329,17 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
                 done = best.active & env.grasped(ev, tolerance)
                 if confirm and bool(done.any()):  # ... and clear by the exact check (the proxy can miss a link)
-                    rows = done.nonzero().squeeze(1)
-                    refused = torch.zeros_like(done).index_fill(
-                        0, rows[~env.confirm(best.config, best.evaluation, rows).to(device)], True)
+                    idx = done.nonzero().squeeze(1)
+                    refused = torch.zeros_like(done).index_fill(0, idx[~part.confirm(best, idx).to(device)], True)
                     if bool(refused.any()):  # those trials start again: new network, new random start
                         done = done & ~refused
                         best.forget(refused)
-                        rows = refused.nonzero().squeeze(1)
-                        net.restart(rows if live is None else torch.searchsorted(live, rows), gen)
-                        o_prev = o_prev.index_copy(0, rows, torch.rand(rows.numel(), n, generator=gen, dtype=dtype,
-                                                                        device=device))
+                        idx = refused.nonzero().squeeze(1)
+                        net.restart(idx, gen)
+                        o_prev = o_prev.index_copy(0, idx, torch.rand(idx.numel(), n, generator=gen, dtype=dtype,
+                                                                      device=device))
                         o_prev2 = o_prev
-                        polished_at = polished_at.index_fill(0, rows, -float("inf"))
+                        polished_at = polished_at.index_fill(0, idx, -float("inf"))
             else:  # the paper's rule: the observed reinforcement exceeds the threshold
                 done = best.active & (observed > threshold)
                 if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
@@ -295,41 +347,47 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
             if bool(done.any()):
                 if not best.finish(done, k + 1):
                     break
-                running = T if live is None else live.numel()
+                running = o_prev.shape[0]
                 if best.n_active * 4 <= running and running >= 64 and not net.autograd:  # run the rest only
                     keep = best.active.nonzero().squeeze(1)
-                    net = net.select(keep if live is None else torch.searchsorted(live, keep))
-                    live = keep
+                    net = net.select(keep)
+                    best = part.select(keep, best, o_prev)
+                    o_prev, o_prev2, ev = o_prev[keep], o_prev2[keep], _take(ev, keep)
+                    polished_at, pending = polished_at[keep], pending[keep]
             restart = solver.restart_every is not None and (k + 1) % solver.restart_every == 0
             if restart and k + 1 < solver.max_iterations:
                 # still searching: a new network and a new random start (the best so far is kept)
-                rows = best.active.nonzero().squeeze(1)
-                net.restart(rows if live is None else torch.searchsorted(live, rows), gen)
-                o_prev = o_prev.index_copy(0, rows, torch.rand(rows.numel(), n, generator=gen, dtype=dtype,
-                                                                device=device))
+                idx = best.active.nonzero().squeeze(1)
+                net.restart(idx, gen)
+                o_prev = o_prev.index_copy(0, idx, torch.rand(idx.numel(), n, generator=gen, dtype=dtype,
+                                                              device=device))
                 o_prev2 = o_prev
-                polished_at = polished_at.index_fill(0, rows, -float("inf"))
+                polished_at = polished_at.index_fill(0, idx, -float("inf"))
+    best = part.whole(best)
     return best.config, best.evaluation, best.r, best.iterations
 
 
 def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, iteration: int, threshold: float,
-                 solver: SolverCfg, tolerance: float | None = None, landed_only: bool = False) -> Tensor:
-    """Polish the best configurations of the trials ``near`` (T,) (the environment's
+                 solver: SolverCfg, tolerance: float | None = None, landed_only: bool = False,
+                 rows: Tensor | None = None) -> Tensor:
+    """Polish the best configurations of the rows ``near`` (R,) (the trials ``rows`` (R,); None:
+    every trial, R = T) (the environment's
     :meth:`~graspnet_torch.solver.environment.Environment.polish`) and keep each where it is
     better (``landed_only``: and has landed with its summed error within ``tolerance`` too, so that
     a trial's best never becomes a local minimum the polish found far from a solution, which later
-    polishes would start from again); returns (T,) which polished trials have now landed: are a
+    polishes would start from again); returns (R,) which polished rows have now landed: are a
     grasp within ``tolerance`` (metres; None: exceed the threshold)."""
     config, ev, r = best.config, best.evaluation, best.r
     idx = near.nonzero().squeeze(1)
+    trials = idx if rows is None else rows[idx]
     part = Evaluation(**{k: v[idx] for k, v in ev.tensors().items()})
     done = None
     if solver.stop is not None:  # the polish ends once enough of a problem's trials have landed
-        pid = None if env.problem_index is None else env.problem_index[idx].cpu()
+        pid = None if env.problem_index is None else env.problem_index[trials].cpu()
 
         def done(converged: Tensor) -> Tensor:
             return enough_succeeded(converged, pid, solver.stop)
-    new_config, new_ev = env.polish(config[idx], part, idx, done)
+    new_config, new_ev = env.polish(config[idx], part, trials, done)
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
     if landed_only:  # landed, and (grasp rule) with the summed error within tolerance too: not a near miss
