@@ -23,6 +23,7 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.robot.kinds import KINDS
 from graspnet_torch.settings import clip
+from graspnet_torch.solver.result import GraspResult
 from graspnet_torch.table import markdown_table
 from graspnet_torch.viz.plots import _plt
 from graspnet_torch.viz.robot import save_figure
@@ -56,18 +57,17 @@ def collect_sweep(sweep: str | Path) -> tuple[list[str], list[dict]]:
             key, sep, value = str(item).partition("=")
             if sep and not key.startswith(("hydra", "~")):
                 settings[key.lstrip("+")] = _value(value)
-        try:
-            data = json.loads(result_path.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError):
-            data = None
         error_keys = tuple(dict.fromkeys(row.environment.error_key for row in KINDS.values()))  # every kind's
-        error = next((data[key] for key in error_keys if key in data), None) if isinstance(data, dict) else None
-        if not isinstance(error, int | float):
+        try:
+            best = GraspResult.from_dict(json.loads(result_path.read_text()), error_keys=error_keys).best
+        except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError):
+            best = None
+        if best is None or not isinstance(best.error_mm, int | float):
             raise ConfigError(f"{clip(str(result_path), 200)}: not a grasp result (no {' or '.join(error_keys)})")
         rows.append({"job": str(job.relative_to(root)), "settings": settings,
-                     "success": bool(data.get("success")), "error_mm": float(error),
-                     "iterations": int(data.get("iterations", 0)), "wall_time_s": float(data.get("wall_time_s", 0.0)),
-                     "collisions": int(data.get("collisions", 0))})
+                     "success": bool(best.success), "error_mm": float(best.error_mm),
+                     "iterations": int(best.iterations), "wall_time_s": float(best.wall_time_s),
+                     "collisions": int(best.collisions)})
     if not rows:
         raise ConfigError(f"{clip(str(root), 200)}: no job results (result.json) below this folder")
     keys = sorted({k for r in rows for k in r["settings"]})

@@ -9,15 +9,17 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from graspnet_torch.errors import InternalError
 from graspnet_torch.io import atomic_write_text
 
-__all__ = ["FIELD_ORDER", "GraspResult", "Trajectory", "TrialResult"]
+__all__ = ["ERROR_KEYS", "FIELD_ORDER", "GraspResult", "Trajectory", "TrialResult"]
 
 
 # The result JSON's trial fields in the order they are written (INTERFACE.md): the common core, then
@@ -25,6 +27,11 @@ __all__ = ["FIELD_ORDER", "GraspResult", "Trajectory", "TrialResult"]
 # with a body: its arm joints; a gripper: d, the alignment and its points).
 FIELD_ORDER = ("success", "iterations", "reinforcement", "wall_time_s", "palm_pose", "joints", "fingertip_error_mm",
                "total_error_mm", "collisions", "arm_joints", "distance_mm", "alignment", "gripper_points")
+# The fields a trial may be ranked by (its error_mm), in the order they are looked for: E of eq. 3, a gripper's d.
+ERROR_KEYS = ("total_error_mm", "distance_mm")
+# A result's own keys; every other top-level key is a field of its reported trial.
+_CORE = ("success", "iterations", "reinforcement", "wall_time_s", "collisions")  # TrialResult's own attributes
+_RESULT_KEYS = ("robot", "trials", "failure", "problem", "seed", "settings", "trajectory")
 
 
 @dataclass
@@ -103,9 +110,19 @@ class TrialResult:
     def __repr__(self) -> str:
         return f"TrialResult({', '.join(f'{k}={v!r}' for k, v in self.to_dict().items())})"
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], error_keys: Sequence[str] = ERROR_KEYS) -> TrialResult:
+        """The inverse of :meth:`to_dict`: a trial as read back from a result file. ``error_mm`` is
+        the first of ``error_keys`` the trial has (None if none); a core field it lacks reads
+        ``iterations`` 0, ``reinforcement`` None, ``wall_time_s`` 0.0, ``collisions`` 0."""
+        fields = {k: v for k, v in data.items() if k not in _CORE}
+        error = next((data[k] for k in error_keys if k in data), None)
+        return cls(data.get("success", False), data.get("iterations", 0), data.get("reinforcement"),
+                   data.get("wall_time_s", 0.0), data.get("collisions", 0), error, **fields)
+
     def to_dict(self) -> dict:
         core = {"success": self.success, "iterations": self.iterations, "reinforcement": self.reinforcement,
-                "wall_time_s": self.wall_time_s, "collisions": self.collisions}
+                "wall_time_s": self.wall_time_s, "collisions": self.collisions}  # the keys of _CORE
         every = {**core, **{k: v for k, v in self.fields.items() if v is not None}}
         return {k: every[k] for k in sorted(every, key=lambda k: (FIELD_ORDER.index(k) if k in FIELD_ORDER
                                                                   else len(FIELD_ORDER)))}
@@ -176,6 +193,29 @@ class GraspResult:
         if self.trajectory is not None:
             out["trajectory"] = self.trajectory.to_dict()
         return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], revolute: np.ndarray | None = None,
+                  error_keys: Sequence[str] = ERROR_KEYS) -> GraspResult:
+        """The inverse of :meth:`to_dict`: a result file read back (``from_dict(r.to_dict()).to_dict()
+        == r.to_dict()``). The reported trial is the one whose fields are the top level's
+        (``chosen``); a file without ``trials`` holds that one trial only. The ``trajectory`` is
+        read when ``revolute`` ((n,) which of its joints are angles; the robot's) is given, else
+        left out. Raises KeyError, TypeError or ValueError on what is not a result."""
+        if not isinstance(data, Mapping):
+            raise TypeError(f"a result is a mapping, not {type(data).__name__}")
+        top = {k: v for k, v in data.items() if k not in _RESULT_KEYS}
+        rows = data.get("trials")
+        rows = [top] if rows is None else rows
+        if not isinstance(rows, list) or not rows or not all(isinstance(t, Mapping) for t in rows):
+            raise TypeError("a result's trials are a non-empty list of mappings")
+        trials = [TrialResult.from_dict(t, error_keys) for t in rows]
+        chosen = next((k for k, t in enumerate(rows) if dict(t) == top), None)
+        trajectory = data.get("trajectory")
+        motion = Trajectory.from_dict(trajectory, revolute) if trajectory is not None and revolute is not None \
+            else None
+        return cls(str(data["robot"]), trials, data.get("problem"), data.get("seed"), dict(data.get("settings") or {}),
+                   failure=data.get("failure"), chosen=chosen, trajectory=motion)
 
     def to_json(self, indent: int | None = 2) -> str:
         """Strict JSON; a non-finite number anywhere is an :class:`InternalError` (NaN and

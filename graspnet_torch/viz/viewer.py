@@ -33,6 +33,7 @@ from graspnet_torch.settings import clip
 from graspnet_torch.solver.api import as_problem, robot_and_ik
 from graspnet_torch.solver.environments import environment_class
 from graspnet_torch.solver.postures import trial_posture
+from graspnet_torch.solver.result import GraspResult
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.viz.robot import drawable_shapes
 
@@ -85,11 +86,11 @@ def load_view(path: str | Path) -> ResultView:
     problem = as_problem(candidate if not Path(source).is_absolute() and candidate.is_file() else source)
     robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
     try:
-        postures = [trial_posture(robot, t) for t in result["trials"]]
+        grasp = GraspResult.from_dict(result)
+        postures = [trial_posture(robot, t) for t in grasp.trials]
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
         raise ProblemError(f"{file}: a trial does not fit robot '{robot.name}' ({clip(str(exc), 120)})") from None
-    best = next((k for k, t in enumerate(result["trials"]) if t.get("palm_pose") == result.get("palm_pose")
-                 and t.get("joints") == result.get("joints") and t.get("arm_joints") == result.get("arm_joints")), 0)
+    best = grasp.chosen if grasp.chosen is not None else 0  # the trial whose fields the top level reports
     motion = _motion(file, result.get("trajectory"), robot)
     replay = None
     if (file.parent / "replay.json").is_file():
