@@ -26,9 +26,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from graspnet_torch.rewards import Reward, add_noise
+from graspnet_torch.rewards import Reward
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
+from graspnet_torch.solver.rows import RunningRows, take_rows
 from graspnet_torch.solver.tracker import Curves, Tracker, enough_succeeded
 from graspnet_torch.srv.network import ConfigurationNetwork, SRVNetCfg
 
@@ -115,74 +116,6 @@ class LoopOutcome:
         return self.evaluation.error
 
 
-def _take(ev: Evaluation, rows: Tensor) -> Evaluation:
-    """The evaluation of the rows ``rows`` (R,) of ``ev``."""
-    return Evaluation(**{k: v[rows.to(v.device)] for k, v in ev.tensors().items()})
-
-
-def _spread(value: Tensor, rows: Tensor, trials: int) -> Tensor:
-    """(T, ...) zeros but for the rows ``rows`` (R,): ``value`` (R, ...)."""
-    return value.new_zeros((trials, *value.shape[1:])).index_copy(0, rows.to(value.device), value)
-
-
-class _Rows:
-    """The rows a loop runs on: every trial's (:attr:`rows` None, T rows) until most trials have
-    stopped, then only those of the trials :attr:`rows` (R,) (sorted), the ones still active when
-    the loop last compacted (:meth:`select`) and which it keeps running. Their tracker is a part
-    of every trial's (:meth:`Tracker.part`), handed back by :meth:`whole`; per-trial bounds,
-    sensor noise and an environment that evaluates every trial at once follow the rows."""
-
-    def __init__(self, env: Environment, trials: int, span: Tensor):
-        self.env, self.trials, self._span = env, trials, span
-        self.rows: Tensor | None = None
-        self.lower, self.span = env.lower, span  # (n,) or the rows' (R, n)
-        self._every: Tracker | None = None  # every trial's tracker, once the loop runs on some rows
-        self._o: Tensor | None = None  # (T, n) every trial's last output, for an environment without subsets
-
-    def select(self, keep: Tensor, best: Tracker, o_prev: Tensor) -> Tracker:
-        """From now on run on the rows ``keep`` (R,) of the current ones, whose tracker is ``best``
-        and last outputs ``o_prev``; returns the tracker of the rows kept."""
-        rows = keep if self.rows is None else self.rows[keep]
-        if not self.env.subsets:  # the trials dropped now keep their last output
-            self._o = o_prev if self.rows is None else self._o.index_copy(0, self.rows, o_prev)
-        if self.rows is None:
-            self._every = best
-        else:
-            self._every.absorb(best, self.rows)
-        if self.env.lower.dim() > 1:
-            self.lower, self.span = self.env.lower[rows], self._span[rows]
-        self.rows = rows
-        return self._every.part(rows)
-
-    def whole(self, best: Tracker) -> Tracker:
-        """Every trial's tracker, given the tracker ``best`` of the current rows."""
-        if self.rows is None:
-            return best
-        self._every.absorb(best, self.rows)
-        return self._every
-
-    def evaluate(self, o: Tensor) -> Evaluation:
-        """The rows' evaluation of their outputs ``o`` (R, n), for an environment that evaluates
-        every trial at once (no subsets): the others at their last outputs."""
-        ev = self.env.evaluate(torch.addcmul(self.env.lower, self._span, self._o.index_copy(0, self.rows, o)))
-        return _take(ev, self.rows)
-
-    def observe(self, r: Tensor, sigma: float, gen: torch.Generator) -> Tensor:
-        """The observed reinforcement (R,) of the rows' ``r`` (eq. 15): every trial's noise drawn."""
-        if self.rows is None or sigma <= 0:
-            return add_noise(r, sigma, gen)
-        return r + sigma * torch.randn(self.trials, generator=gen, dtype=r.dtype, device=r.device)[self.rows]
-
-    def confirm(self, best: Tracker, idx: Tensor) -> Tensor:
-        """:meth:`Environment.confirm` of the rows ``idx`` (B,) of the tracker ``best``."""
-        if self.rows is None:
-            return self.env.confirm(best.config, best.evaluation, idx)
-        trials = self.rows[idx]
-        ev = Evaluation(**{k: _spread(v[idx.to(v.device)], trials, self.trials)
-                           for k, v in best.evaluation.tensors().items()})
-        return self.env.confirm(_spread(best.config[idx], trials, self.trials), ev, trials)
-
-
 def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
              reward: RewardCfg | None = None, noise: NoiseCfg | None = None, start: Starts | None = None
              ) -> LoopOutcome:
@@ -245,7 +178,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     networks, placed there, learn from the second on).
 
     Once most trials have stopped (a quarter of the rows still run, 64 rows or more), the loop
-    runs on the rows of the trials still active only (:class:`_Rows`): every per-trial tensor
+    runs on the rows of the trials still active only (:class:`~graspnet_torch.solver.rows.RunningRows`): every per-trial tensor
     below (R, ...) is then theirs, in trial order. The random draws stay every trial's."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
@@ -263,7 +196,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
     confirm = grasp_rule and env.counts_collisions  # a grasp stops a trial once FCL, too, finds it clear
     tolerance = solver.tolerance_mm / 1000
-    part = _Rows(env, T, span)  # the rows the loop runs: all, until most trials have stopped
+    part = RunningRows(env, T, span)  # the rows the loop runs: all, until most trials have stopped
     ev = None
     for k in range(solver.max_iterations):
         rows = part.rows
@@ -352,7 +285,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
                     keep = best.active.nonzero().squeeze(1)
                     net = net.select(keep)
                     best = part.select(keep, best, o_prev)
-                    o_prev, o_prev2, ev = o_prev[keep], o_prev2[keep], _take(ev, keep)
+                    o_prev, o_prev2, ev = o_prev[keep], o_prev2[keep], take_rows(ev, keep)
                     polished_at, pending = polished_at[keep], pending[keep]
             restart = solver.restart_every is not None and (k + 1) % solver.restart_every == 0
             if restart and k + 1 < solver.max_iterations:
