@@ -178,8 +178,8 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     networks, placed there, learn from the second on).
 
     Once most trials have stopped (a quarter of the rows still run, 64 rows or more), the loop
-    runs on the rows of the trials still active only (:class:`~graspnet_torch.solver.rows.RunningRows`): every per-trial tensor
-    below (R, ...) is then theirs, in trial order. The random draws stay every trial's."""
+    runs on the rows of the trials still active only (:class:`~graspnet_torch.solver.rows.RunningRows`):
+    every per-trial tensor below (R, ...) is then theirs, in trial order. The random draws stay every trial's."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
     span = env.upper - env.lower
