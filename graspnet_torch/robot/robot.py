@@ -38,7 +38,7 @@ from graspnet_torch.robot.kinematics import Kinematics
 from graspnet_torch.robot.link_frames import LinkFrames
 from graspnet_torch.robot.shared import SharedJoints, find_shared_joints
 from graspnet_torch.robot.structure import Finger, Posture
-from graspnet_torch.robot.transforms import rt_to_pose
+from graspnet_torch.robot.transforms import pose_to_matrix_np, rt_to_pose
 
 __all__ = ["Finger", "Posture", "Robot", "load_robot"]
 
@@ -150,7 +150,7 @@ class Robot(Kinematics, JointValues, LinkFrames):
         spec = self.urdf.chain_spec(chain.base, chain.tip, what)
         if chain.tip_offset is not None:
             offsets = spec.offsets.copy()
-            offsets[-1] = offsets[-1] @ _translation(chain.tip_offset)
+            offsets[-1] = offsets[-1] @ pose_to_matrix_np([*chain.tip_offset, 0.0, 0.0, 0.0])
             spec = replace(spec, offsets=offsets)
         if spec.n_joints == 0:
             raise ConfigError(f"{what}: no movable joint between '{chain.base}' and '{chain.tip}'")
@@ -309,12 +309,6 @@ class Robot(Kinematics, JointValues, LinkFrames):
     def __repr__(self) -> str:
         return (f"Robot('{self.name}': {len(self.urdf.links)} links, {len(self.urdf.movable_joint_names)} "
                 f"movable joints, {self.n_chains} chains, {self.dof} DOF)")
-
-
-def _translation(xyz) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = xyz
-    return T
 
 
 def load_robot(name: str | Path | RobotCfg) -> Robot:
