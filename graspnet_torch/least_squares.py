@@ -39,7 +39,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["LMResult", "Model", "damped_pinv_step", "levenberg_marquardt", "numerical_jacobian", "solve3_symmetric"]
+__all__ = ["LMResult", "Model", "damped_pinv_step", "frame_model", "levenberg_marquardt", "numerical_jacobian",
+           "solve3_symmetric"]
 
 SMALL_BATCH = 256
 
@@ -121,6 +122,26 @@ def numerical_jacobian(f: Callable[[Tensor], Tensor], x: Tensor, h: float = 1e-7
     shifted = torch.cat([x.unsqueeze(1), x.unsqueeze(1) + h * torch.eye(m, dtype=x.dtype, device=x.device)], 1)
     values = f(shifted.reshape(-1, m)).reshape(b, m + 1, -1)
     return ((values[:, 1:] - values[:, :1]) / h).transpose(1, 2)
+
+
+def frame_model(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]], rotation: Tensor) -> Model:
+    """A frame's residual (a palm's or a gripper's; a back-off target: the frame moved, its
+    orientation kept) as a :data:`Model`: with ``goal = [t_goal, 0, 0, 0]``, g - f(x) is the
+    position error t_goal - t and the rotation error w = vee(R_goal R^T - R R_goal^T) / 2 (small
+    angles: the angular rows of the geometric Jacobian are its Jacobian, up to sign).
+
+    frame_jacobian: x (b, m) -> R (b, 3, 3), t (b, 3), J (b, 6, m) (rows d t, then the angular
+    velocity; e.g. ``Robot.palm_frame_jacobian``); rotation: R_goal (3, 3) or (B, 3, 3).
+    """
+
+    def frame(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+        R, t, J = frame_jacobian(x)
+        goal = rotation if rotation.dim() == 2 else rotation[rows]
+        E = goal @ R.transpose(-1, -2)
+        w = 0.5 * torch.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], -1)
+        return torch.cat([t, -w], -1), J
+
+    return frame
 
 
 def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
