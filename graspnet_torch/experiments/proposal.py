@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.experiments.report import ExperimentReport, progress
+from graspnet_torch.experiments.report import ExperimentReport, arm_cell, batch_cell, progress
 from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.proposal import proposal_of
 from graspnet_torch.settings import setting
@@ -148,15 +148,10 @@ def _arm(seeds: int) -> tuple[str, dict]:
     rows, at = [], {}
     for env in progress(("env1", "env2"), desc="proposal: arm", unit="env"):
         for name, cfg in variants.items():
-            ok, its, wall = 0, [], []
-            for s in range(seeds):
-                t0 = time.perf_counter()
-                r = gt.solve(env, trials=16, seed=1000 + s, solver=cfg)
-                wall.append(time.perf_counter() - t0)
-                ok += r.best.collisions == 0 and r.best.total_error_mm < 1.0
-                its.append(np.mean([t.iterations for t in r.trials]))
-            rows.append([env, name, f"{ok}/{seeds}", f"{np.mean(its):.0f}", f"{np.median(wall):.2f}"])
-            at[env, name] = (ok, float(np.mean(its)))
+            cell = arm_cell(env, seeds, cfg)
+            rows.append([env, name, f"{cell.ok}/{seeds}", f"{np.mean(cell.iterations):.0f}",
+                         f"{np.median(cell.wall_s):.2f}"])
+            at[env, name] = (cell.ok, float(np.mean(cell.iterations)))
     return markdown_table(["environment", "start", "collision-free success", "iterations per trial (mean)",
                            "median wall s"], rows), at
 
@@ -167,12 +162,8 @@ def _manus(positions: int, runs: int) -> tuple[str, dict]:
                 "cmaes": _solver("random", method="cmaes", stop=None)}
     rows, at = [], {}
     for name, cfg in progress(list(variants.items()), desc="proposal: MANUS", unit="start"):
-        t0 = time.perf_counter()
-        results = gt.solve_many(problems, trials=runs, seed=0, solver=cfg)
-        wall = time.perf_counter() - t0
-        d = np.array([t.distance_mm for r in results for t in r.trials])
-        co = np.array([t.collisions for r in results for t in r.trials])
-        its = np.array([t.iterations for r in results for t in r.trials])
+        cell = batch_cell(problems, runs, cfg)
+        d, co, its, wall = cell.distance_mm, cell.collisions, cell.iterations, cell.wall_s
         solved = float(np.mean((d < 1) & (co == 0)) * 100)
         rows.append([name, f"{np.mean(d):.3g}", f"{solved:.0f}", f"{np.mean(its):.0f}", f"{wall / len(problems):.2f}"])
         at[name] = (float(np.mean(d)), solved, float(np.mean(its)))

@@ -13,6 +13,7 @@ import os
 import platform
 import subprocess
 import sys
+import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,8 @@ import numpy as np
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import build, short
+from graspnet_torch.solver.api import solve, solve_many
+from graspnet_torch.solver.config import SolverCfg
 
 __all__ = ["ExperimentReport", "Figure", "machine", "mean_std", "progress", "quick_settings", "require"]
 
@@ -102,6 +105,53 @@ def progress(iterable: Iterable[T], total: int | None = None, desc: str = "", un
     from tqdm.auto import tqdm
 
     return iter(tqdm(iterable, total=total, desc=desc, unit=unit, disable=None, leave=False, dynamic_ncols=True))
+
+
+@dataclass(frozen=True)
+class ArmCell:
+    """One solver on one arm environment over seeds (:func:`arm_cell`): successes (the best trial
+    collision-free with total error < 1 mm), and per seed its mean iterations per trial, best
+    error (mm) and wall time (s)."""
+
+    ok: int
+    iterations: list[float]
+    error_mm: list[float]
+    wall_s: list[float]
+
+
+def arm_cell(env: str, seeds: int, solver: SolverCfg | dict, trials: int = 16, first: int = 1000) -> ArmCell:
+    """``gt.solve(env, trials=trials, seed=s, solver=solver)`` for the seeds ``first`` .. ``first + seeds - 1``."""
+    ok, its, err, wall = 0, [], [], []
+    for s in range(seeds):
+        t0 = time.perf_counter()
+        r = solve(env, trials=trials, seed=first + s, solver=solver)
+        wall.append(time.perf_counter() - t0)
+        ok += r.best.collisions == 0 and r.best.total_error_mm < 1.0
+        its.append(float(np.mean([t.iterations for t in r.trials])))
+        err.append(r.best.total_error_mm)
+    return ArmCell(ok, its, err, wall)
+
+
+@dataclass(frozen=True)
+class BatchCell:
+    """One solver on a batch of gripper problems (:func:`batch_cell`): the results, the call's
+    wall time (s), and every learner's d (mm), collision count and iterations."""
+
+    results: list
+    wall_s: float
+    distance_mm: np.ndarray
+    collisions: np.ndarray
+    iterations: np.ndarray
+
+
+def batch_cell(problems: list, runs: int, solver: SolverCfg | dict) -> BatchCell:
+    """``gt.solve_many(problems, trials=runs, seed=0, solver=solver)``, timed, its learners' figures."""
+    t0 = time.perf_counter()
+    results = solve_many(problems, trials=runs, seed=0, solver=solver)
+    wall = time.perf_counter() - t0
+    trials = [t for r in results for t in r.trials]
+    return BatchCell(results, wall, np.array([t.distance_mm for t in trials]), np.array([t.collisions for t in trials]),
+                     np.array([t.iterations for t in trials]))
 
 
 def require(ok: bool, message: str) -> None:

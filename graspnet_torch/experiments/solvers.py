@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import graspnet_torch as gt
-from graspnet_torch.experiments.report import ExperimentReport, progress, require
+from graspnet_torch.experiments.report import ExperimentReport, arm_cell, batch_cell, progress, require
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.config import DEFAULT_TRIALS, paper_protocol
@@ -144,14 +144,9 @@ def arm(seeds: int) -> str:
     rows = []
     for env in progress(("env1", "env2"), desc="solvers: arm", unit="env"):
         for name, cfg in variants.items():
-            ok, wall, err = 0, [], []
-            for s in range(seeds):
-                t0 = time.perf_counter()
-                res = gt.solve(env, trials=16, seed=1000 + s, solver=cfg)
-                wall.append(time.perf_counter() - t0)
-                ok += res.best.collisions == 0 and res.best.total_error_mm < 1.0
-                err.append(res.best.total_error_mm)
-            rows.append([env, name, f"{ok}/{seeds}", f"{np.median(err):.2g}", f"{np.median(wall):.2f}"])
+            cell = arm_cell(env, seeds, cfg)
+            rows.append([env, name, f"{cell.ok}/{seeds}", f"{np.median(cell.error_mm):.2g}",
+                         f"{np.median(cell.wall_s):.2f}"])
     return (f"#### Arm among obstacles (R3)\n\n16 trials, seeds 1000-{999 + seeds}; success = the best trial is "
             "collision-free (FCL) with total error < 1 mm.\n\n"
             + markdown_table(["environment", "solver", "success", "median error mm", "median wall s"], rows))
@@ -164,11 +159,8 @@ def manus(positions: int, runs: int) -> str:
                 "cmaes": {"method": "cmaes"}, "dls": {"method": "dls"}}
     rows = []
     for name, cfg in progress(list(variants.items()), desc="solvers: MANUS", unit="solver"):
-        t0 = time.perf_counter()
-        results = gt.solve_many(problems, trials=runs, seed=0, solver=cfg)
-        wall = time.perf_counter() - t0
-        d = np.array([t.distance_mm for r in results for t in r.trials])
-        co = np.array([t.collisions for r in results for t in r.trials])
+        cell = batch_cell(problems, runs, cfg)
+        results, d, co, wall = cell.results, cell.distance_mm, cell.collisions, cell.wall_s
         best_ok = np.mean([r.best.distance_mm < 1 and r.best.collisions == 0 for r in results]) * 100
         rows.append([name, f"{best_ok:.0f}", f"{np.mean((d < 1) & (co == 0)) * 100:.0f}", f"{np.median(d):.2g}",
                      f"{wall / len(problems):.2f}"])
