@@ -25,23 +25,11 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.robot.kernel import motion_terms
 from graspnet_torch.robot.robot import Posture, Robot
 
 __all__ = ["Attachment", "ChainLevels", "RobotLevels", "frames_at_zero", "link_attachments", "motion_terms",
            "riding_base_links"]
-
-
-def motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(n, 4, 4) A and B of M(q) = I + s(q) A + c(q) B, and (n,) revolute mask."""
-    n = len(types)
-    A, B = np.zeros((n, 4, 4)), np.zeros((n, 4, 4))
-    for i, (a, kind) in enumerate(zip(axes, types, strict=True)):
-        if kind == "revolute":
-            K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-            A[i, :3, :3], B[i, :3, :3] = K, K @ K
-        else:
-            A[i, :3, 3] = a
-    return A, B, np.array([t == "revolute" for t in types])
 
 
 class ChainLevels:

@@ -36,6 +36,9 @@ pytorch-kinematics.
 
 A kernel of some chains of a stack (:meth:`ChainKernel.rows`: a problem's contact fingers among
 a hand's) is made from the stack's parts, not traced and expanded again.
+
+:class:`TreeKernel` gives every link's frame of a whole tree (the robot's link frames: collision
+scenes, pictures, the viewer, reach) as batched products of 4x4 frames, depth by depth.
 """
 
 from __future__ import annotations
@@ -49,7 +52,20 @@ from torch import Tensor
 from graspnet_torch.robot.chain import ChainSpec
 from graspnet_torch.robot.trace import Program, compile_program, snap, trace_chain
 
-__all__ = ["ChainKernel"]
+__all__ = ["ChainKernel", "TreeKernel", "motion_terms"]
+
+def motion_terms(axes: np.ndarray, types: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 4, 4) A and B of M(q) = I + s(q) A + c(q) B, and (n,) revolute mask."""
+    n = len(types)
+    A, B = np.zeros((n, 4, 4)), np.zeros((n, 4, 4))
+    for i, (a, kind) in enumerate(zip(axes, types, strict=True)):
+        if kind == "revolute":
+            K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+            A[i, :3, :3], B[i, :3, :3] = K, K @ K
+        else:
+            A[i, :3, 3] = a
+    return A, B, np.array([t == "revolute" for t in types])
+
 
 def _axis_frame(axis: np.ndarray) -> np.ndarray:
     """A rotation A with ``A @ e_z = axis``; a signed permutation when ``axis`` is +-e_k."""
@@ -288,3 +304,69 @@ class ChainKernel:
         tips = ", ".join(s.tip for s in self.specs)
         return (f"ChainKernel({self.num_chains} chain(s) -> {tips}; {self.n_joints} joints; "
                 f"ops p={self.num_ops(('p',))} p+J={self.num_ops(('p', 'Jv'))})")
+
+
+class TreeKernel:
+    """Batched frames of every link of a kinematic tree (a whole URDF: the robot's link frames).
+
+    Each joint's motion is ``M(q) = I + s(q) A + c(q) B`` (:func:`motion_terms`), so its offset
+    and motion cost two fused multiply-adds on precomputed products, ``F M(q) = F + s (F A) +
+    c (F B)``; the joints of one depth are then placed on their parents' frames in one batched
+    product, depth after depth (the joints a branch shares, once), and each link is its joint's
+    frame times a constant. A tree has too many joints for the chain kernel's traced program to
+    pay at small batches (op-bound); these products match it at large ones.
+
+    Args:
+        parents: (n,) each joint's parent joint (-1: the root), listed before it.
+        types: (n,) 'revolute' | 'prismatic'.
+        axes: (n, 3) unit axes, each in its joint's frame.
+        offsets: (n, 4, 4) each joint's frame (before its motion) in its parent joint's frame
+            (after the parent's motion; the root's for -1).
+        attach: (L,) the joint each link moves with (-1: the root);
+        poses: (L, 4, 4) the link's pose in that joint's frame (after its motion).
+    """
+
+    def __init__(self, parents: Sequence[int], types: Sequence[str], axes: np.ndarray, offsets: np.ndarray,
+                 attach: Sequence[int], poses: np.ndarray):
+        n = len(types)
+        self.n_joints, self.n_links, self.joint_types = n, len(attach), tuple(types)
+        A, B, self._revolute = motion_terms(np.asarray(axes, dtype=np.float64).reshape(n, 3), self.joint_types)
+        offsets = np.asarray(offsets, dtype=np.float64).reshape(n, 4, 4)
+        self._consts_np = (offsets, offsets @ A, offsets @ B, np.asarray(poses, dtype=np.float64))
+        depth: list[int] = []
+        for i in range(n):
+            if not -1 <= parents[i] < i:
+                raise ValueError(f"joint {i}'s parent {parents[i]} is not listed before it")
+            depth.append(0 if parents[i] < 0 else depth[parents[i]] + 1)
+        # per depth: its joints, and their parents' slots in the frames (slot n: the root, the identity)
+        self._depths = [(torch.as_tensor([i for i in range(n) if depth[i] == d]),
+                         torch.as_tensor([parents[i] % (n + 1) for i in range(n) if depth[i] == d]))
+                        for d in range(max(depth, default=-1) + 1)]
+        self._attach = torch.as_tensor([j % (n + 1) for j in attach], dtype=torch.long)
+        self._consts: dict[tuple, tuple[Tensor, ...]] = {}
+
+    def frames(self, q: Tensor) -> Tensor:
+        """Every link's frame in the tree's root, in the dtype/device of q. q: (B, n) -> (B, L, 4, 4)."""
+        if q.dim() != 2 or q.shape[1] != self.n_joints or not q.is_floating_point():
+            raise ValueError(f"joint tensor must be floating point of shape (B, {self.n_joints}); got "
+                             f"{tuple(q.shape)} {q.dtype}")
+        key = (q.dtype, q.device)
+        if key not in self._consts:
+            rev = torch.as_tensor(self._revolute, device=q.device)
+            self._consts[key] = (*(torch.as_tensor(a, dtype=q.dtype, device=q.device) for a in self._consts_np), rev,
+                                 torch.eye(4, dtype=q.dtype, device=q.device))
+        F, FA, FB, poses, rev, eye = self._consts[key]
+        if self._revolute.all():
+            s, c = torch.sin(q), 1 - torch.cos(q)
+        else:
+            s = torch.where(rev, torch.sin(q), q)
+            c = torch.where(rev, 1 - torch.cos(q), torch.zeros_like(q))
+        local = torch.addcmul(torch.addcmul(F, s[..., None, None], FA), c[..., None, None], FB)  # (B, n, 4, 4)
+        X = q.new_empty(q.shape[0], self.n_joints + 1, 4, 4)  # every joint's frame, then the root's
+        X[:, -1] = eye
+        for joints, parents in self._depths:
+            X[:, joints] = torch.matmul(X[:, parents], local[:, joints])
+        return torch.matmul(X[:, self._attach], poses)
+
+    def __repr__(self) -> str:
+        return f"TreeKernel({self.n_joints} joints in {len(self._depths)} depths -> {self.n_links} links)"

@@ -1,22 +1,79 @@
 """Every link's world pose in postures (:class:`LinkFrames`, a part of
-:class:`~graspnet_torch.robot.robot.Robot`): pytorch-kinematics over the whole URDF, for pictures
-and collision scenes (the hot loops use the robot's kernels)."""
+:class:`~graspnet_torch.robot.robot.Robot`): the whole URDF tree as one
+:class:`~graspnet_torch.robot.kernel.TreeKernel` (batched, float64), for pictures, collision
+scenes, the viewer and reach. pytorch-kinematics is the oracle in the tests only."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from graspnet_torch.robot.chain import ChainSpec, UrdfModel
+from graspnet_torch.robot.chain import ChainSpec, UrdfModel, origin_matrix
 from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.robot.kernel import TreeKernel
 from graspnet_torch.robot.shared import SharedJoints
 from graspnet_torch.robot.structure import Finger, Posture
 from graspnet_torch.robot.transforms import pose_to_matrix
 
-__all__ = ["LinkFrames"]
+__all__ = ["LinkFrames", "LinkTree", "link_tree"]
+
+_TYPES = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
+
+
+@dataclass(frozen=True)
+class LinkTree:
+    """A URDF's links and movable joints as a :class:`TreeKernel`.
+
+    Attributes:
+        links: every link, depth first from the root, children in the URDF's joint order
+            (pytorch-kinematics' frame order).
+        joints: the movable joints (the kernel's joint order), each after its parent.
+        kernel: joints (B, len(joints)) -> the links' frames (B, len(links), 4, 4) in the root.
+    """
+
+    links: tuple[str, ...]
+    joints: tuple[str, ...]
+    kernel: TreeKernel
+
+
+def link_tree(urdf: UrdfModel) -> LinkTree:
+    """The tree of ``urdf``: a link's frame is its parent's times its link origin, its joint's
+    origin and the joint's motion (pytorch-kinematics' convention; the root's: its link origin)."""
+    children: dict[str, list] = {}
+    for j in urdf.robot.joints:
+        children.setdefault(j.parent, []).append(j)
+
+    def offset(link: str) -> np.ndarray:
+        return origin_matrix(getattr(urdf.links[link], "origin", None))
+
+    root = urdf.root_link
+    links, attach, poses = [root], [-1], [offset(root)]
+    joints, parents, types, axes, offsets = [], [], [], [], []
+    stack = [(j, 0) for j in reversed(children.get(root, []))]
+    while stack:  # depth first, children in joint order
+        j, up = stack.pop()  # up: the parent link's index in ``links``
+        step = offset(j.child) @ origin_matrix(j.origin)
+        if j.type in _TYPES:
+            parents.append(attach[up])
+            offsets.append(poses[up] @ step)
+            joints.append(j.name)
+            types.append(_TYPES[j.type])
+            axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+            axes.append(axis / np.linalg.norm(axis))
+            attach.append(len(joints) - 1)
+            poses.append(np.eye(4))
+        else:
+            attach.append(attach[up])
+            poses.append(poses[up] @ step)
+        links.append(j.child)
+        stack.extend((c, len(links) - 1) for c in reversed(children.get(j.child, [])))
+    kernel = TreeKernel(parents, types, np.asarray(axes).reshape(-1, 3), np.asarray(offsets).reshape(-1, 4, 4),
+                        attach, np.stack(poses))
+    return LinkTree(tuple(links), tuple(joints), kernel)
 
 
 class LinkFrames:
@@ -31,7 +88,7 @@ class LinkFrames:
     body_joint_names: tuple[str, ...]
 
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
-        """(4, 4) float64 world pose of every link (pytorch-kinematics; pictures, collision scenes)."""
+        """(4, 4) float64 world pose of every link (the tree kernel; pictures, collision scenes)."""
         return self.link_frames_many([posture])[0]
 
     def link_frames_many(self, postures: Sequence[Posture]) -> list[dict[str, np.ndarray]]:
@@ -57,23 +114,10 @@ class LinkFrames:
         """The links' names and world poses (B, L, 4, 4) float64 from joints: body (B, m) (a robot
         with a body; else None), fingers (B, F, n) free joints (padded), palm_pose (B, 6) (a free
         hand's), shared (B, S) (default: where they are held)."""
-        chain = self.urdf.chain64
-        names = chain.get_joint_parameter_names()
-        if "_joint_columns" not in self.__dict__:  # where each URDF joint's value comes from, once
-            body_names = list(self.body_joint_names) if self.body is not None else []
-            sources = []
-            for name in names:
-                if name in body_names:
-                    sources.append(("body", body_names.index(name), 0))
-                    continue
-                for k, f in enumerate(self.fingers.values()):
-                    if name in f.chain.all_joint_names:
-                        sources.append(("finger", k, f.chain.all_joint_names.index(name)))
-                        break
-                else:
-                    sources.append(("shared", 0, 0) if name in self.shared.names or name in self.shared.followers
-                                   else ("none", 0, 0))
-            self._joint_columns = sources
+        if "_link_tree" not in self.__dict__:  # the tree, and where each of its joints' values comes from, once
+            self._link_tree = link_tree(self.urdf)
+            self._joint_columns = self._joint_sources(self._link_tree.joints)
+        tree, names = self._link_tree, self._link_tree.joints
         B = fingers.shape[0]
         s = self._shared_rows(shared, B)
         index = {n: k for k, n in enumerate(self.shared.names)}
@@ -88,11 +132,27 @@ class LinkFrames:
             elif kind == "shared":
                 leader, m, b = self.shared.followers.get(names[c], (names[c], 1.0, 0.0))
                 th[:, c] = m * s[:, index[leader]] + b
-        fk = chain.forward_kinematics(torch.as_tensor(th))
-        links = list(fk)
-        frames = torch.stack([fk[name].get_matrix().expand(B, 4, 4) for name in links], dim=1).numpy()
+        frames = tree.kernel.frames(torch.as_tensor(th)).numpy()
         if self.body is None:
             root_to_palm = self.urdf.fixed_transform(self.urdf.root_link, self.cfg.palm_link)
             world = pose_to_matrix(palm_pose.detach().to(torch.float64).cpu()).numpy() @ np.linalg.inv(root_to_palm)
             frames = world[:, None] @ frames
-        return links, frames
+        return list(tree.links), frames
+
+    def _joint_sources(self, names: Sequence[str]) -> list[tuple[str, int, int]]:
+        """Where each joint's value comes from: ('body', column, 0), ('finger', finger, joint of its
+        whole chain), ('shared', 0, 0) (a shared joint or a follower) or ('none', 0, 0) (held at 0)."""
+        body_names = list(self.body_joint_names) if self.body is not None else []
+        sources = []
+        for name in names:
+            if name in body_names:
+                sources.append(("body", body_names.index(name), 0))
+                continue
+            for k, f in enumerate(self.fingers.values()):
+                if name in f.chain.all_joint_names:
+                    sources.append(("finger", k, f.chain.all_joint_names.index(name)))
+                    break
+            else:
+                sources.append(("shared", 0, 0) if name in self.shared.names or name in self.shared.followers
+                               else ("none", 0, 0))
+        return sources
