@@ -172,16 +172,6 @@ class UrdfModel:
         with _quiet_parser():
             return pk.build_chain_from_urdf(self.xml)
 
-    @cached_property
-    def chain64(self) -> pk.Chain:
-        """A float64 copy of :attr:`chain` (pytorch-kinematics' ``to`` converts in place, so the
-        float32 one is never converted)."""
-        import pytorch_kinematics as pk
-        import torch
-
-        with _quiet_parser():
-            return pk.build_chain_from_urdf(self.xml).to(dtype=torch.float64)
-
     def check_link(self, link: str, what: str) -> None:
         if link not in self.links:
             raise ConfigError(f"{what}: link '{link}' is not in {self.path.name}")

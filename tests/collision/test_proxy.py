@@ -75,8 +75,8 @@ def test_proxy_agrees_with_fcl_for_the_free_hand_and_its_object():
     assert exact >= 0.90, exact
 
 
-def test_sphere_centres_follow_pytorch_kinematics_link_frames(arm_hand):
-    """Every sphere centre equals its link frame (pytorch-kinematics, float64) times its offset."""
+def test_sphere_centres_follow_the_link_frames(arm_hand):
+    """Every sphere centre equals its link frame (``Robot.link_frames_of``, float64) times its offset."""
     problem = gt.GraspProblem.from_task("env1")
     proxy = CollisionProxy(arm_hand, problem, dtype=torch.float64)
     body, q = _random_arm(arm_hand, problem, 3, seed=2)
