@@ -199,23 +199,28 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
     stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
     settled = torch.zeros(B, dtype=torch.bool, device=x.device)
+    checks = tol > 0 or done is not None  # else only a settled row stops (no row is below tol = 0)
+    fixed = lam == lam_min == lam_max  # a fixed damping: lambda never changes
     for it in range(iterations):
-        stopped = err < tol
-        if done is not None:
-            stopped = stopped | done(stopped)
-        stopped = stopped | settled
-        if bool(stopped.all()):
-            break
-        running = ~stopped
-        if bool((stalled | stopped).all()):  # nothing changes any more: the rows ran the budget out
-            steps += running.long() * (iterations - it)
-            if trace is not None:
-                trace.extend(err.clone() for _ in range(iterations - it))
-            break
-        moving = running & ~stalled
+        stopped = settled
+        if checks:
+            stopped = err < tol
+            if done is not None:
+                stopped = stopped | done(stopped)
+            stopped = stopped | settled
+        moving = ~(stopped | stalled)
+        running = None  # every row
         if bool(moving.all()):  # every row: views of the whole tensors, no gather and scatter
             rows, ids = slice(None), all_rows
         else:
+            if bool(stopped.all()):
+                break
+            running = ~stopped
+            if not bool(moving.any()):  # nothing changes any more: the rows ran the budget out
+                steps += running.long() * (iterations - it)
+                if trace is not None:
+                    trace.extend(err.clone() for _ in range(iterations - it))
+                break
             rows = ids = moving.nonzero().squeeze(1)
         xr, vr, Jr, gr, lr, hr = x[rows], value[rows], jac[rows], goal[rows], lo[rows], hi[rows]
         e = gr - vr
@@ -242,8 +247,9 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
             settled[rows] = better & (new_err > err[rows] * (1 - min_gain))
         err[rows] = torch.where(better, new_err, err[rows])
         stalled[rows] = ~better & (damping >= lam_max)  # the same step again next time: rejected again
-        lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)
-        steps += running.long()  # a stalled row counts the steps it would repeat
+        if not fixed:
+            lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)
+        steps += 1 if running is None else running.long()  # a stalled row counts the steps it would repeat
         if trace is not None:
             trace.append(err.clone())
     if prior is not None:  # the model's residuals alone

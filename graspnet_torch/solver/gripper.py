@@ -39,14 +39,10 @@ __all__ = ["ALIGNMENT_MIN", "CLEARANCE_M", "GripperEnvironment"]
 
 CLEARANCE_M = 0.005  # the loop and the polish keep 5 mm from obstacles, floor and own links (proxy margin)
 ALIGNMENT_MIN = 0.999  # a gripper's grasp: |n_gripper . n_object| above this (about 2.6 degrees)
-# _refine (solver.gripper.settle): the settling steps' damping lambda (m), fixed: a couple of steps
-# per proposal, each kept only where it lowers the point error, none adapting lambda
-SETTLE_DAMPING = 0.05
-# _least_squares (the polish, solver=dls): lambda's start, smallest and largest (m); it falls by 3
-# after a kept step and grows by 4 after a refused one (least_squares.levenberg_marquardt)
+SETTLE_DAMPING = 0.05  # _refine (gripper.settle): the settling steps' fixed lambda (m), a couple of steps
+# _least_squares (the polish, solver=dls): lambda's start, least and largest (m); / 3 kept, * 4 refused
 POLISH_DAMPING = (1e-2, 1e-4, 10.0)
-# _least_squares: a joint within this of its bound (m or rad) is at it (the active set's test)
-BOUND_EDGE = 1e-9
+BOUND_EDGE = 1e-9  # _least_squares: a joint within this of its bound (m or rad) is at it (the active set)
 
 
 class GripperEnvironment(Environment):
@@ -181,29 +177,37 @@ class GripperEnvironment(Environment):
 
     def _refine(self, q: Tensor, steps: int, targets: Tensor, lower: Tensor, upper: Tensor
                 ) -> tuple[Tensor, Tensor | None, Tensor]:
-        """``steps`` Levenberg-Marquardt steps (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
-        at the fixed damping :data:`SETTLE_DAMPING` (the closed-form Jacobian of :meth:`kinematics`,
-        no collision test, each step clamped to the bounds, no active set) of the gripper points
-        towards each trial's nearer pairing, each kept where it lowers the point error: the learner
-        proposes, a few local steps settle the proposal, and the settled configuration is what is
-        evaluated and reported. q: (T, n), targets: (T or 1, 2, 3), lower, upper: (T or 1, n).
-        Returns it (T, n) with its chain frames (T, n, 4, 4; None without a proxy, their one
-        user) and gripper points (T, 2, 3)."""
+        """``steps`` Levenberg-Marquardt steps (:func:`~graspnet_torch.least_squares.levenberg_marquardt`,
+        fixed damping :data:`SETTLE_DAMPING`, the Jacobian of :meth:`kinematics`, no collision test,
+        steps clamped to the bounds) of the gripper points towards each trial's nearer pairing, kept
+        where they lower the point error: the learner proposes, a few steps settle the proposal, and
+        that is evaluated and reported. q: (T, n), targets: (T or 1, 2, 3), lower, upper: (T or 1, n)
+        -> q (T, n), its frames (T, n, 4, 4; None without a proxy, their user), points (T, 2, 3)."""
         T = q.shape[0]
         tg = targets.expand(T, 2, 3)
         lower, upper = lower.expand(T, -1), upper.expand(T, -1)
         q = torch.minimum(torch.maximum(q, lower), upper)  # as the LM starts: its first model call is at this q
         start = [self.kinematics(q, jacobian=True)]
+        levels = start[0][0]
         goal = torch.where(_pairing(start[0][1], tg).view(-1, 1, 1), tg.flip(1), tg).reshape(T, 6)
+        tried: list[tuple[Tensor, Tensor, Tensor]] = []  # (rows, x, frames) of every trial point
 
         def points(x: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
-            _levels, pts, J = start.pop() if start else self.kinematics(x, jacobian=True)  # first: at q
+            if start:  # the first call: at q
+                _levels, pts, J = start.pop()
+            else:
+                frames, pts, J = self.kinematics(x, jacobian=True)
+                tried.append((rows, x, frames))
             return pts.reshape(-1, 6), J
 
         solved = levenberg_marquardt(points, goal, q, lower, upper, steps,
                                      lam=SETTLE_DAMPING, lam_min=SETTLE_DAMPING, lam_max=SETTLE_DAMPING,
                                      active_set=False)
-        levels = self.kinematics(solved.x)[0] if self.proxy is not None else None
+        if self.proxy is None:
+            return solved.x, None, solved.value.view(T, 2, 3)
+        for rows, x, frames in tried:  # each row's frames: those of the trial point it kept (else q's)
+            levels = levels.index_copy(0, rows, torch.where((solved.x[rows] == x).all(1).view(-1, 1, 1, 1), frames,
+                                                            levels[rows]))
         return solved.x, levels, solved.value.view(T, 2, 3)
 
     def finish(self, config: Tensor, evaluation: Evaluation, done: Done | None = None) -> tuple[Tensor, Evaluation]:
