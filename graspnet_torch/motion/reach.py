@@ -30,7 +30,7 @@ import torch
 
 from graspnet_torch.collision.scene import CollisionScene, has_environment
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.least_squares import levenberg_marquardt
+from graspnet_torch.least_squares import frame_model, levenberg_marquardt
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path
@@ -253,17 +253,9 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     goal_t = t0 + torch.as_tensor(distance * away / np.linalg.norm(away))
     lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
 
-    def frame(x: torch.Tensor, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The palm frame as a residual model: its position, then minus its turn back to R0
-        (vee of the skew part of R0 R^T; d/dq: the frame Jacobian's rotation rows)."""
-        R, t, J = robot.palm_frame_jacobian(x)
-        E = R0 @ R.transpose(-1, -2)
-        w = 0.5 * torch.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0],
-                               E[..., 1, 0] - E[..., 0, 1]], -1)
-        return torch.cat([t, -w], -1), J
-
     goal = torch.cat([goal_t, torch.zeros(3, dtype=torch.float64)])
     fixed = {"lam": BACK_OFF_DAMPING, "lam_min": BACK_OFF_DAMPING, "lam_max": BACK_OFF_DAMPING}
+    frame = frame_model(robot.palm_frame_jacobian, R0)  # the palm frame: position, then its turn back to R0
     q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, active_set=False, tol=1e-4, **fixed).x[0]
     R, t = robot.palm_frame(q)
     E = R0 @ R.T
