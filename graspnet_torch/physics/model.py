@@ -1,0 +1,237 @@
+"""The MuJoCo model of a grasp: the robot from its URDF, placed and held as a result reports it,
+and the problem's object as a free body (MJCF text, :func:`grasp_mjcf`).
+
+The protocol it serves (:mod:`graspnet_torch.physics.config`) is DexGraspBench's: friction 0.6
+tangential / 0.02 torsional, elliptic cones, object 100 g, timestep 4 ms, an external force of the
+object's weight along +-x, +-y, +-z in turn for 2 s each; holds when the object moves less than
+5 cm and turns less than 15 degrees.
+
+The model, in the problem's world frame:
+
+- the robot's URDF tree, one body per link, written here from the package's own URDF model (its
+  link frames, joint axes and limits, collision shapes: primitives as primitives, meshes by their
+  convex hulls, whatever the file format or ``package://`` path), so MuJoCo's URDF reader and its
+  mesh-path rules play no part;
+- its root link fixed where the posture places it (a free hand: the palm pose; a robot with a body:
+  its base at the world origin), the body joints (arm, mobile base) locked at the posture's values;
+- every other movable joint a MuJoCo joint within its limits, with a position actuator (gain
+  ``kp``, joint damping and armature, force limit ``max_effort`` or the URDF ``effort``), mimic
+  joints an equality constraint on their leader instead;
+- link masses and inertias from the URDF where given, else from the collision shapes (density
+  1000 kg/m^3); bodies without either get MuJoCo's bound mass;
+- the robot's geoms collide with the object only (self-collision is the solver's check, and
+  primitive hands overlap at their knuckles by design); the problem's obstacles are left out
+  (DexGraspBench's check has no table);
+- the object a free body (box, cylinder, sphere; a mesh by its convex pieces, the collision
+  proxy's CoACD decomposition) of ``object_mass_kg``, uniform density, at the problem's pose.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from graspnet_torch.collision.convex import convex_pieces
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.physics.config import PhysicsCfg
+from graspnet_torch.robot.chain import origin_matrix
+from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.transforms import pose_to_matrix_np
+
+__all__ = ["OBJECT_BODY", "GraspModel", "grasp_mjcf"]
+
+OBJECT_BODY = "grasped_object"
+ROBOT_BITS = (2, 1)  # contype, conaffinity: robot geoms touch the object, never each other
+OBJECT_BITS = (1, 2)
+
+
+@dataclass(frozen=True)
+class GraspModel:
+    """The MJCF of a grasp and what the check needs to run it.
+
+    Attributes:
+        xml: the MJCF text.
+        start: movable MuJoCo joint name -> its initial value (rad or m): the grasp posture.
+        targets: actuator name (its joint's) -> its commanded value: the squeeze posture.
+    """
+
+    xml: str
+    start: dict[str, float]
+    targets: dict[str, float]
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.9g}" for v in np.ravel(values))
+
+
+def _quat(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation -> (4,) quaternion (w, x, y, z)."""
+    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
+    x = math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
+    y = math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
+    z = math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
+    x = math.copysign(x, R[2, 1] - R[1, 2])
+    y = math.copysign(y, R[0, 2] - R[2, 0])
+    z = math.copysign(z, R[1, 0] - R[0, 1])
+    q = np.array([w, x, y, z])
+    return q / np.linalg.norm(q)
+
+
+def _place(el: ET.Element, T: np.ndarray) -> None:
+    """Set an element's pos and quat from a (4, 4) pose in its parent's frame."""
+    el.set("pos", _fmt(T[:3, 3]))
+    el.set("quat", _fmt(_quat(T[:3, :3])))
+
+
+def _motion(kind: str, axis: np.ndarray, q: float) -> np.ndarray:
+    """(4, 4) the motion of a joint of ``kind`` about / along its unit ``axis`` by ``q``."""
+    M = np.eye(4)
+    if kind == "prismatic":
+        M[:3, 3] = axis * q
+        return M
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    M[:3, :3] = np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+    return M
+
+
+def _geom(parent: ET.Element, kind: str, size, T: np.ndarray | None, bits: tuple[int, int], **extra) -> ET.Element:
+    g = ET.SubElement(parent, "geom", type=kind, contype=str(bits[0]), conaffinity=str(bits[1]))
+    if size is not None:
+        g.set("size", _fmt(size))
+    if T is not None:
+        _place(g, T)
+    for k, v in extra.items():
+        g.set(k, v)
+    return g
+
+
+def _body_name(link: str) -> str:
+    """A link's body name: its own, but MuJoCo's ``world`` is taken (an arm's URDF root often has it)."""
+    return "urdf_world" if link == "world" else link
+
+
+def _primitive_size(kind: str, size) -> list[float]:
+    """MuJoCo's size of a box (half extents), cylinder (radius, half length) or sphere (radius)."""
+    if kind == "box":
+        return [s / 2 for s in size]
+    if kind == "cylinder":
+        return [size[0], size[1] / 2]
+    return [size[0]]
+
+
+def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsCfg) -> GraspModel:
+    """The MJCF of ``robot`` in posture ``start`` (its palm and body where ``start`` puts them),
+    its actuators commanded to ``target``'s joints, holding ``obj`` (a problem's object:
+    :class:`~graspnet_torch.robot.shape.Shape` kind, size, pose (6,) m/rad in the world, mesh,
+    scale)."""
+    if obj is None:
+        raise ProblemError("the physics check needs the problem's object; this problem has none")
+    urdf = robot.urdf
+    root = urdf.root_link
+    values, goals = robot.joint_values(start), robot.joint_values(target)
+    mimic = urdf.mimic_joints
+    locked = set(robot.body_joint_names)
+    locked |= {j for j, (leader, _, _) in mimic.items() if leader in locked}
+
+    mj = ET.Element("mujoco", model=f"grasp_{robot.name}")
+    ET.SubElement(mj, "compiler", angle="radian", autolimits="true", balanceinertia="true", boundmass="1e-5",
+                  boundinertia="1e-10", inertiafromgeom="auto")
+    ET.SubElement(mj, "option", timestep=f"{cfg.timestep_s:.9g}", integrator="implicitfast", cone="elliptic",
+                  gravity="0 0 -9.81" if cfg.gravity else "0 0 0")
+    default = ET.SubElement(mj, "default")
+    ET.SubElement(default, "geom", condim="4", friction=_fmt([cfg.friction, cfg.torsional_friction, 0.0]))
+    asset = ET.SubElement(mj, "asset")
+    world = ET.SubElement(mj, "worldbody")
+    actuators = ET.SubElement(mj, "actuator")
+    equality = ET.SubElement(mj, "equality")
+
+    shapes: dict[str, list] = {}
+    for s in link_shapes(urdf, "collision"):
+        shapes.setdefault(s.link, []).append(s)
+    children: dict[str, list] = {}
+    for j in urdf.robot.joints:
+        children.setdefault(j.parent, []).append(j)
+
+    placed = robot.link_frames(start)[root]
+    root_el = ET.SubElement(world, "body", name=_body_name(root))
+    _place(root_el, placed)
+    start_q, targets, meshes = {}, {}, [0]
+
+    def fill(body: ET.Element, link: str) -> None:
+        ln = urdf.links[link]
+        inertial = getattr(ln, "inertial", None)
+        if inertial is not None and inertial.mass is not None and inertial.mass > 0:
+            i = inertial.inertia
+            full = [i.ixx, i.iyy, i.izz, i.ixy, i.ixz, i.iyz] if i is not None else [1e-9, 1e-9, 1e-9, 0, 0, 0]
+            el = ET.SubElement(body, "inertial", mass=f"{inertial.mass:.9g}", fullinertia=_fmt(full))
+            _place(el, origin_matrix(inertial.origin))
+        for s in shapes.get(link, []):
+            if s.kind == "mesh":
+                name = f"link_mesh_{meshes[0]}"
+                meshes[0] += 1
+                ET.SubElement(asset, "mesh", name=name, vertex=_fmt(s.mesh.convex_hull.vertices))
+                _geom(body, "mesh", None, s.origin, ROBOT_BITS, mesh=name)
+            else:
+                _geom(body, s.kind, _primitive_size(s.kind, s.size), s.origin, ROBOT_BITS)
+        for j in children.get(link, []):
+            T = origin_matrix(getattr(urdf.links[j.child], "origin", None)) @ origin_matrix(j.origin)
+            movable = j.type in ("revolute", "continuous", "prismatic")
+            axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+            axis = axis / np.linalg.norm(axis)
+            kind = "prismatic" if j.type == "prismatic" else "revolute"
+            if movable and j.name in locked:
+                T = T @ _motion(kind, axis, values.get(j.name, 0.0))
+            child = ET.SubElement(body, "body", name=_body_name(j.child))
+            _place(child, T)
+            if movable and j.name not in locked:
+                _joint(child, j, axis, kind)
+            fill(child, j.child)
+
+    def _joint(child: ET.Element, j, axis: np.ndarray, kind: str) -> None:
+        el = ET.SubElement(child, "joint", name=j.name, type="slide" if kind == "prismatic" else "hinge",
+                           axis=_fmt(axis), damping=f"{cfg.damping:.9g}", armature=f"{cfg.armature:.9g}")
+        lim = j.limit
+        if j.type != "continuous" and lim is not None and lim.lower is not None and lim.upper is not None \
+                and lim.lower < lim.upper:
+            el.set("range", _fmt([lim.lower, lim.upper]))
+        start_q[j.name] = values.get(j.name, 0.0)
+        if j.name in mimic:
+            leader, m, b = mimic[j.name]
+            ET.SubElement(equality, "joint", joint1=j.name, joint2=leader, polycoef=_fmt([b, m, 0, 0, 0]))
+            return
+        effort = cfg.max_effort
+        if lim is not None and lim.effort is not None and 0 < lim.effort < effort:
+            effort = float(lim.effort)
+        kp = cfg.kp_prismatic if kind == "prismatic" else cfg.kp
+        ET.SubElement(actuators, "position", name=j.name, joint=j.name, kp=f"{kp:.9g}",
+                      forcerange=_fmt([-effort, effort]), forcelimited="true")
+        targets[j.name] = goals.get(j.name, 0.0)
+
+    fill(root_el, root)
+    _object(world, asset, obj, cfg)
+    if not len(actuators):
+        mj.remove(actuators)
+    if not len(equality):
+        mj.remove(equality)
+    return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets)
+
+
+def _object(world: ET.Element, asset: ET.Element, obj, cfg: PhysicsCfg) -> None:
+    """The object: a free body at its pose, its mass ``cfg.object_mass_kg`` spread uniformly."""
+    body = ET.SubElement(world, "body", name=OBJECT_BODY)
+    _place(body, pose_to_matrix_np(obj.pose))
+    ET.SubElement(body, "freejoint", name=f"{OBJECT_BODY}_free")
+    if obj.kind != "mesh":
+        _geom(body, obj.kind, _primitive_size(obj.kind, obj.size), None, OBJECT_BITS, mass=f"{cfg.object_mass_kg:.9g}")
+        return
+    pieces = convex_pieces(obj.mesh, obj.scale).vertices
+    volumes = [ConvexHull(v).volume for v in pieces]
+    density = cfg.object_mass_kg / max(sum(volumes), 1e-12)  # the pieces overlap little: about the mass asked
+    for k, v in enumerate(pieces):
+        ET.SubElement(asset, "mesh", name=f"object_piece_{k}", vertex=_fmt(v))
+        _geom(body, "mesh", None, None, OBJECT_BITS, mesh=f"object_piece_{k}", density=f"{density:.9g}")
