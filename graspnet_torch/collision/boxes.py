@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.meshes import load_mesh
-from graspnet_torch.robot.geometry import Shape as LinkShape
+from graspnet_torch.robot.geometry import LinkShape
+from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
-from graspnet_torch.tasks.shapes import Shape
 
 __all__ = ["BOX_MARGIN_M", "boxes_apart", "link_box", "shape_box"]
 

@@ -35,7 +35,7 @@ def fcl_geometry(kind: str, size: tuple[float, ...], mesh=None):
 
 
 def link_geometry(shape) -> object:
-    """The FCL geometry of a link's shape (``robot.geometry.Shape``): a primitive, or a mesh as a
+    """The FCL geometry of a link's shape (``robot.geometry.LinkShape``): a primitive, or a mesh as a
     ``BVHModel`` of its triangles (a surface: FCL finds where it crosses another geometry, not a
     geometry wholly inside a closed mesh)."""
     return fcl_geometry(shape.kind, shape.size, shape.mesh)

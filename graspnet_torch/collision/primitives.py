@@ -24,8 +24,8 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.collision.convex import FAR, convex_pieces, pieces_distance
+from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import rpy_to_matrix_np
-from graspnet_torch.tasks.problem import Shape
 
 __all__ = ["GroupThresholds", "PrimitiveGroup", "group_thresholds", "primitive_groups"]
 

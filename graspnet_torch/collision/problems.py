@@ -27,9 +27,10 @@ from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np, rpy_to_matrix_np, rt_to_pose
 from graspnet_torch.tasks.objects import random_pose, real_objects
-from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture, Shape
+from graspnet_torch.tasks.problem import Contact, GraspProblem, ReferencePosture
 
 __all__ = ["closure_problem", "random_obstacle_problems", "real_mesh_problems"]
 

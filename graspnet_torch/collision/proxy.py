@@ -37,7 +37,8 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.frames import Attachment, RobotLevels, link_attachments, riding_base_links
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Robot
-from graspnet_torch.tasks.problem import GraspProblem, Shape
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CollisionProxy"]
 

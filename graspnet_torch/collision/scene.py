@@ -32,8 +32,9 @@ from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_
 from graspnet_torch.collision.mesh import mesh_query, shape_points
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
-from graspnet_torch.tasks.problem import GraspProblem, Shape
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "has_environment", "self_collision_pairs"]
 

@@ -20,7 +20,7 @@ from torch import Tensor
 from graspnet_torch.collision.spheres import cylinder_axis_half, mesh_box
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.frames import Attachment
-from graspnet_torch.robot.geometry import Shape as LinkShape
+from graspnet_torch.robot.geometry import LinkShape
 
 __all__ = ["SMALL_BOX_M", "SelfCollisionModel", "segment_distance_sq", "segment_meets_box",
            "self_collision_primitive"]

@@ -27,7 +27,7 @@ import numpy as np
 
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.frames import Attachment
-from graspnet_torch.robot.geometry import Shape as LinkShape
+from graspnet_torch.robot.geometry import LinkShape
 
 __all__ = ["CLUSTER", "SphereClusters", "cylinder_axis_half", "mesh_box", "shape_spheres", "sphere_clusters"]
 
@@ -53,8 +53,8 @@ def mesh_box(shape: LinkShape) -> LinkShape:
     half = np.asarray(obb.primitive.extents, dtype=np.float64) / 2
     half = np.maximum(half, half.max() / 8)
     half = half + half.min() / 2
-    return LinkShape(shape.link, "box", tuple(float(2 * h) for h in half),
-                     shape.origin @ np.asarray(obb.primitive.transform, dtype=np.float64), shape.rgba)
+    return LinkShape.placed(shape.link, "box", tuple(float(2 * h) for h in half),
+                            shape.origin @ np.asarray(obb.primitive.transform, dtype=np.float64), shape.rgba)
 
 
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:

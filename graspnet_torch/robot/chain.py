@@ -31,16 +31,21 @@ from graspnet_torch.settings import clip
 if TYPE_CHECKING:  # pragma: no cover
     import pytorch_kinematics as pk
 
-__all__ = ["ChainSpec", "UrdfModel", "origin_matrix"]
+__all__ = ["ChainSpec", "UrdfModel", "origin_matrix", "origin_pose"]
+
+
+def origin_pose(origin) -> np.ndarray:
+    """(6,) float64 (x, y, z, rx, ry, rz) of a URDF ``<origin>`` (None, or missing xyz / rpy: zeros)."""
+    if origin is None:
+        return np.zeros(6)
+    xyz = origin.xyz if origin.xyz is not None else (0, 0, 0)
+    rpy = origin.rpy if origin.rpy is not None else (0, 0, 0)
+    return np.array([*xyz, *rpy], dtype=np.float64)
 
 
 def origin_matrix(origin) -> np.ndarray:
     """(4, 4) float64 of a URDF ``<origin>`` (None, or missing xyz / rpy: zeros)."""
-    if origin is None:
-        return np.eye(4)
-    xyz = origin.xyz if origin.xyz is not None else (0, 0, 0)
-    rpy = origin.rpy if origin.rpy is not None else (0, 0, 0)
-    return pose_to_matrix_np([*xyz, *rpy])
+    return np.eye(4) if origin is None else pose_to_matrix_np(origin_pose(origin))
 
 
 @dataclass(frozen=True)

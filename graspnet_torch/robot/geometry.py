@@ -1,4 +1,5 @@
-"""Shapes of a URDF's links (boxes, cylinders, spheres, meshes), for pictures and collisions."""
+"""Shapes of a URDF's links (boxes, cylinders, spheres, meshes), for pictures and collisions: each
+the package's one :class:`~graspnet_torch.robot.shape.Shape`, in its link's frame."""
 
 from __future__ import annotations
 
@@ -7,38 +8,58 @@ from dataclasses import dataclass
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.robot.chain import UrdfModel, origin_matrix
+from graspnet_torch.robot.chain import UrdfModel, origin_matrix, origin_pose
 from graspnet_torch.robot.meshes import load_link_mesh
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import matrix_to_pose_np
 
-__all__ = ["Shape", "link_shapes"]
+__all__ = ["LinkShape", "link_shapes"]
 
 GREY = (0.6, 0.6, 0.6, 1.0)
 
 
 @dataclass(frozen=True, eq=False)
-class Shape:
-    """A shape attached to a link.
+class LinkShape:
+    """A :class:`Shape` attached to a link, with what pictures and collisions use of it.
 
     Attributes:
         link: link name.
-        kind: 'box' | 'cylinder' | 'sphere' | 'mesh'.
-        size: box (x, y, z) full extents; cylinder (radius, length) along its z; sphere (radius,);
-            mesh: the URDF's scale (x, y, z), already applied to ``mesh``.
-        origin: (4, 4) pose of the shape in the link frame.
+        shape: kind, size, pose (6,) in the link frame (the URDF ``<origin>``'s xyz and rpy), and a
+            mesh's file and per-axis scale (x, y, z) (a mesh's size is ()).
+        origin: (4, 4) the shape's pose in the link frame as a matrix, exact (made from the URDF's
+            numbers, or a product of exact matrices): collisions and pictures place the shape by it.
         rgba: colour from the URDF material (grey if none).
         mesh: a mesh's ``trimesh.Trimesh`` (V vertices, M faces) in the shape's frame, scaled;
             shared with a cache: do not modify it. None for primitives.
     """
 
     link: str
-    kind: str
-    size: tuple[float, ...]
+    shape: Shape
     origin: np.ndarray
     rgba: tuple[float, float, float, float] = GREY
     mesh: object = None
 
+    @property
+    def kind(self) -> str:
+        """The shape's kind: 'box' | 'cylinder' | 'sphere' | 'mesh'."""
+        return self.shape.kind
 
-def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] | None = None) -> list[Shape]:
+    @property
+    def size(self) -> tuple[float, ...]:
+        """The shape's size: box (x, y, z) full extents; cylinder (radius, length) along its z;
+        sphere (radius,); mesh ()."""
+        return self.shape.size
+
+    @classmethod
+    def placed(cls, link: str, kind: str, size: tuple[float, ...], origin: np.ndarray,
+               rgba: tuple[float, float, float, float] = GREY) -> LinkShape:
+        """A primitive placed by an origin (4, 4) in the link frame, kept exact (its shape's pose
+        is the origin's, to round-off)."""
+        origin = np.asarray(origin, dtype=np.float64)
+        return cls(link, Shape(kind, tuple(size), matrix_to_pose_np(origin)), origin, rgba)
+
+
+def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] | None = None) -> list[LinkShape]:
     """Every shape of every link; ``source`` is 'collision' or 'visual'.
 
     Meshes are loaded (``robot/meshes.py`` resolves their URIs, within the model's folders). A mesh
@@ -62,7 +83,7 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
         for k, el in enumerate(elements):
             g = el.geometry
             rgba = visual_colors[k] if k < len(visual_colors) else GREY
-            mesh = None
+            mesh, path, scale = None, None, 1.0
             if isinstance(g, Box):
                 kind, size = "box", tuple(float(s) for s in g.size)
             elif isinstance(g, Cylinder):
@@ -70,19 +91,20 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
             elif isinstance(g, Sphere):
                 kind, size = "sphere", (float(g.radius),)
             elif isinstance(g, Mesh) and g.filename:
-                scale = np.broadcast_to(np.asarray(g.scale if g.scale is not None else 1.0, dtype=np.float64), (3,))
+                axes = np.broadcast_to(np.asarray(g.scale if g.scale is not None else 1.0, dtype=np.float64), (3,))
                 try:
-                    mesh = load_link_mesh(g.filename, model.path, scale,
-                                          f"{model.path.name}: link '{link.name}' {source}", model.mesh_roots,
-                                          model.allow_outside_paths)
+                    path, mesh = load_link_mesh(g.filename, model.path, axes,
+                                                f"{model.path.name}: link '{link.name}' {source}", model.mesh_roots,
+                                                model.allow_outside_paths)
                 except ConfigError as exc:
                     if errors is None:
                         raise
                     errors.append(str(exc))
                     continue
-                kind, size = "mesh", tuple(float(s) for s in scale)
+                kind, size, scale = "mesh", (), tuple(float(s) for s in axes)
             else:
                 raise ConfigError(f"{model.path.name}: link '{link.name}' has {type(g).__name__} "
                                   f"{source} geometry; only box, cylinder, sphere and mesh are supported")
-            shapes.append(Shape(link.name, kind, size, origin_matrix(el.origin), rgba, mesh))
+            shape = Shape(kind, size, origin_pose(el.origin), path, scale)
+            shapes.append(LinkShape(link.name, shape, origin_matrix(el.origin), rgba, mesh))
     return shapes

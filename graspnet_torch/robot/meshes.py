@@ -130,9 +130,9 @@ def resolve_mesh(uri: str, urdf_path: str | Path, what: str = "mesh", roots: Seq
 
 
 def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mesh", roots: Sequence[str | Path] = (),
-                   allow_outside: bool = False):
-    """The ``trimesh.Trimesh`` a URDF ``<mesh>`` names, in its own frame with ``scale`` (3 numbers,
-    or one) applied; cached and shared (do not modify it). A file that is missing, outside the
+                   allow_outside: bool = False) -> tuple[Path, object]:
+    """The file a URDF ``<mesh>`` names and its ``trimesh.Trimesh``, in its own frame with ``scale``
+    (3 numbers, or one) applied; cached and shared (do not modify it). A file that is missing, outside the
     robot's folders (:func:`resolve_mesh`; ``roots``, ``allow_outside``) or that trimesh cannot
     read is a one-line :class:`ConfigError` starting with ``what``."""
     path = resolve_mesh(uri, urdf_path, what, roots, allow_outside)
@@ -142,7 +142,7 @@ def load_link_mesh(uri: str, urdf_path: str | Path, scale=None, what: str = "mes
         mesh = load_mesh(path.resolve(), s, merge=False)
         if len(mesh.faces) == 0:
             raise ValueError("no triangles")
-        return mesh
+        return path, mesh
     except Exception as exc:  # trimesh raises assorted types on unreadable or foreign files
         reason = clip(" ".join(f"{type(exc).__name__}: {exc}".split()), 160)
         raise ConfigError(f"{what}: mesh '{clip(uri, 160)}' ({path}) could not be loaded ({reason})") from None

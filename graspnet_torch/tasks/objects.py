@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.tasks.problem import GraspProblem, Shape
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["REAL_OBJECTS", "as_mesh", "random_pose", "real_objects"]
 

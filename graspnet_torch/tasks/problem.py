@@ -21,9 +21,10 @@ from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import read_document
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
+from graspnet_torch.robot.shape import Shape, numbers, pose_degrees, unknown_keys
 from graspnet_torch.robot.transforms import rpy_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
-from graspnet_torch.tasks.shapes import Shape, check_free_contacts, numbers, obstacles_of, pose_degrees, unknown_keys
+from graspnet_torch.tasks.shapes import check_free_contacts, obstacles_of
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.io import atomic_path
-from graspnet_torch.robot.geometry import Shape, link_shapes
+from graspnet_torch.robot.geometry import LinkShape, link_shapes
 from graspnet_torch.robot.meshes import decimate
 from graspnet_torch.robot.robot import Posture, Robot
 
@@ -69,7 +69,7 @@ def _apply(T: np.ndarray, X, Y, Z):
 COLLIDING = (0.85, 0.1, 0.1)
 
 
-def draw_shapes(ax, shapes: Sequence[Shape], frames: dict[str, np.ndarray], alpha: float = 1.0,
+def draw_shapes(ax, shapes: Sequence[LinkShape], frames: dict[str, np.ndarray], alpha: float = 1.0,
                 red: frozenset[str] = frozenset()) -> np.ndarray:
     """Draw shapes at their links' world frames, the links in ``red`` red (colliding); returns
     (N, 3) points spanning the drawing."""
@@ -142,7 +142,7 @@ def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndar
     return np.asarray(mesh.vertices)
 
 
-def drawable_shapes(robot: Robot) -> tuple[list[Shape], list[str]]:
+def drawable_shapes(robot: Robot) -> tuple[list[LinkShape], list[str]]:
     """The shapes a picture draws (collision, else visual when there is no collision geometry)
     and the one-line errors of the meshes that could not be loaded (skipped)."""
     errors: list[str] = []

@@ -27,6 +27,7 @@ from graspnet_torch.files import read_document
 from graspnet_torch.io import json_digest
 from graspnet_torch.motion.trajectory import Trajectory
 from graspnet_torch.motion.validity import StateLayout, state_postures
+from graspnet_torch.robot.geometry import LinkShape
 from graspnet_torch.robot.meshes import decimate
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.settings import clip
@@ -125,7 +126,7 @@ def _motion(file: Path, data: Any, robot: Robot) -> Trajectory | None:
     return motion
 
 
-def _shape_mesh(shape):
+def _shape_mesh(shape: LinkShape):
     """A link shape as a trimesh in its own frame."""
     import trimesh
 

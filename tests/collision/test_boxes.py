@@ -13,7 +13,7 @@ import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene, environment_obstacles
 from graspnet_torch.collision.boxes import boxes_apart, link_box
 from graspnet_torch.collision.geometry import fcl_geometry, link_geometry
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import LinkShape, link_shapes
 from graspnet_torch.robot.robot import Posture
 from graspnet_torch.robot.transforms import pose_to_matrix_np, rt_to_pose
 
@@ -49,12 +49,10 @@ def test_the_margin_makes_near_boxes_meet():
 @pytest.mark.parametrize("kind, size", [("box", (0.1, 0.04, 0.2)), ("cylinder", (0.03, 0.2)), ("sphere", (0.05,))])
 def test_a_shape_lies_inside_its_box(kind, size):
     """Points of the shape's surface (FCL's own geometry, sampled by distance queries) lie in its box."""
-    from graspnet_torch.robot.geometry import Shape as LinkShape
-
     origin = np.eye(4)
     origin[:3, :3] = Rotation.from_euler("xyz", [20, -40, 70], degrees=True).as_matrix()
     origin[:3, 3] = [0.1, -0.2, 0.3]
-    shape = LinkShape("link", kind, size, origin)
+    shape = LinkShape.placed("link", kind, size, origin)
     T, half = link_box(shape)
     obj = fcl.CollisionObject(link_geometry(shape), fcl.Transform(origin[:3, :3], origin[:3, 3]))
     rng = np.random.default_rng(0)

@@ -12,8 +12,7 @@ import graspnet_torch as gt
 from graspnet_torch.collision.self_collision import SMALL_BOX_M, SelfCollisionModel
 from graspnet_torch.collision.spheres import CLUSTER, shape_spheres, sphere_clusters
 from graspnet_torch.robot.frames import Attachment, link_attachments
-from graspnet_torch.robot.geometry import Shape as LinkShape
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import LinkShape, link_shapes
 
 KW = {"dtype": torch.float64, "device": "cpu"}
 
@@ -50,7 +49,7 @@ def test_clusters_hold_every_sphere_in_its_attachment_frame(name):
 
 
 def _cylinder(link: str, r: float, length: float) -> LinkShape:
-    return LinkShape(link, "cylinder", (r, length), np.eye(4))
+    return LinkShape.placed(link, "cylinder", (r, length), np.eye(4))
 
 
 def _frames(shift: np.ndarray) -> torch.Tensor:
@@ -67,9 +66,10 @@ def test_capsules_and_boxes_hit_within_their_radii_and_the_clearance():
     a capsule against a large box (a box for self-collision) when the capsule's axis comes within
     r + clearance of the box's face; two boxes are left unchecked; dropped pairs never hit."""
     r, clearance = 0.02, 0.005
-    big = LinkShape("c", "box", (0.4, 0.4, 0.4), np.eye(4))  # half 0.2 > SMALL_BOX_M: a box
+    big = LinkShape.placed("c", "box", (0.4, 0.4, 0.4), np.eye(4))  # half 0.2 > SMALL_BOX_M: a box
     assert 0.2 > SMALL_BOX_M
-    shapes = [_cylinder("a", r, 0.2), _cylinder("b", r, 0.2), big, LinkShape("d", "box", (0.3, 0.3, 0.3), np.eye(4))]
+    small = LinkShape.placed("d", "box", (0.3, 0.3, 0.3), np.eye(4))
+    shapes = [_cylinder("a", r, 0.2), _cylinder("b", r, 0.2), big, small]
     attach = {"a": Attachment("body", 0), "b": Attachment("body", 1), "c": Attachment("body", 2),
               "d": Attachment("body", 0)}
     pairs = [("a", "b"), ("a", "c"), ("c", "d")]

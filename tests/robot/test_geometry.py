@@ -8,9 +8,12 @@ import numpy as np
 import pytest
 
 import graspnet_torch as gt
+import graspnet_torch.tasks
 from graspnet_torch.robot import UrdfModel
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import LinkShape, link_shapes
 from graspnet_torch.robot.meshes import decimate, mesh_candidates
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from tests.mesh_robots import PALM_EXTENTS, mesh_hand_urdf, write_box_mesh
 
 
@@ -30,12 +33,30 @@ def test_package_uri_against_a_folder_named_like_the_package_with_scale(tmp_path
     geometry = '<mesh filename="package://my_hand/meshes/palm.stl" scale="2 1 0.5"/>'
     model = _model(tmp_path / "my_hand" / "urdf", geometry)
     shape = _palm(model)
-    assert shape.kind == "mesh" and shape.size == (2.0, 1.0, 0.5)
+    assert shape.kind == "mesh" and shape.size == () and shape.shape.scale == (2.0, 1.0, 0.5)
+    assert shape.shape.mesh.resolve() == (tmp_path / "my_hand" / "meshes" / "palm.stl").resolve()
+    np.testing.assert_array_equal(shape.shape.pose, np.zeros(6))
+    np.testing.assert_allclose(shape.shape.trimesh().bounds, shape.mesh.bounds, atol=1e-12)  # the one Shape's mesh
     np.testing.assert_allclose(shape.mesh.extents, np.multiply(PALM_EXTENTS, (2, 1, 0.5)), atol=1e-9)
     np.testing.assert_allclose(shape.origin, np.eye(4))
     assert _palm(model).mesh is shape.mesh  # loaded once, cached
     cylinders = [s for s in link_shapes(model) if s.kind == "cylinder"]
     assert len(cylinders) == 4
+
+
+def test_one_shape_class_for_problems_and_links():
+    """gt.Shape, graspnet_torch.tasks.Shape and a link's shape are one class; a link shape's origin
+    is its shape's pose as a matrix, exactly; a placed primitive keeps its origin exact."""
+    assert gt.Shape is Shape and graspnet_torch.tasks.Shape is Shape
+    shapes = link_shapes(gt.load_robot("arm_hand").urdf)
+    assert shapes and all(isinstance(s.shape, Shape) and s.kind == s.shape.kind for s in shapes)
+    assert any(np.any(s.shape.pose) for s in shapes)
+    for s in shapes:
+        np.testing.assert_array_equal(s.origin, pose_to_matrix_np(s.shape.pose))
+    origin = pose_to_matrix_np([0.1, -0.2, 0.3, 0.4, -0.5, 0.6]) @ pose_to_matrix_np([0, 0, 0, 0.7, 0.2, -0.1])
+    placed = LinkShape.placed("l", "box", (0.1, 0.2, 0.3), origin)
+    assert np.array_equal(placed.origin, origin) and placed.size == (0.1, 0.2, 0.3)
+    np.testing.assert_allclose(pose_to_matrix_np(placed.shape.pose), origin, atol=1e-12)
 
 
 def test_package_uri_against_an_installed_python_package(tmp_path, monkeypatch):
