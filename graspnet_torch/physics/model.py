@@ -66,19 +66,25 @@ class GraspModel:
 
 
 def _fmt(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in np.ravel(values))
+    return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
 def _quat(R: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation -> (4,) quaternion (w, x, y, z)."""
-    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2
-    x = math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
-    y = math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2
-    z = math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2
-    x = math.copysign(x, R[2, 1] - R[1, 2])
-    y = math.copysign(y, R[0, 2] - R[2, 0])
-    z = math.copysign(z, R[1, 0] - R[0, 1])
-    q = np.array([w, x, y, z])
+    """(3, 3) rotation -> (4,) unit quaternion (w, x, y, z), from its largest component (exact to
+    rounding everywhere)."""
+    t = np.trace(R)
+    if t >= max(R[0, 0], R[1, 1], R[2, 2]):
+        w = math.sqrt(1.0 + t) / 2
+        q = [w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)]
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        v = np.zeros(3)
+        v[i] = math.sqrt(max(0.0, 1.0 + R[i, i] - R[j, j] - R[k, k])) / 2
+        v[j] = (R[j, i] + R[i, j]) / (4 * v[i])
+        v[k] = (R[k, i] + R[i, k]) / (4 * v[i])
+        q = [(R[k, j] - R[j, k]) / (4 * v[i]), *v]
+    q = np.asarray(q)
     return q / np.linalg.norm(q)
 
 
