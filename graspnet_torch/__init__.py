@@ -11,6 +11,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
 from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
+from graspnet_torch.physics import PhysicsCfg, PhysicsReport, simulate_grasp
 from graspnet_torch.robot import (
     ChainKernel,
     ChainSpec,
@@ -70,6 +71,8 @@ __all__ = [
     "GripperCfg",
     "InternalError",
     "NoiseCfg",
+    "PhysicsCfg",
+    "PhysicsReport",
     "PolishCfg",
     "PoseBounds",
     "Posture",
@@ -99,6 +102,7 @@ __all__ = [
     "random_sequence",
     "robot_kind",
     "set_default_threads",
+    "simulate_grasp",
     "solve",
     "solve_many",
 ]
