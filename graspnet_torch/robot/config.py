@@ -23,7 +23,19 @@ from graspnet_torch.robot.kinds import ProblemSchema, robot_kind
 from graspnet_torch.robot.meshes import package_candidates, package_roots
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
-__all__ = ["ChainCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg", "robot_cfg_from_setting"]
+__all__ = ["ChainCfg", "PadCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg",
+           "robot_cfg_from_setting"]
+
+
+@dataclass(frozen=True)
+class PadCfg:
+    """A finger's pad as its config gives it (``pad: {link: <link>, point: [x, y, z], normal: [nx, ny, nz]}``):
+    a point (m) and an outward unit normal (normalised here) in ``link``'s frame; the link is checked
+    against the URDF by :func:`graspnet_torch.robot.pads.finger_pads`."""
+
+    link: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -34,11 +46,14 @@ class ChainCfg:
         base, tip: link names; a finger's ``base`` defaults to the palm link.
         tip_offset: (x, y, z) of the tip point in the ``tip`` link's frame (m): a fingertip that is
             not a URDF link (``tip: {link: <link>, offset: [x, y, z]}`` in the file).
+        pad: a finger's pad (``pad:`` in the file), or None: derived from the URDF
+            (:mod:`graspnet_torch.robot.pads`).
     """
 
     base: str
     tip: str
     tip_offset: tuple[float, float, float] | None = None
+    pad: PadCfg | None = None
 
 
 @dataclass(frozen=True)
@@ -251,8 +266,8 @@ def _urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: boo
 
 def _finger(value: Any, where: str, palm: str) -> ChainCfg:
     """``{base: <link>, tip: <link>}``; ``base`` may be left out (the palm), ``tip`` may be
-    ``{link: <link>, offset: [x, y, z]}``."""
-    if not isinstance(value, Mapping) or "tip" not in value or not set(value) <= {"base", "tip"}:
+    ``{link: <link>, offset: [x, y, z]}``; an optional ``pad`` (:func:`_pad`)."""
+    if not isinstance(value, Mapping) or "tip" not in value or not set(value) <= {"base", "tip", "pad"}:
         raise ConfigError(f"{where}: expected {{base: <link>, tip: <link>}} or {{tip: {{link: <link>, offset: "
                           f"[x, y, z]}}}}, got {short(value)}")
     base = value.get("base", palm)
@@ -268,7 +283,25 @@ def _finger(value: Any, where: str, palm: str) -> ChainCfg:
         tip, offset = tip["link"], (float(xyz[0]), float(xyz[1]), float(xyz[2]))
     elif not isinstance(tip, str) or not tip:
         raise ConfigError(f"{where}: tip must be a link name or {{link: <link>, offset: [x, y, z]}}, got {short(tip)}")
-    return ChainCfg(base, tip, offset)
+    return ChainCfg(base, tip, offset, None if value.get("pad") is None else _pad(value["pad"], f"{where}.pad"))
+
+
+def _pad(value: Any, where: str) -> PadCfg:
+    """``{link: <link>, point: [x, y, z], normal: [nx, ny, nz]}``: the normal must not be zero."""
+    if not isinstance(value, Mapping) or set(value) != {"link", "point", "normal"} \
+            or not isinstance(value["link"], str) or not value["link"]:
+        raise ConfigError(f"{where}: expected {{link: <link>, point: [x, y, z], normal: [nx, ny, nz]}}, "
+                          f"got {short(value)}")
+    point = number_list(value["point"], 3, f"{where}.point", ConfigError, -MAX_LENGTH_M, MAX_LENGTH_M,
+                        "numbers (m, in the link's frame)")
+    normal = np.asarray(number_list(value["normal"], 3, f"{where}.normal", ConfigError, -1e6, 1e6,
+                                    "numbers (a direction in the link's frame)"), dtype=np.float64)
+    norm = float(np.linalg.norm(normal))
+    if not norm > 1e-9:
+        raise ConfigError(f"{where}.normal: must not be zero, got {short(value['normal'])}")
+    n = normal / norm
+    return PadCfg(value["link"], (float(point[0]), float(point[1]), float(point[2])),
+                  (float(n[0]), float(n[1]), float(n[2])))
 
 
 def _chain(value: Any, where: str) -> ChainCfg:

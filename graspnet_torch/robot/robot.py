@@ -36,6 +36,7 @@ from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.kinematics import Kinematics
 from graspnet_torch.robot.link_frames import LinkFrames
+from graspnet_torch.robot.pads import Pad, finger_pads
 from graspnet_torch.robot.shared import SharedJoints, find_shared_joints
 from graspnet_torch.robot.structure import Finger, Posture
 from graspnet_torch.robot.transforms import pose_to_matrix_np, rt_to_pose
@@ -241,6 +242,12 @@ class Robot(Kinematics, JointValues, LinkFrames):
         """Serial chains this robot evaluates: one per finger, plus the body chain, plus one per
         gripper point."""
         return self.n_fingers + (1 if self.has_body else 0) + len(self.cfg.gripper_points)
+
+    @cached_property
+    def pads(self) -> dict[str, Pad]:
+        """Finger name -> its :class:`~graspnet_torch.robot.pads.Pad` (a point and outward normal in
+        the finger's tip frame: the config's ``pad``, else derived from the URDF); {} without fingers."""
+        return finger_pads(self)
 
     @property
     def palm_bounds(self) -> PoseBounds | None:

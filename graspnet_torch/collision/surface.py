@@ -1,0 +1,168 @@
+"""An object's surface at given points: outward normals and signed distances, and where a finger's
+tip must be for its pad to touch a contact (the "surface" contact model).
+
+Primitives are measured analytically in the shape's own frame (its pose (x, y, z, rx, ry, rz),
+metres and radians, undone first):
+
+- box (full extents s): the face of the largest ``|p_i| - s_i / 2`` (the nearest face for a point
+  inside or on the surface; an edge or a corner takes one of its faces), normal ``sign(p_i) e_i``;
+- cylinder (radius r, height h along z): radial ``(x, y, 0) / rho`` where ``rho - r >= |z| - h / 2``
+  (the side is the nearer surface), else ``sign(z) e_z`` (a cap);
+- sphere: radial.
+
+A mesh object (its :func:`~graspnet_torch.collision.mesh.mesh_query`: the mesh at its scale, placed
+by its pose) is measured from the mesh: the exact closest point of its triangles; on the surface
+(within ``ON_SURFACE``) the normal is that triangle's face normal, off it the direction from the
+closest point to the point (away from it when outside, towards it when inside: the distance's
+gradient, outward either way). Distances are signed: positive outside.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from graspnet_torch.collision.mesh import mesh_query, point_triangle_distance
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
+from graspnet_torch.tasks import GraspProblem
+
+__all__ = ["ON_SURFACE", "pad_targets", "surface_distance", "surface_normals"]
+
+ON_SURFACE = 1e-7  # m: a mesh point this near its closest surface point takes that triangle's normal
+
+
+def _local(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World points (k, 3) in the shape's frame, and the shape's rotation (3, 3)."""
+    T = pose_to_matrix_np(obj.pose)
+    return (np.asarray(points, dtype=np.float64).reshape(-1, 3) - T[:3, 3]) @ T[:3, :3], T[:3, :3]
+
+
+def _primitive(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals (k, 3) and signed distances (k,) of a primitive, in its frame."""
+    k = len(p)
+    if obj.kind == "sphere":
+        norm = np.linalg.norm(p, axis=1)
+        n = np.where(norm[:, None] > 0, p / np.where(norm > 0, norm, 1.0)[:, None], [0.0, 0.0, 1.0])
+        return n, norm - obj.size[0]
+    if obj.kind == "box":
+        q = np.abs(p) - np.asarray(obj.size) / 2  # (k, 3) beyond each face pair
+        axis = np.argmax(q, axis=1)
+        n = np.zeros((k, 3))
+        n[np.arange(k), axis] = np.where(p[np.arange(k), axis] < 0, -1.0, 1.0)
+    else:  # cylinder
+        rho = np.linalg.norm(p[:, :2], axis=1)
+        q = np.stack([rho - obj.size[0], np.abs(p[:, 2]) - obj.size[1] / 2], axis=1)
+        side = q[:, 0] >= q[:, 1]
+        radial = np.concatenate([p[:, :2] / np.where(rho > 0, rho, 1.0)[:, None], np.zeros((k, 1))], axis=1)
+        radial[rho == 0] = [1.0, 0.0, 0.0]
+        cap = np.zeros((k, 3))
+        cap[:, 2] = np.where(p[:, 2] < 0, -1.0, 1.0)
+        n = np.where(side[:, None], radial, cap)
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    return n, outside + np.minimum(q.max(axis=1), 0.0)
+
+
+def _closest_on_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(3,) the point of triangle abc nearest p (3,): by its Voronoi regions (Ericson, Real-Time
+    Collision Detection, 5.1.5)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = ab @ ap, ac @ ap
+    if d1 <= 0 and d2 <= 0:
+        return a
+    bp = p - b
+    d3, d4 = ab @ bp, ac @ bp
+    if d3 >= 0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        return a + ab * (d1 / (d1 - d3))
+    cp = p - c
+    d5, d6 = ab @ cp, ac @ cp
+    if d6 >= 0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        return a + ac * (d2 / (d2 - d6))
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    denom = va + vb + vc
+    return a + ab * (vb / denom) + ac * (vc / denom)
+
+
+@lru_cache(maxsize=32)
+def _centres(path: Path, scale: float) -> tuple[cKDTree, float]:
+    """A KD-tree of a mesh object's triangle centres and the largest centre-to-vertex distance."""
+    triangles = mesh_query(Shape("mesh", (), np.zeros(6), path, scale))[0].triangles
+    centres = triangles.mean(1)
+    return cKDTree(centres), float(np.linalg.norm(triangles - centres[:, None], axis=-1).max())
+
+
+def _mesh(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals (k, 3) and signed distances (k,) of a mesh object, in its frame: each
+    point's nearest triangle among those whose centres could be near enough (a KD-tree), exactly."""
+    query, _ = mesh_query(obj)
+    tree, reach = _centres(Path(obj.mesh).resolve(), obj.scale)
+    triangles, face_normals = query.triangles, np.asarray(query.mesh.face_normals, dtype=np.float64)
+    near, _ = tree.query(p)
+    sign = np.where(query.inside(p), -1.0, 1.0)
+    n, dist = np.zeros_like(p), np.zeros(len(p))
+    for i in range(len(p)):
+        idx = np.asarray(tree.query_ball_point(p[i], near[i] + reach + 1e-12), dtype=int)
+        j = int(idx[np.argmin(point_triangle_distance(p[i:i + 1], triangles[idx])[0])])
+        closest = _closest_on_triangle(p[i], *triangles[j])
+        dist[i] = float(np.linalg.norm(p[i] - closest))
+        n[i] = sign[i] * (p[i] - closest) / dist[i] if dist[i] > ON_SURFACE else face_normals[j]
+    return n, sign * dist
+
+
+def _measure(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World normals (k, 3) and signed distances (k,)."""
+    if obj.kind not in ("box", "cylinder", "sphere", "mesh"):
+        raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
+    p, R = _local(obj, points)
+    n, d = _mesh(obj, p) if obj.kind == "mesh" else _primitive(obj, p)
+    return n @ R.T, d
+
+
+def surface_normals(obj: Shape, points: np.ndarray) -> np.ndarray:
+    """(k, 3) the object's outward unit normals, world frame, at (or nearest to) world points
+    ``points`` (k, 3) (module docstring: which face a point on an edge takes)."""
+    return _measure(obj, points)[0]
+
+
+def surface_distance(obj: Shape, points: np.ndarray) -> np.ndarray:
+    """(k,) signed distances (m) of world points ``points`` (k, 3) to the object's surface:
+    positive outside, negative inside (exact for primitives; a mesh: to its triangles, the sign by
+    its inside test, :class:`~graspnet_torch.collision.mesh.MeshQuery`)."""
+    return _measure(obj, points)[1]
+
+
+def pad_targets(robot: Robot, problem: GraspProblem) -> np.ndarray:
+    """(k, 3) world positions of the tip frames of the problem's contact fingers (its ``fingers``
+    order) that put each finger's pad (:attr:`Robot.pads <graspnet_torch.robot.robot.Robot.pads>`)
+    on its contact c with the pad normal along the object's inward normal ``-n`` (n: the outward
+    normal at c, :func:`surface_normals`).
+
+    With the tip frame's rotation R chosen so that ``R normal = -n``, the tip lies at
+    ``c - R point``; the pad point's component along its normal gives ``c + depth n``
+    (``depth = point . normal``), which is what is returned: exact for a pad on its tip's normal
+    line (every derived pad whose normal line meets the distal surface, e.g. the shipped hand's),
+    and for any other pad its sideways offset is left out (it turns with R about n, which a
+    position target cannot fix).
+    """
+    contacts = np.asarray(problem.contacts_world(), dtype=np.float64).reshape(-1, 3)
+    if not len(contacts):
+        return contacts
+    if problem.object is None:
+        raise ProblemError(f"{problem.source}: the surface contact model needs the problem's object (its "
+                           f"normals at the contacts)")
+    pads = robot.pads
+    depth = np.array([pads[robot.finger_names[robot.finger_index(f)]].depth for f in problem.fingers])
+    return contacts + depth[:, None] * surface_normals(problem.object, contacts)

@@ -1,0 +1,154 @@
+"""Finger pads (graspnet_torch.robot.pads): derived from the URDF's distal links and closing
+directions, or given by the robot config (read, moved into the tip frame, checked)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+import yaml
+
+import graspnet_torch as gt
+from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.robot.geometry import link_shapes
+
+TRIFINGER = repo_root() / "examples" / "trifinger" / "trifinger.yaml"
+HAS_TRIFINGER = importlib.util.find_spec("robot_properties_fingers") is not None
+HAND_RADII = {"thumb": 0.008075, "index": 0.007225, "middle": 0.007225, "ring": 0.0068, "pinky": 0.00595}
+
+
+def _closing_directions(robot: gt.Robot, eps: float = 1e-6) -> dict[str, np.ndarray]:
+    """Finger name -> unit direction, in its tip frame, in which the tip moves as its last free
+    joint increases at the home posture: finite differences of the link frames (an oracle
+    independent of the finger kernels' Jacobians)."""
+    home = robot.home_posture()
+    frames = robot.link_frames(home)
+    out = {}
+    for k, (name, finger) in enumerate(robot.fingers.items()):
+        moved = home.fingers.clone()
+        moved[k, finger.n_joints - 1] += eps
+        after = robot.link_frames(gt.Posture(home.palm_pose, moved, home.body))
+        offset = np.array([*(robot.cfg.fingers[name].tip_offset or (0.0, 0.0, 0.0)), 1.0])
+        tip = finger.chain.tip
+        before_p, after_p = (frames[tip] @ offset)[:3], (after[tip] @ offset)[:3]
+        v = frames[tip][:3, :3].T @ (after_p - before_p)
+        out[name] = v / np.linalg.norm(v)
+    return out
+
+
+def _distal_sphere_radius(robot: gt.Robot, link: str) -> float:
+    return max(s.size[0] for s in link_shapes(robot.urdf, "collision") if s.link == link and s.kind == "sphere")
+
+
+@pytest.mark.parametrize("name", ["hand", "arm_hand"])
+def test_shipped_hand_pads_are_the_distal_spheres_along_the_closing_direction(robots, name):
+    robot = robots[name]
+    pads = robot.pads
+    assert list(pads) == list(robot.finger_names)
+    closing = _closing_directions(robot)
+    for finger, pad in pads.items():
+        assert pad.link == f"{finger}_distal"
+        r = _distal_sphere_radius(robot, pad.link)
+        assert r == pytest.approx(HAND_RADII[finger])
+        assert abs(pad.depth - r) < 1e-4
+        np.testing.assert_allclose(pad.normal, [0.0, 1.0, 0.0], atol=1e-9)  # flexion about z moves the tip to +y
+        np.testing.assert_allclose(pad.normal, closing[finger], atol=1e-6)
+        np.testing.assert_allclose(pad.point, [0.0, r, 0.0], atol=1e-9)
+    assert robot.pads is pads  # cached
+
+
+def test_a_gripper_has_no_pads(robots):
+    assert robots["manus"].pads == {}
+
+
+@pytest.mark.skipif(not HAS_TRIFINGER, reason="the TriFinger URDF needs the 'robot_properties_fingers' package")
+def test_trifinger_pads_lie_on_its_tip_meshes_along_the_closing_direction():
+    import trimesh
+
+    robot = gt.load_robot(TRIFINGER)
+    pads = robot.pads
+    closing = _closing_directions(robot)
+    meshes = {s.link: s for s in link_shapes(robot.urdf, "collision") if s.kind == "mesh"}
+    assert set(pads) == {"f0", "f120", "f240"}
+    for finger, pad in pads.items():
+        assert pad.link == robot.fingers[finger].chain.tip
+        np.testing.assert_allclose(pad.normal, closing[finger], atol=1e-6)
+        assert np.linalg.norm(pad.normal) == pytest.approx(1.0)
+        shape = meshes[pad.link]
+        vertices = np.asarray(shape.mesh.vertices) @ shape.origin[:3, :3].T + shape.origin[:3, 3]
+        surface = trimesh.Trimesh(vertices, np.asarray(shape.mesh.faces), process=False)
+        _, dist, _ = trimesh.proximity.closest_point(surface, pad.point[None])
+        assert dist[0] < 1e-6  # on the tip's surface
+        assert pad.depth == pytest.approx(float((vertices @ pad.normal).max()), abs=5e-4)  # the support height
+        assert 0.005 < pad.depth < 0.02
+
+
+def _hand_with(tmp_path, finger: str = "index", **chain) -> gt.Robot:
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    data["fingers"][finger] = {"base": f"{finger}_base", "tip": f"{finger}_tip", **chain}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return gt.load_robot(path)
+
+
+def test_a_config_pad_is_read_and_moved_into_the_tip_frame(tmp_path):
+    robot = _hand_with(tmp_path, pad={"link": "index_distal", "point": [0.015, 0.007, 0.001], "normal": [0, 2, 0]})
+    cfg = robot.cfg.fingers["index"].pad
+    assert cfg.link == "index_distal" and cfg.normal == (0.0, 1.0, 0.0)
+    pad = robot.pads["index"]
+    assert pad.link == "index_distal"
+    np.testing.assert_allclose(pad.point, [0.015 - 0.01843, 0.007, 0.001], atol=1e-12)  # tip: x = 0.01843 on it
+    np.testing.assert_allclose(pad.normal, [0.0, 1.0, 0.0])
+    assert pad.depth == pytest.approx(0.007)
+    assert robot.pads["middle"].depth == pytest.approx(0.007225)  # the others are still derived
+
+
+def test_a_config_pad_on_the_tip_link_with_a_tip_offset(tmp_path):
+    robot = _hand_with(tmp_path, tip={"link": "index_distal", "offset": [0.01, 0.0, 0.0]},
+                       pad={"link": "index_distal", "point": [0.01843, 0.0, 0.007225], "normal": [0, 0, 1]})
+    pad = robot.pads["index"]
+    np.testing.assert_allclose(pad.point, [0.00843, 0.0, 0.007225], atol=1e-12)
+    np.testing.assert_allclose(pad.normal, [0.0, 0.0, 1.0])
+    derived = _hand_with(tmp_path, tip={"link": "index_distal", "offset": [0.01843, 0.0, 0.0]}).pads["index"]
+    np.testing.assert_allclose(derived.point, [0.0, 0.007225, 0.0], atol=1e-9)
+
+
+@pytest.mark.parametrize(("link", "message"), [
+    ("index_nail", r"fingers\.index\.pad\.link: link 'index_nail' is not in hand\.urdf"),
+    ("middle_distal", r"fingers\.index\.pad\.link: link 'middle_distal' is not the tip link 'index_tip' of finger "
+                      r"'index' or one of its ancestors"),
+    ("index_middle", r"fingers\.index\.pad\.link: link 'index_middle' is not rigidly attached to the tip 'index_tip' "
+                     r"\(revolute joint 'index_dip' between them\)"),
+])
+def test_a_config_pad_on_a_wrong_link_is_refused_in_one_line(tmp_path, link, message):
+    robot = _hand_with(tmp_path, pad={"link": link, "point": [0, 0, 0], "normal": [0, 1, 0]})
+    with pytest.raises(gt.ConfigError, match=message) as info:
+        _ = robot.pads
+    assert "\n" not in str(info.value) and "robot.yaml" in str(info.value)
+
+
+@pytest.mark.parametrize(("pad", "message"), [
+    ({"link": "index_distal", "point": [0, 0, 0], "normal": [0, 0, 0]},
+     r"fingers\.index\.pad\.normal: must not be zero"),
+    ({"link": "index_distal", "point": [0, 0], "normal": [0, 1, 0]}, r"fingers\.index\.pad\.point: expected 3 numbers"),
+    ({"link": "index_distal", "point": [0, 0, 0]}, r"fingers\.index\.pad: expected \{link: <link>, point"),
+    ({"link": "", "point": [0, 0, 0], "normal": [0, 1, 0]}, r"fingers\.index\.pad: expected"),
+    ({"link": "index_distal", "point": [0, 0, 0], "normal": [0, "up", 0]}, r"fingers\.index\.pad\.normal\[1\]"),
+])
+def test_a_bad_config_pad_is_refused_when_the_config_loads(tmp_path, pad, message):
+    with pytest.raises(gt.ConfigError, match=message) as info:
+        _hand_with(tmp_path, pad=pad)
+    assert "\n" not in str(info.value) and "robot.yaml" in str(info.value)
+
+
+def test_pads_do_not_depend_on_the_home_posture(tmp_path):
+    """The last joint's closing direction is constant in the tip frame: another home gives the same pads."""
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    data["home"] = {"index_mcp": 60, "index_pip": 70, "index_dip": 40, "index_abd": -10}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    bent = gt.load_robot(path).pads["index"]
+    straight = gt.load_robot("hand").pads["index"]
+    np.testing.assert_allclose(bent.normal, straight.normal, atol=1e-12)
+    np.testing.assert_allclose(bent.point, straight.point, atol=1e-12)
