@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.proxy import CollisionProxy
-from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.collision.scene import OBJECT_TOLERANCE_M, CollisionScene
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -57,15 +57,21 @@ def _cached(cache: OrderedDict[tuple, T], key: tuple, build: Callable[[], T]) ->
 
 
 def proxy_for(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
-              device: torch.device | str = "cpu", clearance: float = 0.0) -> CollisionProxy:
-    """The torch collision proxy of a robot and a problem (or a batch), built once per geometry."""
+              device: torch.device | str = "cpu", clearance: float = 0.0, object_tolerance: float = OBJECT_TOLERANCE_M,
+              touching: bool = True) -> CollisionProxy:
+    """The torch collision proxy of a robot and a problem (or a batch), built once per geometry
+    and rule (``object_tolerance``, ``touching``: :class:`CollisionProxy`)."""
     problems = (problem,) if not isinstance(problem, Sequence) else tuple(problem)
-    key = (id(robot), tuple(geometry_key(p) for p in problems), dtype, str(device), clearance)
+    key = (id(robot), tuple(geometry_key(p) for p in problems), dtype, str(device), clearance, object_tolerance,
+           touching)
     arg = problems[0] if len(problems) == 1 and not isinstance(problem, Sequence) else list(problems)
-    return _cached(_PROXIES, key, lambda: CollisionProxy(robot, arg, dtype=dtype, device=device,
-                                                         clearance=clearance))
+    return _cached(_PROXIES, key, lambda: CollisionProxy(robot, arg, object_tolerance, dtype=dtype, device=device,
+                                                         clearance=clearance, touching=touching))
 
 
-def scene_for(robot: Robot, problem: GraspProblem) -> CollisionScene:
-    """The FCL collision scene of a robot and a problem, built once per geometry."""
-    return _cached(_SCENES, (id(robot), geometry_key(problem)), lambda: CollisionScene(robot, problem))
+def scene_for(robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M,
+              touching: bool = True) -> CollisionScene:
+    """The FCL collision scene of a robot and a problem, built once per geometry and rule
+    (``object_tolerance``, ``touching``: :class:`CollisionScene`)."""
+    return _cached(_SCENES, (id(robot), geometry_key(problem), object_tolerance, touching),
+                   lambda: CollisionScene(robot, problem, object_tolerance, touching))

@@ -58,6 +58,10 @@ class CollisionProxy:
             the count at zero with a margin stays clear of
             the proxy's approximation error (FCL, with no margin, has the last word).
 
+        touching: whether the contact fingers' distal links may touch the object at any depth
+            (the point contact model); False: they count as every link does, beyond
+            ``object_tolerance`` (the surface model).
+
     Call :meth:`count` with the palm frame, the body joints (robots with an arm) and every
     finger's joints. Two phases, as FCL: each link's spheres are cut into clusters of at most
     ``CLUSTER`` neighbours, each with a bounding sphere; a cluster's spheres are placed and tested
@@ -76,13 +80,14 @@ class CollisionProxy:
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], object_tolerance: float = 0.002,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0):
+                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0,
+                 touching: bool = True):
         self.robot = robot
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         problem = problems[0]
         self.n_problems = len(problems)
         shapes = link_shapes(robot.urdf, "collision")
-        touching = CollisionScene.distal_links(robot, shapes, problem.fingers)
+        touching_links = CollisionScene.distal_links(robot, shapes, problem.fingers)
         attach = link_attachments(robot, [shape.link for shape in shapes])
         self.body_levels = max((a.level for a in attach.values() if a.kind == "body"), default=0)
         self.finger_levels = max((a.level for a in attach.values() if a.kind == "finger"), default=0)
@@ -119,7 +124,7 @@ class CollisionProxy:
         if problem.object is not None:
             elements.append(problem.object)
             margin.append(object_tolerance - clearance)
-            exempt.append(touching)
+            exempt.append(touching_links if touching else set())
         self.n_elements = len(elements)
         batch = [elements] + [_elements_like(robot, p, elements, k) for k, p in enumerate(problems[1:], 1)]
         self.groups = primitive_groups(batch, kw, len(problem.obstacles) if robot.cfg.floor is not None else None)

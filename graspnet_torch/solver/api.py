@@ -10,7 +10,6 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.fcnn.checkpoint import finger_ik_of, robot_checkpoint
@@ -25,18 +24,19 @@ from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.solver.config import DEFAULT_TRIALS, NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.dls import run_dls
-from graspnet_torch.solver.environment import Environment, Report
-from graspnet_torch.solver.environments import build_environment, environment_class
+from graspnet_torch.solver.environment import Environment
+from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.loop import LoopOutcome, Starts, enough_succeeded, run_loop
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.proposals import proposal_starts
-from graspnet_torch.solver.result import GraspResult, TrialResult
+from graspnet_torch.solver.result import GraspResult
+from graspnet_torch.solver.trials import trial_results
 from graspnet_torch.srv.network import SRVNetCfg
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import reference_posture
 from graspnet_torch.threads import torch_threads
 
-__all__ = ["as_problem", "build_environment", "failure_reason", "reference_posture", "result_of", "robot_and_ik",
+__all__ = ["as_problem", "build_environment", "reference_posture", "result_of", "robot_and_ik",
            "search", "settings_of", "solve", "solve_many", "solve_with", "starts_from_proposals", "trial_posture"]
 # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
@@ -142,7 +142,7 @@ def _settings_dict(trials: int, solver: SolverCfg, srv: SRVNetCfg, reward: Rewar
 def result_of(robot: Robot, problem: GraspProblem, env: Environment, outcome: LoopOutcome, trials: int, seed: int,
             solver: SolverCfg, srv: SRVNetCfg, reward: RewardCfg, noise: NoiseCfg) -> GraspResult:
     report = env.report(outcome.config, outcome.evaluation)
-    results, failure = _trials(robot, problem, env, report, outcome, reward, solver)
+    results, failure = trial_results(robot, problem, env, report, outcome, reward, solver)
     return GraspResult(robot=robot.name, trials=results, problem=problem.name or problem.source, seed=seed,
                        settings=_settings_dict(trials, solver, srv, reward, noise), outcome=outcome, failure=failure)
 
@@ -315,71 +315,7 @@ def _solve_many(problems: Sequence[GraspProblem | str | Path], trials: int, seed
     settings = _settings_dict(trials, solver, srv, reward, noise)
     for problem, part, part_report in zip(batch, outcome.split(trials), report.split(trials), strict=True):
         part.wall_time_s = outcome.wall_time_s / len(batch)  # the batch's time, shared out
-        trial_results, failure = _trials(robot, problem, env, part_report, part, reward, solver)
-        results.append(GraspResult(robot=robot.name, trials=trial_results, problem=problem.name or problem.source,
+        part_results, failure = trial_results(robot, problem, env, part_report, part, reward, solver)
+        results.append(GraspResult(robot=robot.name, trials=part_results, problem=problem.name or problem.source,
                                    seed=seed, settings=dict(settings), outcome=part, failure=failure))
     return results
-
-
-def _trials(robot: Robot, problem: GraspProblem, env: Environment, report: Report, outcome: LoopOutcome,
-            reward: RewardCfg, solver: SolverCfg) -> tuple[list[TrialResult], str | None]:
-    """Per-trial results of one problem from the environment's float64 report of its reported
-    configurations: the collision count by FCL (INTERFACE.md) of each reported posture when the
-    problem has an object or obstacles, the noise-free reinforcement recomputed from them, and
-    ``success``: the grasp (the report's ``landed``: every contact within ``solver.tolerance_mm``,
-    and no collision). Also the one-line reason no trial succeeded, or None."""
-    from dataclasses import replace
-
-
-    reports = None
-    if has_environment(robot, problem):
-
-        scene = scene_for(robot, problem)
-        reports = scene.check_many([trial_posture(robot, f) for f in report.fields])
-    collisions = None if reports is None else torch.tensor([c.count for c in reports])
-    evaluation = replace(report.evaluation, collisions=collisions)
-    r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
-    out = []
-    for t, f in enumerate(report.fields):
-        count = 0 if collisions is None else int(collisions[t])
-        out.append(TrialResult(success=count == 0 and report.landed[t], iterations=int(outcome.iterations[t]),
-                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s, collisions=count,
-                               error_mm=report.error_mm[t], **f))
-    failure = None
-    if not any(t.success for t in out):
-        failure = failure_reason(robot, problem, out, reports, report.landed, solver.tolerance_mm)
-    return out, failure
-
-
-COLLISIONS_NAMED = 3  # a "colliding" failure names this many of the most frequent colliding pairs
-
-
-def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult], reports: Sequence | None,
-                   landed: Sequence[bool], tolerance_mm: float) -> str:
-    """Why no trial is a grasp, in one line: a contact out of reach of the search space (no palm
-    position or arm configuration in it brings that finger there), else every configuration that
-    reached the contacts (``landed``) colliding (with what, by FCL), else the budget ended far
-    away (the best trial's errors)."""
-    env = environment_class(robot)
-    far = env.unreachable(robot, problem)
-    if far:
-        return (f"out of reach: no configuration in the search space brings the {', '.join(far)} fingertip"
-                f"{'s' if len(far) > 1 else ''} to {'their contacts' if len(far) > 1 else 'its contact'}")
-    landed = [k for k, ok in enumerate(landed) if ok]
-    if landed and reports is not None:
-        what: dict[str, int] = {}
-        names = [f"obstacles[{k}]" for k in range(len(problem.obstacles))] + ["the floor"]
-        for k in landed:
-            rep = reports[k]
-            for link, o in rep.obstacle_pairs:
-                key = f"{link} with {names[o] if o < len(names) else f'obstacle {o}'}"
-                what[key] = what.get(key, 0) + 1
-            for link in rep.object_links:
-                what[f"{link} in the object"] = what.get(f"{link} in the object", 0) + 1
-            for a, b in rep.self_pairs:
-                what[f"{a} with {b}"] = what.get(f"{a} with {b}", 0) + 1
-        common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:COLLISIONS_NAMED])
-        return (f"colliding: all {len(landed)} configuration(s) that reached the contacts collide (FCL: {common})")
-    best = min(trials, key=lambda t: t.error_mm)
-    return (f"far: the budget ended with the best trial {env.describe(best)} after {best.iterations} iteration(s) "
-            f"(tolerance {tolerance_mm:g} mm)")

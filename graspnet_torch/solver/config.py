@@ -161,6 +161,22 @@ class SolverCfg:
         tolerance_mm: a contact finger within this of its contact (a gripper: d of eq. 26) is on
             it. A result's ``success`` means the grasp: every contact finger within it and, where
             the problem has an object or obstacles, no collision (FCL).
+        contact_model: how a contact finger touches its contact: 'surface' (its pad, a point and
+            an outward normal on its distal link (:mod:`graspnet_torch.robot.pads`), on the
+            contact, the pad facing into the object within ``normal_cone_deg``, no link deeper
+            than ``penetration_mm`` in the object), 'point' (the paper's model: the finger's tip
+            frame on the contact; the default for now), or 'auto' ('surface' where the problem has
+            an object, else 'point': without a surface there is nothing to touch). The surface
+            model turns the pads toward the object only after the search
+            (:mod:`graspnet_torch.solver.align`), which often leaves one outside the cone: it
+            becomes the default once the search itself sees the pads' normals.
+        penetration_mm: in the surface model, how deep a link of the robot (the contact
+            fingers' distal links included) may lie inside the object.
+        normal_cone_deg: in the surface model, the largest angle between a contact finger's pad
+            normal and the object's inward normal at its contact.
+        pregrasp_mm, squeeze_mm: in the surface model, the result's pre-grasp backs each contact
+            finger's pad off its contact by ``pregrasp_mm`` along the object's normal, its
+            squeeze presses it ``squeeze_mm`` further in (the fingers only; the palm and arm stay).
         stop_rule: 'grasp' (default): a trial stops once its configuration is a grasp in the
             model (every contact finger within ``tolerance_mm``, a gripper aligned, and clear
             where the collision proxy counts collisions); 'reinforcement': once its observed
@@ -208,6 +224,11 @@ class SolverCfg:
     max_iterations: int = setting(2000, lo=1, hi=10_000_000)
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
     tolerance_mm: float = setting(1.0, lo=0.0, lo_open=True, hi=1000.0)
+    contact_model: str = setting("point", choices=("auto", "surface", "point"))
+    penetration_mm: float = setting(1.0, lo=0.0, hi=100.0)
+    normal_cone_deg: float = setting(30.0, lo=0.0, hi=90.0)
+    pregrasp_mm: float = setting(10.0, lo=0.0, hi=200.0)
+    squeeze_mm: float = setting(5.0, lo=0.0, hi=50.0)
     stop_rule: str = setting("grasp", choices=("grasp", "reinforcement"))
     time_budget: float | None = setting(None, lo=0.0, lo_open=True, hi=1e7)
     stop: int | None = setting(1, lo=1, hi=1_000_000)

@@ -14,6 +14,7 @@ from torch import Tensor
 
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import has_environment
+from graspnet_torch.solver.contact import POINT_RULE, ContactRule
 from graspnet_torch.solver.evaluation import Evaluation, Report
 from graspnet_torch.solver.postures import trial_posture
 
@@ -53,8 +54,15 @@ class ReportPart(ABC):
         part = Evaluation(**{k: v[rows[at].to(v.device)] for k, v in evaluation.tensors().items()})
         report = self.report(config[rows[at].to(config.device)], part, rows[at])
         for k, trial in zip(at.tolist(), report.fields, strict=True):
-            clear[k] = scene_for(self.robot, problems[k]).check(trial_posture(self.robot, trial)).count == 0
+            rule, posture = self.rule_of(int(pid[k])), trial_posture(self.robot, trial)
+            scene = scene_for(self.robot, problems[k], rule.object_tolerance, rule.touching)
+            clear[k] = scene.check(posture).count == 0  # the pads are turned in after the search (solver/align.py)
         return clear
+
+    def rule_of(self, problem: int) -> ContactRule:
+        """The contact rule of the environment's problem ``problem`` (its index in the batch):
+        default the point model's (:mod:`graspnet_torch.solver.contact`)."""
+        return POINT_RULE
 
     # -- robot-kind knowledge needed without an environment ------------------------------------
 

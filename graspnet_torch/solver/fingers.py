@@ -12,6 +12,7 @@ from graspnet_torch.collision.cache import proxy_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.transforms import compose, rt_to_pose, transform_points, untransform_points
+from graspnet_torch.solver.contact import ContactRule, contact_rule, tip_targets
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
 from graspnet_torch.solver.whole import WholeConfiguration
 from graspnet_torch.tasks.problem import GraspProblem
@@ -69,17 +70,18 @@ class FingerEnvironment(WholeConfiguration, Environment):
         self.tolerance_mm = solver.tolerance_mm
         kw = {"dtype": dtype, "device": device}
         self.mask = self.problem_index = None
+        self.rules = [contact_rule(robot, p, solver) for p in problems]  # each problem's contact model
         if len(problems) == 1:
             self.fingers = self.problem.fingers
-            contacts64 = np.asarray(self.problem.contacts_world(), dtype=np.float64)  # (F, 3)
+            contacts64 = tip_targets(robot, self.problem, self.rules[0].model)  # (F, 3): where the tips go
         else:  # a batch: the union of the contact fingers, per-trial contacts and a mask
             used = {f for p in problems for f in p.fingers}
             self.fingers = tuple(f for f in robot.finger_names if f in used)
             column = {f: k for k, f in enumerate(self.fingers)}
             contacts = np.zeros((len(problems), len(self.fingers), 3))
             mask = np.zeros((len(problems), len(self.fingers)))
-            for i, p in enumerate(problems):
-                for f, x in zip(p.fingers, p.contacts_world(), strict=True):
+            for i, (p, rule) in enumerate(zip(problems, self.rules, strict=True)):
+                for f, x in zip(p.fingers, tip_targets(robot, p, rule.model), strict=True):
                     contacts[i, column[f]], mask[i, column[f]] = x, 1.0
             rep = np.repeat(np.arange(len(problems)), runs)
             contacts64 = contacts[rep]  # (T, F, 3)
@@ -98,10 +100,16 @@ class FingerEnvironment(WholeConfiguration, Environment):
 
         if collisions and has_environment(robot, self.problem):
 
-            self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device)
+            rule = self.rules[0]  # one proxy for the batch: its first problem's rule
+            self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device,
+                                   object_tolerance=rule.object_tolerance, touching=rule.touching)
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)
         self.counts_collisions = self.proxy is not None
+
+    def rule_of(self, problem: int) -> ContactRule:
+        """The contact rule of problem ``problem`` of the batch (its contact model)."""
+        return self.rules[problem]
 
     def proposal_input(self) -> tuple[Tensor, Tensor]:
         """One slot per robot finger: the contacts in this environment's frame (a free hand's

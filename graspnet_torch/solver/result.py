@@ -24,9 +24,12 @@ __all__ = ["ERROR_KEYS", "FIELD_ORDER", "GraspResult", "Trajectory", "TrialResul
 
 # The result JSON's trial fields in the order they are written (INTERFACE.md): the common core, then
 # what an environment adds (a fingered robot: the palm pose, joints and fingertip errors; a robot
-# with a body: its arm joints; a gripper: d, the alignment and its points).
+# with a body: its arm joints; a gripper: d, the alignment and its points), then the surface contact
+# model's (solver/contact.py) and the physics check's.
 FIELD_ORDER = ("success", "iterations", "reinforcement", "wall_time_s", "palm_pose", "joints", "fingertip_error_mm",
-               "total_error_mm", "collisions", "arm_joints", "distance_mm", "alignment", "gripper_points")
+               "total_error_mm", "collisions", "arm_joints", "distance_mm", "alignment", "gripper_points",
+               "contact_model", "pad_distance_mm", "normal_angle_deg", "penetration_mm", "pregrasp", "squeeze",
+               "physics")
 # The fields a trial may be ranked by (its error_mm), in the order they are looked for: E of eq. 3, a gripper's d.
 ERROR_KEYS = ("total_error_mm", "distance_mm")
 # A result's own keys; every other top-level key is a field of its reported trial.

@@ -188,8 +188,8 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
     """A hand whose thumb cannot stretch to its bound of link lengths (tests/odd_hands.py), a box of
     palm positions that the bound reaches but the thumb does not: the thumb's contact is out of
     reach of the search space, and a failed result says so first."""
-    from graspnet_torch.solver.api import failure_reason
     from graspnet_torch.solver.search_space import finger_reach, finger_reach_bound
+    from graspnet_torch.solver.trials import failure_reason
     from tests.odd_hands import write_oddhand
 
     robot = gt.load_robot(write_oddhand(tmp_path))

@@ -1,0 +1,138 @@
+"""A problem's trial results from its environment's float64 report: the collision count by FCL,
+the noise-free reinforcement, the contact model's fields (the surface model's pads, pre-grasp and
+squeeze: :mod:`graspnet_torch.solver.contact`), ``success`` and, where no trial succeeded, why."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from graspnet_torch.collision.cache import scene_for
+from graspnet_torch.collision.scene import has_environment
+from graspnet_torch.rewards import Reward
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.solver.align import align_pads
+from graspnet_torch.solver.config import RewardCfg, SolverCfg
+from graspnet_torch.solver.contact import (
+    ContactRule,
+    contact_rule,
+    describe_pad,
+    grasp_postures,
+    posture_fields,
+    surface_fields,
+    tip_frames,
+    tip_targets,
+    within_cone,
+)
+from graspnet_torch.solver.environment import Environment, Report
+from graspnet_torch.solver.environments import environment_class
+from graspnet_torch.solver.loop import LoopOutcome
+from graspnet_torch.solver.postures import trial_posture
+from graspnet_torch.solver.result import TrialResult
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["COLLISIONS_NAMED", "failure_reason", "trial_results"]
+
+
+def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report: Report, outcome: LoopOutcome,
+            reward: RewardCfg, solver: SolverCfg) -> tuple[list[TrialResult], str | None]:
+    """Per-trial results of one problem from the environment's float64 report of its reported
+    configurations: the collision count by FCL (INTERFACE.md) of each reported posture when the
+    problem has an object or obstacles, the noise-free reinforcement recomputed from them, and
+    ``success``: the grasp (the report's ``landed``: every contact within ``solver.tolerance_mm``,
+    and no collision; in the surface model also every pad on its contact and facing into the
+    object). Also the one-line reason no trial succeeded, or None."""
+    rule = contact_rule(robot, problem, solver)
+    postures = [trial_posture(robot, f) for f in report.fields]
+    reports = None
+    if has_environment(robot, problem):
+        reports = scene_for(robot, problem, rule.object_tolerance, rule.touching).check_many(postures)
+    collisions = None if reports is None else torch.tensor([c.count for c in reports])
+    evaluation = replace(report.evaluation, collisions=collisions)
+    r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
+    out, touching = [], list(report.landed)
+    for t, f in enumerate(report.fields):
+        count = 0 if collisions is None else int(collisions[t])
+        fields, error = dict(f), report.error_mm[t]
+        if rule.surface:  # the pads: on their contacts, facing into the object; pre-grasp and squeeze
+            fields.update(surface_fields(robot, problem, postures[t]))
+            if report.landed[t] and count == 0 and not within_cone(fields, rule.cone_deg):
+                turned = turn_pads(robot, problem, postures[t], solver, rule)
+                if turned is not None:  # the pads turned in: this posture is the trial's
+                    postures[t], f2 = turned
+                    fields.update(f2)
+                    error = f2["total_error_mm"]
+            touching[t] = touching[t] and within_cone(fields, rule.cone_deg) and \
+                max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm
+            around = grasp_postures(robot, problem, postures[t], solver)
+            if around is not None:
+                fields["pregrasp"], fields["squeeze"] = (posture_fields(robot, p) for p in around)
+        out.append(TrialResult(success=count == 0 and touching[t], iterations=int(outcome.iterations[t]),
+                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s, collisions=count,
+                               error_mm=error, **fields))
+    failure = None
+    if not any(t.success for t in out):
+        failure = failure_reason(robot, problem, out, reports, report.landed, solver.tolerance_mm)
+        if rule.surface and any(report.landed) and not any(touching):
+            worst = min((t for t, ok in enumerate(report.landed) if ok), key=lambda t: out[t].error_mm)
+            failure = f"no pad faces into the object: {describe_pad(out[worst].fields)} (solver.normal_cone_deg=" \
+                      f"{solver.normal_cone_deg:g})"
+    return out, failure
+
+
+def turn_pads(robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, rule: ContactRule
+              ) -> tuple[Posture, dict] | None:
+    """A landed, collision-free surface grasp whose pads face away, turned in (:func:`align_pads`):
+    the new posture and its fields (palm pose, joints, tip errors to their targets, the surface
+    fields), or None where the turned posture is not a grasp (a tip off its target, a pad still
+    outside the cone, a collision or a link too deep: FCL)."""
+    if robot.shared.n:
+        return None
+    turned = align_pads(robot, problem, posture, solver)
+    fields = posture_fields(robot, turned)
+    _, tips = tip_frames(robot, turned, problem.fingers)
+    errors = np.linalg.norm(tips - tip_targets(robot, problem, "surface"), axis=1) * 1000
+    fields["fingertip_error_mm"] = {f: float(e) for f, e in zip(problem.fingers, errors, strict=True)}
+    fields["total_error_mm"] = float(errors.sum())
+    fields.update(surface_fields(robot, problem, turned))
+    scene = scene_for(robot, problem, rule.object_tolerance, rule.touching)
+    if errors.max() > solver.tolerance_mm or not within_cone(fields, rule.cone_deg) or scene.check(turned).count:
+        return None
+    return turned, fields
+
+
+COLLISIONS_NAMED = 3  # a "colliding" failure names this many of the most frequent colliding pairs
+
+
+def failure_reason(robot: Robot, problem: GraspProblem, trials: Sequence[TrialResult], reports: Sequence | None,
+                   landed: Sequence[bool], tolerance_mm: float) -> str:
+    """Why no trial is a grasp, in one line: a contact out of reach of the search space (no palm
+    position or arm configuration in it brings that finger there), else every configuration that
+    reached the contacts (``landed``) colliding (with what, by FCL), else the budget ended far
+    away (the best trial's errors)."""
+    env = environment_class(robot)
+    far = env.unreachable(robot, problem)
+    if far:
+        return (f"out of reach: no configuration in the search space brings the {', '.join(far)} fingertip"
+                f"{'s' if len(far) > 1 else ''} to {'their contacts' if len(far) > 1 else 'its contact'}")
+    landed = [k for k, ok in enumerate(landed) if ok]
+    if landed and reports is not None:
+        what: dict[str, int] = {}
+        names = [f"obstacles[{k}]" for k in range(len(problem.obstacles))] + ["the floor"]
+        for k in landed:
+            rep = reports[k]
+            for link, o in rep.obstacle_pairs:
+                key = f"{link} with {names[o] if o < len(names) else f'obstacle {o}'}"
+                what[key] = what.get(key, 0) + 1
+            for link in rep.object_links:
+                what[f"{link} in the object"] = what.get(f"{link} in the object", 0) + 1
+            for a, b in rep.self_pairs:
+                what[f"{a} with {b}"] = what.get(f"{a} with {b}", 0) + 1
+        common = ", ".join(k for k, _ in sorted(what.items(), key=lambda kv: -kv[1])[:COLLISIONS_NAMED])
+        return (f"colliding: all {len(landed)} configuration(s) that reached the contacts collide (FCL: {common})")
+    best = min(trials, key=lambda t: t.error_mm)
+    return (f"far: the budget ended with the best trial {env.describe(best)} after {best.iterations} iteration(s) "
+            f"(tolerance {tolerance_mm:g} mm)")

@@ -1,0 +1,79 @@
+"""The surface contact model (solver.contact_model=surface): pads on their contacts, nothing inside
+the object, what a result reports, and that no result claims a success an independent check refuses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import graspnet_torch as gt
+from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.collision.surface import surface_normals
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.solver.contact import contact_model, tip_frames
+from graspnet_torch.solver.postures import trial_posture
+
+SURFACE = {"contact_model": "surface", "normal_cone_deg": 90.0}  # the cone open: the search finds grasps
+
+
+def _independent(robot: gt.Robot, problem: gt.GraspProblem, trial) -> tuple[float, np.ndarray, np.ndarray]:
+    """Deepest link in the object (mm, FCL with no tolerance and no exempt link), each pad's distance
+    to its contact (mm) and its normal's angle to the inward normal (degrees), recomputed here."""
+    posture = trial_posture(robot, trial)
+    report = CollisionScene(robot, problem, object_tolerance=0.0, touching=False).check(posture)
+    deepest = max(report.object_links.values(), default=0.0) * 1000
+    R, t = tip_frames(robot, posture, problem.fingers)
+    contacts = problem.contacts_world()
+    depth = np.array([robot.pads[f].depth for f in problem.fingers])
+    distance = np.abs(np.linalg.norm(contacts - t, axis=1) - depth) * 1000
+    normals = np.einsum("kij,kj->ki", R, np.stack([robot.pads[f].normal for f in problem.fingers]))
+    cos = np.sum(normals * -surface_normals(problem.object, contacts), axis=1)
+    return deepest, distance, np.degrees(np.arccos(np.clip(cos, -1, 1)))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task", ["glass3", "block5"])
+def test_a_surface_success_is_one_an_independent_check_accepts(task):
+    robot, problem = gt.load_robot("hand"), gt.GraspProblem.from_task(task)
+    result = gt.solve(problem, trials=8, seed=0, solver=SURFACE)
+    assert result.success, result.failure
+    for trial in result.trials:
+        assert trial.contact_model == "surface"
+        assert set(trial.pad_distance_mm) == set(problem.fingers) == set(trial.normal_angle_deg)
+        deepest, distance, angle = _independent(robot, problem, trial)
+        assert trial.penetration_mm == pytest.approx(deepest, abs=1e-6)
+        np.testing.assert_allclose(list(trial.pad_distance_mm.values()), distance, atol=1e-6)
+        np.testing.assert_allclose(list(trial.normal_angle_deg.values()), angle, atol=1e-6)
+        if trial.success:  # nothing deeper than solver.penetration_mm, every pad on its contact
+            assert deepest <= 1.0 and distance.max() <= 1.0 and trial.collisions == 0
+        assert {"palm_pose", "joints"} <= set(trial.pregrasp) and {"palm_pose", "joints"} <= set(trial.squeeze)
+
+
+@pytest.mark.slow
+def test_the_pads_rest_on_the_surface_where_the_point_model_sinks_the_tips_in():
+    """The point model puts the tip frames (the distal spheres' centres) on the contacts: every
+    contact finger a radius inside the object; the surface model's tips lie a pad depth outside."""
+    robot, problem = gt.load_robot("hand"), gt.GraspProblem.from_task("glass3")
+    point = gt.solve(problem, trials=4, seed=0).best
+    surface = gt.solve(problem, trials=8, seed=0, solver=SURFACE).best
+    assert point.contact_model is None and point.penetration_mm is None  # the paper's result, as it was
+    deep_point = _independent(robot, problem, point)[0]
+    deep_surface = _independent(robot, problem, surface)[0]
+    assert deep_point > 5.0 > 1.0 >= deep_surface
+
+
+def test_the_model_is_chosen_from_the_setting_and_the_problem():
+    robot = gt.load_robot("hand")
+    cfg = gt.SolverCfg
+    with_object = gt.GraspProblem.from_task("glass3")
+    without = gt.random_reachable_problem(robot, 0)
+    assert contact_model(robot, with_object, cfg()) == "point"  # the default, for now
+    assert contact_model(robot, with_object, cfg(contact_model="auto")) == "surface"
+    assert contact_model(robot, without, cfg(contact_model="auto")) == "point"
+    assert contact_model(gt.load_robot("manus"), gt.GraspProblem.from_task("cube"), cfg(contact_model="auto")) == "point"
+    with pytest.raises(ProblemError, match="contact_model=surface needs an object"):
+        contact_model(robot, without, cfg(contact_model="surface"))
+
+
+def test_the_paper_preset_keeps_the_point_model():
+    assert gt.SolverCfg.paper().contact_model == "point"
