@@ -70,7 +70,8 @@ def test_the_model_is_chosen_from_the_setting_and_the_problem():
     assert contact_model(robot, with_object, cfg()) == "point"  # the default, for now
     assert contact_model(robot, with_object, cfg(contact_model="auto")) == "surface"
     assert contact_model(robot, without, cfg(contact_model="auto")) == "point"
-    assert contact_model(gt.load_robot("manus"), gt.GraspProblem.from_task("cube"), cfg(contact_model="auto")) == "point"
+    manus, cube = gt.load_robot("manus"), gt.GraspProblem.from_task("cube")
+    assert contact_model(manus, cube, cfg(contact_model="auto")) == "point"  # a gripper has no pads
     with pytest.raises(ProblemError, match="contact_model=surface needs an object"):
         contact_model(robot, without, cfg(contact_model="surface"))
 
