@@ -10,11 +10,13 @@ on the robot's kind. Every method is batched over leading dimensions unless it s
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.structure import Posture
 from graspnet_torch.robot.transforms import rt_to_pose
@@ -80,6 +82,13 @@ class Head:
         """The links' names and world poses (B, L, 4, 4) from head values (B, n) and fingers (B, F, j)."""
         raise NotImplementedError
 
+    def from_reference(self, palm_pose: Sequence[float] | None, arm_joints: Mapping[str, float] | None,
+                       where: str) -> Tensor:
+        """The head values (n,) a problem's reference posture gives (its ``palm_pose``, m and rad;
+        or its ``arm_joints`` by name, rad or m, the others at home); ``where`` names it in a
+        refusal (:class:`~graspnet_torch.errors.ProblemError`)."""
+        raise NotImplementedError
+
 
 class FreePalm(Head):
     """A free hand: the palm pose (x, y, z in m, rx, ry, rz in rad), unbounded."""
@@ -109,6 +118,12 @@ class FreePalm(Head):
 
     def link_frames(self, head: Tensor, q: Tensor) -> tuple[list[str], np.ndarray]:
         return self.robot.link_frames_of(None, q, head)
+
+    def from_reference(self, palm_pose: Sequence[float] | None, arm_joints: Mapping[str, float] | None,
+                       where: str) -> Tensor:
+        if palm_pose is None:
+            raise ProblemError(f"{where}: reference.palm_pose: a free hand's reference gives its palm pose")
+        return torch.as_tensor(palm_pose, dtype=torch.float64)
 
 
 class BodyChain(Head):
@@ -141,3 +156,15 @@ class BodyChain(Head):
 
     def link_frames(self, head: Tensor, q: Tensor) -> tuple[list[str], np.ndarray]:
         return self.robot.link_frames_of(head, q)
+
+    def from_reference(self, palm_pose: Sequence[float] | None, arm_joints: Mapping[str, float] | None,
+                       where: str) -> Tensor:
+        unknown = sorted(set(arm_joints or {}) - set(self.names))
+        if unknown:
+            raise ProblemError(f"{where}: reference.arm_joints: unknown joint(s) {', '.join(unknown[:5])} "
+                               f"of robot '{self.robot.name}'")
+        body = self.robot.home_posture(torch.float64).body.clone()
+        for k, name in enumerate(self.names):
+            if arm_joints and name in arm_joints:
+                body[k] = arm_joints[name]
+        return body
