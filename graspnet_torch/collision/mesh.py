@@ -28,7 +28,7 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["MeshQuery", "mesh_query", "point_triangle_distance", "shape_points"]
+__all__ = ["MeshQuery", "closest_on_triangles", "mesh_query", "point_triangle_distance", "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
@@ -57,8 +57,13 @@ def shape_points(kind: str, size: tuple[float, ...], mesh=None) -> np.ndarray:
 
 
 def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(N, M) distances from points (N, 3) to triangles (M, 3, 3): the closest point of each
-    triangle by its Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised."""
+    """(N, M) distances from points (N, 3) to triangles (M, 3, 3) (:func:`closest_on_triangles`)."""
+    return np.linalg.norm(points[:, None, :] - closest_on_triangles(points, triangles), axis=-1)
+
+
+def closest_on_triangles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(N, M, 3) the point of each triangle (M, 3, 3) nearest each point (N, 3), by the triangle's
+    Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised."""
     p = points[:, None, :]
     a, b, c = (triangles[None, :, k, :] for k in range(3))
     ab, ac, ap = b - a, c - a, p - a
@@ -85,7 +90,7 @@ def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.nda
     ]
     for cond, point in reversed(regions):
         closest = np.where(cond[..., None], np.broadcast_to(point, closest.shape), closest)
-    return np.linalg.norm(p - closest, axis=-1)
+    return closest
 
 
 class MeshQuery:

@@ -19,13 +19,12 @@ gradient, outward either way). Distances are signed: positive outside.
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from graspnet_torch.collision.mesh import mesh_query, point_triangle_distance
+from graspnet_torch.collision.mesh import closest_on_triangles, mesh_query
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
@@ -68,35 +67,6 @@ def _primitive(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return n, outside + np.minimum(q.max(axis=1), 0.0)
 
 
-def _closest_on_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(3,) the point of triangle abc nearest p (3,): by its Voronoi regions (Ericson, Real-Time
-    Collision Detection, 5.1.5)."""
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = ab @ ap, ac @ ap
-    if d1 <= 0 and d2 <= 0:
-        return a
-    bp = p - b
-    d3, d4 = ab @ bp, ac @ bp
-    if d3 >= 0 and d4 <= d3:
-        return b
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0 and d1 >= 0 and d3 <= 0:
-        return a + ab * (d1 / (d1 - d3))
-    cp = p - c
-    d5, d6 = ab @ cp, ac @ cp
-    if d6 >= 0 and d5 <= d6:
-        return c
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0 and d2 >= 0 and d6 <= 0:
-        return a + ac * (d2 / (d2 - d6))
-    va = d3 * d6 - d5 * d4
-    if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-    denom = va + vb + vc
-    return a + ab * (vb / denom) + ac * (vc / denom)
-
-
-@lru_cache(maxsize=32)
 def _centres(path: Path, scale: float) -> tuple[cKDTree, float]:
     """A KD-tree of a mesh object's triangle centres and the largest centre-to-vertex distance."""
     triangles = mesh_query(Shape("mesh", (), np.zeros(6), path, scale))[0].triangles
@@ -115,8 +85,9 @@ def _mesh(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n, dist = np.zeros_like(p), np.zeros(len(p))
     for i in range(len(p)):
         idx = np.asarray(tree.query_ball_point(p[i], near[i] + reach + 1e-12), dtype=int)
-        j = int(idx[np.argmin(point_triangle_distance(p[i:i + 1], triangles[idx])[0])])
-        closest = _closest_on_triangle(p[i], *triangles[j])
+        candidates = closest_on_triangles(p[i:i + 1], triangles[idx])[0]  # (m, 3)
+        k = int(np.argmin(np.linalg.norm(candidates - p[i], axis=-1)))
+        j, closest = int(idx[k]), candidates[k]
         dist[i] = float(np.linalg.norm(p[i] - closest))
         n[i] = sign[i] * (p[i] - closest) / dist[i] if dist[i] > ON_SURFACE else face_normals[j]
     return n, sign * dist

@@ -41,6 +41,7 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.config import PadCfg, RobotCfg
 from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.shape import primitive_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
 __all__ = ["TIE", "Pad", "finger_pads"]
@@ -239,14 +240,7 @@ def _surface_points(s: Any, P: np.ndarray) -> np.ndarray:
     """(N, 3) points spread densely over a shape's surface (vertices included), placed by ``P``."""
     import trimesh
 
-    if s.kind == "box":
-        mesh = trimesh.creation.box(extents=s.size)
-    elif s.kind == "cylinder":
-        mesh = trimesh.creation.cylinder(radius=s.size[0], height=s.size[1], sections=128)
-    elif s.kind == "sphere":
-        mesh = trimesh.creation.icosphere(subdivisions=4, radius=s.size[0])
-    else:
-        mesh = s.mesh
+    mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
     samples, _ = trimesh.sample.sample_surface_even(mesh, SAMPLES, seed=0)
     points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
     return points @ P[:3, :3].T + P[:3, 3]

@@ -27,7 +27,7 @@ from graspnet_torch.paths import repo_root
 from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
-__all__ = ["MAX_SCALE", "SHAPES", "Shape", "check_mesh", "numbers", "pose_degrees", "unknown_keys"]
+__all__ = ["MAX_SCALE", "SHAPES", "Shape", "check_mesh", "numbers", "pose_degrees", "primitive_mesh", "unknown_keys"]
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1}
 MAX_SCALE = 1e6
@@ -126,17 +126,26 @@ class Shape:
 
     def trimesh(self):
         """The shape as a trimesh.Trimesh in its parent frame (imports trimesh)."""
-        import trimesh
 
-        if self.kind == "box":
-            mesh = trimesh.creation.box(extents=self.size)
-        elif self.kind == "cylinder":
-            mesh = trimesh.creation.cylinder(radius=self.size[0], height=self.size[1], sections=48)
-        elif self.kind == "sphere":
-            mesh = trimesh.creation.icosphere(subdivisions=3, radius=self.size[0])
-        else:
+        if self.kind == "mesh":
             mesh = load_mesh(Path(self.mesh).resolve(), self.scale).copy()
+        else:
+            mesh = primitive_mesh(self.kind, self.size)
         return mesh.apply_transform(pose_to_matrix_np(self.pose))
+
+
+def primitive_mesh(kind: str, size: tuple[float, ...], fine: bool = False):
+    """A box, cylinder (along z) or sphere of ``size`` as a trimesh.Trimesh at the origin (imports
+    trimesh); ``fine``: more facets (a cylinder of 128 sections, a sphere of 4 subdivisions, not 48 and 3)."""
+    import trimesh
+
+    if kind == "box":
+        return trimesh.creation.box(extents=size)
+    if kind == "cylinder":
+        return trimesh.creation.cylinder(radius=size[0], height=size[1], sections=128 if fine else 48)
+    if kind == "sphere":
+        return trimesh.creation.icosphere(subdivisions=4 if fine else 3, radius=size[0])
+    raise ValueError(f"no primitive '{kind}'")
 
 
 def check_mesh(path: Path, where: str, scale: float = 1.0) -> None:
