@@ -46,9 +46,10 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     and no collision; in the surface model also every pad on its contact and facing into the
     object). Also the one-line reason no trial succeeded, or None."""
     rule = contact_rule(robot, problem, solver)
-    postures = [trial_posture(robot, f) for f in report.fields]
+    exact = has_environment(robot, problem)  # the postures are needed only to check them (FCL) or their pads
+    postures = [trial_posture(robot, f) for f in report.fields] if exact or rule.surface else []
     reports = None
-    if has_environment(robot, problem):
+    if exact:
         reports = scene_for(robot, problem, rule.object_tolerance, rule.touching).check_many(postures)
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
     evaluation = replace(report.evaluation, collisions=collisions)
