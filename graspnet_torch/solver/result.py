@@ -35,6 +35,7 @@ ERROR_KEYS = ("total_error_mm", "distance_mm")
 # A result's own keys; every other top-level key is a field of its reported trial.
 _CORE = ("success", "iterations", "reinforcement", "wall_time_s", "collisions")  # TrialResult's own attributes
 _RESULT_KEYS = ("robot", "trials", "failure", "problem", "seed", "settings", "trajectory")
+_RESULT_ATTRIBUTES = (*_RESULT_KEYS, "outcome", "chosen", "best")  # GraspResult's own
 
 
 @dataclass
@@ -157,31 +158,15 @@ class GraspResult:
 
     @property
     def success(self) -> bool:
+        """The reported trial's ``success``: the grasp."""
         return self.best.success
 
-    @property
-    def palm_pose(self) -> list[float]:
-        return self.best.palm_pose
-
-    @property
-    def joints(self) -> dict[str, list[float]]:
-        return self.best.joints
-
-    @property
-    def fingertip_error_mm(self) -> dict[str, float]:
-        return self.best.fingertip_error_mm
-
-    @property
-    def total_error_mm(self) -> float:
-        return self.best.total_error_mm
-
-    @property
-    def iterations(self) -> int:
-        return self.best.iterations
-
-    @property
-    def reinforcement(self) -> float:
-        return self.best.reinforcement
+    def __getattr__(self, name: str):
+        """The reported trial's fields at the top level, as in the JSON (``result.palm_pose``,
+        ``result.total_error_mm``, ``result.iterations``, ...: :class:`TrialResult`)."""
+        if name.startswith("_") or name in _RESULT_ATTRIBUTES:  # not (yet) set: no trial to ask
+            raise AttributeError(f"{type(self).__name__!r} has no attribute {name!r}")
+        return getattr(self.best, name)
 
     def to_dict(self) -> dict:
         out = {"robot": self.robot, **self.best.to_dict(), "trials": [t.to_dict() for t in self.trials]}
