@@ -21,23 +21,33 @@ OPEN_TOWARD_HOME = (1.0, 0.75, 0.5, 0.25)  # else: the fingers this far from the
 OPENING_IK_STEPS = 40  # least-squares steps that put the fingertips on an opening's targets
 
 
-def opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> np.ndarray | None:
+def opening(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg,
+            pregrasp: np.ndarray | None = None) -> np.ndarray | None:
     """The most open of :func:`openings`, or None."""
-    return next(iter(openings(checker, problem, goal, cfg)), None)
+    return next(iter(openings(checker, problem, goal, cfg, pregrasp)), None)
 
 
-def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg) -> Iterator[np.ndarray]:
+def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cfg: ReachCfg,
+             pregrasp: np.ndarray | None = None) -> Iterator[np.ndarray]:
     """The pre-grasp states at the grasp, clear of the object with no link touching it and whose
     closing onto the grasp is clear; the other fingers as in the grasp (a gripper: the grasp
-    itself). First each contact finger at its own first clear candidate (:func:`finger_by_finger`),
-    then every candidate for all fingers at once, in order: each contact fingertip backed off from
-    its contact by each of :data:`OPENINGS_M` away from the object's centre (or the contacts'
-    centroid; finger inverse kinematics), then by each toward the palm (curling), then the
-    fingers straightened toward their home by :data:`OPEN_TOWARD_HOME`."""
+    itself). First the result's own pre-grasp (``pregrasp``, a state: the surface contact model's
+    pads backed off along the object's normals), where it is clear; then each contact finger at its
+    own first clear candidate (:func:`finger_by_finger`), then every candidate for all fingers at
+    once, in order: each contact fingertip backed off from its contact by each of :data:`OPENINGS_M`
+    away from the object's centre (or the contacts' centroid; finger inverse kinematics), then by
+    each toward the palm (curling), then the fingers straightened toward their home by
+    :data:`OPEN_TOWARD_HOME`."""
     robot, m = checker.robot, checker.layout.body
     if not problem.fingers:  # a gripper's jaws: nothing to open
         yield goal
         return
+    res = (cfg.resolution_deg, cfg.resolution_mm)
+    if pregrasp is not None:
+        pre = goal.copy()
+        pre[m:] = pregrasp[m:]  # its fingers; the palm (or arm) is the grasp's
+        if checker.strictly_clear(pre[None])[0] and checker.first_collision(pre, goal, *res) is None:
+            yield pre
     posture = checker.posture(goal)
     contacts = np.asarray(problem.contacts_world(), dtype=np.float64)
     centre = np.asarray(problem.object.pose[:3], dtype=np.float64) if problem.object is not None else contacts.mean(0)

@@ -133,14 +133,15 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     layout = StateLayout.of(robot, cfg.palm_speed)
     checker = MotionChecker(robot, problem, layout, cfg.touch_mm)
     goal = checker.state(trial_posture(robot, trial))
+    pregrasp = None if trial.pregrasp is None else checker.state(trial_posture(robot, trial.pregrasp))
     velocity = layout.velocity
     acceleration = np.full_like(velocity, cfg.acceleration)
     res = (cfg.resolution_deg, cfg.resolution_mm)
     deadline = t0 + cfg.timeout_s
     if robot.head.anchored:
-        corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline)
+        corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline, pregrasp)
     else:
-        corners, reason = _hand_path(robot, problem, checker, goal, cfg)
+        corners, reason = _hand_path(robot, problem, checker, goal, cfg, pregrasp)
     while corners is not None:  # the rows are checked as check_motion does; a colliding stretch is planned again
         try:
             times, rows, at = time_path(corners, velocity, acceleration, cfg.sample_hz, cfg.max_samples)
@@ -196,14 +197,15 @@ def colliding_row(checker: MotionChecker, rows: np.ndarray, resolution_deg: floa
 
 
 def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg,
-               deadline: float) -> tuple[np.ndarray | None, str]:
-    """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers
-    open, the grasp; or None and why. A mobile base first drives (a straight line, the arm as at
-    the start), then the arm is planned with the base where the grasp has it; where that fails,
-    base and arm are planned together (by :func:`_plan`, until ``deadline``)."""
+               deadline: float, pregrasp: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
+    """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers open
+    (the result's pre-grasp where it has one and it is clear), the grasp; or None and why. A mobile
+    base first drives (a straight line, the arm as at the start), then the arm is planned with the
+    base where the grasp has it; where that fails, base and arm are planned together (by
+    :func:`_plan`, until ``deadline``)."""
     m = checker.layout.body
     start = checker.state(start_posture(robot, problem))
-    pre = opening(checker, problem, goal, cfg)
+    pre = opening(checker, problem, goal, cfg, pregrasp)
     if pre is None:
         return None, "no pre-grasp opening of the fingers at the grasp is clear of the object"
     opened = start.copy()
@@ -299,8 +301,8 @@ def _plan(checker: MotionChecker, a: np.ndarray, b: np.ndarray, dims: range | np
     return [full(x) for x in path], ""
 
 
-def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg
-               ) -> tuple[np.ndarray | None, str]:
+def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal: np.ndarray, cfg: ReachCfg,
+               pregrasp: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
     """A free hand's approach: the pre-grasp pose (the palm backed off ``reach.backoff_m``, its
     orientation kept, the fingers open), in a straight line to the grasp's palm, then the
     fingers close. The directions tried, in order: away from the contacts' centroid, away from
@@ -318,7 +320,7 @@ def _hand_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
             directions.append(d / np.linalg.norm(d))
     res = (cfg.resolution_deg, cfg.resolution_mm)
     reason = "no pre-grasp opening of the fingers at the grasp is clear of the object"
-    for pre in openings(checker, problem, goal, cfg):
+    for pre in openings(checker, problem, goal, cfg, pregrasp):
         for direction in directions:
             back = pre.copy()
             back[:3] = palm + cfg.backoff_m * direction

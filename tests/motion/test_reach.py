@@ -182,3 +182,23 @@ def test_the_fingers_open_clear_of_the_object_before_the_arm_moves(env2):
     opened[7:] = motion.positions[moving[0], 7:]  # the fingers when the arm starts moving
     assert not np.allclose(opened[7:], goal[7:])
     assert checker.strictly_clear(opened[None])[0]
+
+
+@pytest.mark.slow
+def test_a_surface_grasp_is_reached_through_its_own_pre_grasp():
+    """The surface contact model's result carries a pre-grasp (the pads backed off along the
+    object's normals): the motion passes through it, the palm where the grasp has it, then closes
+    onto the grasp; FCL finds nothing along it."""
+    problem = gt.GraspProblem.from_task("glass3")
+    result = gt.solve(problem, trials=8, seed=0, solver={"contact_model": "surface", "normal_cone_deg": 90.0})
+    assert result.success and result.best.pregrasp is not None
+    robot = gt.load_robot("hand")
+    motion = gt.plan_reach(problem, result)
+    assert motion.found, motion.reason
+    checker = MotionChecker(robot, problem, StateLayout.of(robot))
+    goal = checker.state(trial_posture(robot, result.best))
+    pre = checker.state(trial_posture(robot, result.best.pregrasp))
+    pre[:6] = goal[:6]
+    assert np.abs(motion.positions - pre).max(1).min() < 1e-9  # a row is the pre-grasp
+    np.testing.assert_allclose(motion.positions[-1], goal, atol=1e-9)
+    assert gt.check_motion(robot, problem, result.best, motion) == []
