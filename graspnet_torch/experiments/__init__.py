@@ -16,6 +16,7 @@ tradeoff     the noise study against Table 2, open choices swept (5.1)      :cla
 proxy        the collision proxy against FCL near meshes (beyond the paper) :class:`ProxyCfg`
 proposal     posture proposals: what they cost and buy (beyond the paper)   :class:`ProposalExperimentCfg`
 reach        reach motions to every arm and MANUS grasp (beyond the paper)  :class:`ReachExperimentCfg`
+contact      pads on the surface beside the point model, in MuJoCo (beyond)  :class:`ContactCfg`
 ===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -34,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from graspnet_torch.experiments.arm import ArmCfg, run_arm
+from graspnet_torch.experiments.contact import ContactCfg, run_contact
 from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
 from graspnet_torch.experiments.manus import ManusCfg, run_manus
 from graspnet_torch.experiments.objects import ObjectsCfg, run_objects
@@ -48,11 +50,11 @@ from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
 from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 from graspnet_torch.settings import DefaultsFile
 
-__all__ = ["DEFAULTS_FILES", "EXPERIMENTS", "ArmCfg", "Experiment", "ExperimentReport", "Fig10Cfg", "Figure",
-           "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg",
-           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_fig10",
-           "run_manus", "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_reach",
-           "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
+__all__ = ["DEFAULTS_FILES", "EXPERIMENTS", "ArmCfg", "ContactCfg", "Experiment", "ExperimentReport", "Fig10Cfg",
+           "Figure", "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg",
+           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_contact",
+           "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand",
+           "run_reach", "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -69,7 +71,8 @@ _TABLE = (  # name, settings, run: in the order `make reproduce` runs them (the 
     ("fig10", Fig10Cfg, run_fig10), ("manus", ManusCfg, run_manus), ("solvers", SolversCfg, run_solvers),
     ("objects", ObjectsCfg, run_objects), ("arm", ArmCfg, run_arm), ("random_hand", RandomHandCfg, run_random_hand),
     ("tradeoff", TradeoffCfg, run_tradeoff), ("proxy", ProxyCfg, run_proxy),
-    ("proposal", ProposalExperimentCfg, run_proposal), ("reach", ReachExperimentCfg, run_reach))
+    ("proposal", ProposalExperimentCfg, run_proposal), ("reach", ReachExperimentCfg, run_reach),
+    ("contact", ContactCfg, run_contact))
 EXPERIMENTS: dict[str, Experiment] = {name: Experiment(name, cfg, run) for name, cfg, run in _TABLE}
 
 # configs/experiment/<name>.yaml lists its experiment's settings; their values are written from the
