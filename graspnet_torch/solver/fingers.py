@@ -14,6 +14,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.transforms import compose, rt_to_pose, transform_points, untransform_points
 from graspnet_torch.solver.contact import ContactRule, contact_rule, tip_targets
 from graspnet_torch.solver.environment import Done, Environment, Evaluation, Report
+from graspnet_torch.solver.pad_term import PadTerm
 from graspnet_torch.solver.whole import WholeConfiguration
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -97,6 +98,9 @@ class FingerEnvironment(WholeConfiguration, Environment):
         self._base64 = (self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu())
         ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
+        self.pads = None  # the surface model: the pads' normals join the errors (solver/pad_term.py)
+        if any(rule.surface for rule in self.rules):
+            self.pads = PadTerm(robot, problems, self.rules, self.fingers, runs, robot.joints_per_finger)
 
         if collisions and has_environment(robot, self.problem):
 
@@ -209,12 +213,21 @@ class FingerEnvironment(WholeConfiguration, Environment):
         collision count (B,) of the whole posture (the fingers without a contact at home)."""
         palm, levels = self.palm_and_levels(config)
         q, errors = self.finger_joints(config, palm, trials)
+        if self.pads is not None:  # the surface model: a pad facing away counts as a tip off its target
+            errors = errors + self.pads.penalty(self.pad_normals(palm[0], config, q), trials)
         collisions = None
         if self.proxy is not None:
             collisions = self.proxy.count(palm, self._every(q, trials), self.body(config), levels, self._pid(trials),
                                           self._all_bases(config))
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions,
                           config=config)
+
+    def pad_normals(self, R: Tensor, config: Tensor, q: Tensor) -> Tensor:
+        """The contact fingers' pad normals in the environment's frame (B, F, 3) with the palm
+        turned by R (B, 3, 3), the bases of ``config`` (B, n) and the finger joints q (B, F, j)."""
+        local, _ = self.pads.local(q)
+        base_R = self.bases(config)[0]
+        return (R.unsqueeze(1) @ base_R @ local.unsqueeze(-1)).squeeze(-1)
 
     def palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
         """The palm frame of configurations (T, n) and, where the proxy needs them, the body's chain
@@ -237,6 +250,8 @@ class FingerEnvironment(WholeConfiguration, Environment):
                 q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
             if self.mask is not None:
                 err = err * self.mask
+            if self.pads is not None:
+                err = err + self.pads.penalty(self.pad_normals(self.palm_frame(config)[0], config, q))
             evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
                                     collisions=evaluation.collisions)
         if whole:

@@ -14,6 +14,7 @@ from torch import Tensor
 from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
 from graspnet_torch.solver.environment import Done, Evaluation
+from graspnet_torch.solver.pad_term import PadTerm, skew
 
 if TYPE_CHECKING:
     from graspnet_torch.collision.proxy import CollisionProxy
@@ -42,6 +43,8 @@ class WholeConfiguration:
     polish_iterations: int
     polish_tol: float
     min_gain: float
+    pads: PadTerm | None
+    shared_slots: int
 
     def near(self, posture: Posture, step_deg: float | None) -> Self:
         """Keep the contact fingers' joints within ``step_deg`` degrees (a prismatic joint: that
@@ -133,6 +136,31 @@ class WholeConfiguration:
         J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
         return tips.reshape(B, -1), J.reshape(B, 3 * F, -1)
 
+    def whole_pads(self, x: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """The surface model's pad residuals (:mod:`~graspnet_torch.solver.pad_term`) of x (B, m)
+        of the trials ``rows``: (B, 3F) and their Jacobian (B, 3F, m): the palm's columns by its angular velocity
+        (d m = w x m), each finger's R B_R d(R_f n)/dq; the shared joints' (the bases move) by
+        central differences."""
+        B, F, j, n = x.shape[0], len(self.idx), self.robot.joints_per_finger, self.n
+        R, _, Jc = self.palm_frame_jacobian(x[:, :n])
+        local, Jq = self.pads.local(x[:, n:].reshape(B, F, j), jacobian=True)  # (B, F, 3), (B, F, 3, j)
+        RB = R.unsqueeze(1) @ self.bases(x[:, :n])[0]  # (B, F, 3, 3): each finger's base in the frame
+        world = (RB @ local.unsqueeze(-1)).squeeze(-1)
+        palm = -skew(world) @ Jc[:, None, 3:, :]  # (B, F, 3, n)
+        for k in range(self.shared_slots):
+            S, h = self.shared_slots, 1e-6
+            step = torch.zeros_like(x[:, :n])
+            step[:, n - S + k] = h
+            moved = [R.unsqueeze(1) @ self.bases(x[:, :n] + sign * step)[0] @ local.unsqueeze(-1)
+                     for sign in (1.0, -1.0)]
+            palm[..., n - S + k] = ((moved[0] - moved[1]) / (2 * h)).squeeze(-1)
+        r, D = self.pads.residual(world, rows)
+        palm, fingers = D @ palm, D @ RB @ Jq
+        J = x.new_zeros(B, F, 3, n + F * j)
+        J[..., :n] = palm
+        J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
+        return r.reshape(B, -1), J.reshape(B, 3 * F, -1)
+
     def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
         """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
         F, j = len(self.idx), self.robot.joints_per_finger
@@ -153,11 +181,20 @@ class WholeConfiguration:
         def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
             return self.whole_tips(xx, r if trials is None else trials[r])
 
+        def tips_and_pads(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
+            rr = r if trials is None else trials[r]
+            (v, J), (pv, pJ) = self.whole_tips(xx, rr), self.whole_pads(xx, rr)
+            return torch.cat([v, pv], 1), torch.cat([J, pJ], 1)
+
+        goal, model = self._goal64(trials), tips
+        if self.pads is not None:  # the surface model: the pads' residuals too (goal 0)
+            goal, model = torch.cat([goal, torch.zeros_like(goal)], -1), tips_and_pads
+
         def count(xx: Tensor, r: Tensor) -> Tensor:
             return self._count64(xx, r if trials is None else trials[r])
 
         lo, hi = self.whole_bounds(trials)
-        return levenberg_marquardt(tips, self._goal64(trials), x, lo, hi, iterations, tol=tol, done=done,
+        return levenberg_marquardt(model, goal, x, lo, hi, iterations, tol=tol, done=done,
                                    trace=trace, count=count if self.proxy is not None else None,
                                    min_gain=self.min_gain, prior=prior)
 
@@ -181,7 +218,9 @@ class WholeConfiguration:
         """The configurations (B, n) and evaluation of solved x, in the dtype and device of ``like``."""
         B, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
         goal = self._goal64(None if rows is None else rows.cpu())
-        finger_err = (goal - solved.value).reshape(B, F, 3).norm(dim=-1)
+        finger_err = (goal - solved.value[:, : 3 * F]).reshape(B, F, 3).norm(dim=-1)
+        if self.pads is not None:  # the pads' penalties (the norms of their residuals), as in evaluate
+            finger_err = finger_err + solved.value[:, 3 * F:].reshape(B, F, 3).norm(dim=-1)
         kw = {"dtype": like.dtype, "device": like.device}
         count = solved.count
         return solved.x[:, : self.n].to(**kw), Evaluation(
