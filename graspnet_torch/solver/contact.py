@@ -143,29 +143,32 @@ def penetration_mm(robot: Robot, problem: GraspProblem, posture: Posture) -> flo
 PREGRASP_STEPS = 60  # least-squares steps that put the fingertips on the pre-grasp's and the squeeze's targets
 
 
-def grasp_postures(robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg
-                   ) -> tuple[Posture, Posture] | None:
-    """The pre-grasp and the squeeze of a surface grasp: the palm (and an arm) where the grasp has
-    it, each contact finger's tip target moved along the object's outward normal at its contact,
-    by ``solver.pregrasp_mm`` out (the pads backed off) and ``solver.squeeze_mm`` in (pressed
-    further), its joints by least squares within their limits from the grasp's; the other fingers
-    as in the grasp. None for a hand whose fingers share joints (their bases move with them)."""
+def grasp_postures(robot: Robot, problem: GraspProblem, postures: Sequence[Posture], solver: SolverCfg
+                   ) -> list[tuple[Posture, Posture]] | None:
+    """The pre-grasp and the squeeze of each surface grasp of ``postures``: the palm (and an arm)
+    where the grasp has it, each contact finger's tip target moved along the object's outward
+    normal at its contact, by ``solver.pregrasp_mm`` out (the pads backed off) and
+    ``solver.squeeze_mm`` in (pressed further), its joints by least squares within their limits
+    from the grasp's (every posture and both moves in one batch); the other fingers as in the
+    grasp. None for a hand whose fingers share joints (their bases move with them)."""
     if robot.shared.n:
         return None
+    if not postures:
+        return []
     contacts = np.asarray(problem.contacts_world(), dtype=np.float64).reshape(-1, 3)
     normals = surface_normals(problem.object, contacts)
     tips = tip_targets(robot, problem, "surface")
     rows = [robot.finger_index(f) for f in problem.fingers]
-    head = robot.head.values(posture)
+    head = torch.stack([robot.head.values(p) for p in postures])  # (T, n)
+    q0 = torch.stack([p.fingers for p in postures])  # (T, F, j)
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
-    out = []
-    for shift in (solver.pregrasp_mm / 1000, -solver.squeeze_mm / 1000):
-        targets = robot.head.fingertips(head, posture.fingers).clone()  # (F, 3): every finger where it is
-        targets[rows] = torch.as_tensor(tips + shift * normals)
-        bases = robot.head.world_to_bases(targets, head)
-        q, _ = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, PREGRASP_STEPS)
-        out.append(replace(posture, fingers=q))
-    return out[0], out[1]
+    shifts = (solver.pregrasp_mm / 1000, -solver.squeeze_mm / 1000)
+    targets = robot.head.fingertips(head, q0).repeat(len(shifts), 1, 1, 1)  # (2, T, F, 3): every finger where it is
+    for k, shift in enumerate(shifts):
+        targets[k][:, rows] = torch.as_tensor(tips + shift * normals)
+    bases = robot.head.world_to_bases(targets, head.expand(len(shifts), -1, -1))
+    q, _ = refine(robot.fingertips_base_jacobian, q0.expand(len(shifts), -1, -1, -1), bases, lo, hi, PREGRASP_STEPS)
+    return [(replace(p, fingers=q[0, t]), replace(p, fingers=q[1, t])) for t, p in enumerate(postures)]
 
 
 def posture_fields(robot: Robot, posture: Posture) -> dict:

@@ -54,11 +54,11 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
     evaluation = replace(report.evaluation, collisions=collisions)
     r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
-    out, touching = [], list(report.landed)
+    touching, counts, all_fields, errors = list(report.landed), [], [], []
     for t, f in enumerate(report.fields):
         count = 0 if collisions is None else int(collisions[t])
         fields, error = dict(f), report.error_mm[t]
-        if rule.surface:  # the pads: on their contacts, facing into the object; pre-grasp and squeeze
+        if rule.surface:  # the pads: on their contacts, facing into the object
             fields.update(surface_fields(robot, problem, postures[t]))
             if report.landed[t] and count == 0 and not within_cone(fields, rule.cone_deg):
                 turned = turn_pads(robot, problem, postures[t], solver, rule)
@@ -68,12 +68,16 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
                     error = f2["total_error_mm"]
             touching[t] = touching[t] and within_cone(fields, rule.cone_deg) and \
                 max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm
-            around = grasp_postures(robot, problem, postures[t], solver)
-            if around is not None:
-                fields["pregrasp"], fields["squeeze"] = (posture_fields(robot, p) for p in around)
-        out.append(TrialResult(success=count == 0 and touching[t], iterations=int(outcome.iterations[t]),
-                               reinforcement=float(r[t]), wall_time_s=outcome.wall_time_s, collisions=count,
-                               error_mm=error, **fields))
+        counts.append(count)
+        all_fields.append(fields)
+        errors.append(error)
+    around = grasp_postures(robot, problem, postures, solver) if rule.surface else None
+    if around is not None:  # the surface model's pre-grasp and squeeze of every trial
+        for fields, pair in zip(all_fields, around, strict=True):
+            fields["pregrasp"], fields["squeeze"] = (posture_fields(robot, p) for p in pair)
+    out = [TrialResult(success=count == 0 and ok, iterations=int(outcome.iterations[t]), reinforcement=float(r[t]),
+                       wall_time_s=outcome.wall_time_s, collisions=count, error_mm=error, **fields)
+           for t, (count, ok, error, fields) in enumerate(zip(counts, touching, errors, all_fields, strict=True))]
     failure = None
     if not any(t.success for t in out):
         failure = failure_reason(robot, problem, out, reports, report.landed, solver.tolerance_mm)
