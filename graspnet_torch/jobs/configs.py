@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.motion.config import ReachCfg
+from graspnet_torch.physics.config import PhysicsCfg
 from graspnet_torch.proposal.model import ProposalCfg
 from graspnet_torch.settings import DefaultsFile, Free, clip, setting
 from graspnet_torch.solver.config import DEFAULT_TRIALS, NoiseCfg, RewardCfg, SolverCfg
@@ -55,6 +56,11 @@ class SolveGraspJobCfg:
     batch: int = setting(1000, lo=1, hi=1_000_000)  # problem=DIR / .jsonl: problems per vectorised search
     sequence: bool = False  # problem=DIR / .jsonl: frames in order, each warm-started from the last (gt.Solver.track)
     reach: ReachCfg = setting(factory=ReachCfg)  # reach=true: the motion to the grasp (reach.timeout_s=..., ...)
+    # verify=physics: report the first successful trial (best first) that holds its object in MuJoCo, with
+    # reach=true also one with a motion found (graspnet_torch.jobs.verify)
+    verify: str = setting("none", choices=("none", "physics"))
+    verify_trials: int = setting(20, lo=1, hi=1_000_000)  # verify=physics / reach=true: most trials checked
+    physics: PhysicsCfg = setting(factory=PhysicsCfg)  # verify=physics: the check's protocol (physics.friction=...)
 
 
 @dataclass(frozen=True)

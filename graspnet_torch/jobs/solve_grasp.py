@@ -23,7 +23,8 @@ from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text, json_digest
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
-from graspnet_torch.motion import ReachCfg, StateLayout, Trajectory, check_start, plan_reach
+from graspnet_torch.jobs.verify import check_verify, motion_line, no_motion, verify_result
+from graspnet_torch.motion import ReachCfg, Trajectory, check_start, plan_reach
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.proposal import proposal_of
 from graspnet_torch.robot.chain import UrdfModel
@@ -227,6 +228,8 @@ def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
         raise ConfigError("sequence=true solves the frames of a sequence: give problem=FOLDER or problem=FRAMES.jsonl")
     device = check_device(job.device)
     problem = resolve_problem(job.problem, job.task, robot, job.allow_outside_paths)
+    if job.verify == "physics":
+        check_verify(problem)  # an object to hold, MuJoCo installed
     job, solver = with_robot_defaults(job, groups, problem.robot_cfg)
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     check_solve_memory(job.trials, solver.max_iterations, len(problem.contacts), solver.history,
@@ -277,8 +280,16 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
           f"{result.outcome.wall_time_s:.2f} s for {trials} trials batched")
     if result.failure is not None:
         print(f"no grasp: {result.failure}")
-    if job.reach.enabled:
-        result.trajectory = reach_motion(robot, problem, result, job.reach)
+    if job.verify == "physics" or job.reach.enabled:  # the reported trial: the best that passes what was asked
+        verification = verify_result(robot, problem, result, job.physics if job.verify == "physics" else None,
+                                     job.reach if job.reach.enabled else None, job.verify_trials)
+        if verification.passed:
+            print(verification.summary())
+        else:  # the solve worked: a warning, exit 0
+            stopped = solver.stop is not None and solver.stop <= n_ok < trials
+            more = f" (solver.stop={solver.stop} ended the solve at {n_ok} success(es): a larger solver.stop, or " \
+                   f"null, gives more trials to check)" if stopped else ""
+            print(f"warning: {verification.summary()}{more}", file=sys.stderr)
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
     if job.tensorboard:
@@ -319,18 +330,8 @@ def write_replay(robot, problem: GraspProblem, result: GraspResult, env, path: P
 def reach_motion(robot, problem: GraspProblem, result: GraspResult, cfg: ReachCfg) -> Trajectory:
     """The reach motion to the result's grasp (``reach=true``), said in one line; no grasp: no
     motion (``found`` false, the reason)."""
-    if not result.success:
-        layout = StateLayout.of(robot, cfg.palm_speed)
-        motion = Trajectory.missing(list(layout.names), layout.revolute, "no grasp to reach (the solve did not "
-                                    "succeed)", 0.0)
-    else:
-        motion = plan_reach(problem, result, cfg, robot)
-    if motion.found:
-        print(f"reach motion: {len(motion.times)} rows, {motion.times[-1]:.2f} s long, planned in "
-              f"{motion.planning_time_s:.2f} s ({motion.planner}; collision-free at {cfg.resolution_deg:g} deg / "
-              f"{cfg.resolution_mm:g} mm)")
-    else:
-        print(f"no reach motion: {motion.reason}")
+    motion = plan_reach(problem, result, cfg, robot) if result.success else no_motion(robot, cfg)
+    print(motion_line(motion, cfg))
     return motion
 
 

@@ -158,6 +158,9 @@ def prepare_many(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path
     if job.reach.enabled:
         raise ConfigError("reach=true plans the motion of one problem: give problem=FILE (a folder or .jsonl "
                           "of problems: plan each result's motion with gt.plan_reach)")
+    if job.verify != "none":
+        raise ConfigError(f"verify={job.verify} checks the result of one problem: give problem=FILE (a folder or "
+                          f".jsonl of problems: check each result with gt.simulate_grasp)")
     device = check_device(job.device)
     named = load_problems(job.problem, robot, job.allow_outside_paths)
     problems = [p for _, p in named]
