@@ -70,8 +70,8 @@ def proxy_for(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtyp
 
 
 def scene_for(robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M,
-              touching: bool = True) -> CollisionScene:
+              touching: bool = True, fingers_apart: bool = False) -> CollisionScene:
     """The FCL collision scene of a robot and a problem, built once per geometry and rule
-    (``object_tolerance``, ``touching``: :class:`CollisionScene`)."""
-    return _cached(_SCENES, (id(robot), geometry_key(problem), object_tolerance, touching),
-                   lambda: CollisionScene(robot, problem, object_tolerance, touching))
+    (``object_tolerance``, ``touching``, ``fingers_apart``: :class:`CollisionScene`)."""
+    return _cached(_SCENES, (id(robot), geometry_key(problem), object_tolerance, touching, fingers_apart),
+                   lambda: CollisionScene(robot, problem, object_tolerance, touching, fingers_apart))

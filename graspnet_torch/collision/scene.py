@@ -36,7 +36,8 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "has_environment", "self_collision_pairs"]
+__all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "finger_pairs", "has_environment",
+           "self_collision_pairs"]
 
 FLOOR_SIZE = (100.0, 100.0, 1.0)  # m: the floor slab (centred under the world origin)
 FLOOR_GAP = 0.001  # m: its top lies this far below the robot's floor height
@@ -66,48 +67,70 @@ def self_collision_pairs(robot: Robot) -> list[tuple[str, str]]:
     cached = getattr(robot, "_self_collision_pairs", None)
     if cached is not None:
         return cached
-    pairs: list[tuple[str, str]] = []
-    if robot.cfg.self_collision:
-        import fcl
-
-        shapes = link_shapes(robot.urdf, "collision")
-        with_geometry = list(dict.fromkeys(s.link for s in shapes))
-
-        def carrier(link: str) -> str | None:  # the nearest ancestor (or itself) with geometry
-            while link not in with_geometry and link in robot.urdf.parent_joint:
-                link = robot.urdf.parent_joint[link].parent
-            return link if link in with_geometry else None
-
-        def moved_by(link: str) -> frozenset:  # the movable joints between the root and the link
-            joints = set()
-            while link in robot.urdf.parent_joint:
-                joint = robot.urdf.parent_joint[link]
-                if joint.type != "fixed":
-                    joints.add(joint.name)
-                link = joint.parent
-            return frozenset(joints)
-
-        adjacent = set()
-        for link in with_geometry:
-            if link in robot.urdf.parent_joint:
-                parent = carrier(robot.urdf.parent_joint[link].parent)
-                if parent is not None:
-                    adjacent.add(frozenset((link, parent)))
-        frames = robot.link_frames(robot.home_posture())
-        objects: dict[str, list] = {}
-        for shape in shapes:
-            placed = fcl_transform(frames[shape.link] @ shape.origin)
-            obj = fcl.CollisionObject(link_geometry(shape), placed)
-            objects.setdefault(shape.link, []).append(obj)
-        for i, a in enumerate(with_geometry):
-            for b in with_geometry[i + 1:]:
-                if frozenset((a, b)) in adjacent or moved_by(a) == moved_by(b):  # adjacent or rigidly joined
-                    continue
-                if any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
-                       for oa in objects[a] for ob in objects[b]):
-                    continue
-                pairs.append((a, b))
+    pairs = _apart_at_home(robot, None) if robot.cfg.self_collision else []
     robot._self_collision_pairs = pairs
+    return pairs
+
+
+def finger_pairs(robot: Robot) -> list[tuple[str, str]]:
+    """The (link, link) pairs of two different fingers' links (with collision geometry, from the
+    fingers' bases to their tips) that do not intersect at the home posture (FCL): fingers through
+    each other (the surface contact model counts them). Computed once per robot."""
+    cached = getattr(robot, "_finger_pairs", None)
+    if cached is None:
+        owner = {}
+        for name, finger in robot.fingers.items():
+            for joint in robot.urdf.path_joints(finger.chain.root, finger.chain.tip):
+                owner[joint.child] = name
+        cached = robot._finger_pairs = _apart_at_home(robot, owner)
+    return cached
+
+
+def _apart_at_home(robot: Robot, owner: dict[str, str] | None) -> list[tuple[str, str]]:
+    """Pairs of links with collision geometry, not adjacent, not rigidly joined and not
+    intersecting at the home posture; ``owner`` (link -> finger): only pairs of two fingers."""
+    import fcl
+
+    pairs: list[tuple[str, str]] = []
+    shapes = link_shapes(robot.urdf, "collision")
+    with_geometry = list(dict.fromkeys(s.link for s in shapes))
+
+    def carrier(link: str) -> str | None:  # the nearest ancestor (or itself) with geometry
+        while link not in with_geometry and link in robot.urdf.parent_joint:
+            link = robot.urdf.parent_joint[link].parent
+        return link if link in with_geometry else None
+
+    def moved_by(link: str) -> frozenset:  # the movable joints between the root and the link
+        joints = set()
+        while link in robot.urdf.parent_joint:
+            joint = robot.urdf.parent_joint[link]
+            if joint.type != "fixed":
+                joints.add(joint.name)
+            link = joint.parent
+        return frozenset(joints)
+
+    adjacent = set()
+    for link in with_geometry:
+        if link in robot.urdf.parent_joint:
+            parent = carrier(robot.urdf.parent_joint[link].parent)
+            if parent is not None:
+                adjacent.add(frozenset((link, parent)))
+    frames = robot.link_frames(robot.home_posture())
+    objects: dict[str, list] = {}
+    for shape in shapes:
+        placed = fcl_transform(frames[shape.link] @ shape.origin)
+        obj = fcl.CollisionObject(link_geometry(shape), placed)
+        objects.setdefault(shape.link, []).append(obj)
+    for i, a in enumerate(with_geometry):
+        for b in with_geometry[i + 1:]:
+            if frozenset((a, b)) in adjacent or moved_by(a) == moved_by(b):  # adjacent or rigidly joined
+                continue
+            if owner is not None and (owner.get(a) is None or owner.get(b) is None or owner[a] == owner[b]):
+                continue  # not two different fingers' links
+            if any(fcl.collide(oa, ob, fcl.CollisionRequest(), fcl.CollisionResult())
+                   for oa in objects[a] for ob in objects[b]):
+                continue
+            pairs.append((a, b))
     return pairs
 
 OBJECT_TOLERANCE_M = 0.002
@@ -147,17 +170,20 @@ class CollisionScene:
         object_tolerance: penetration of the object (metres) below which a link does not count.
         touching: whether the contact fingers' distal links (a gripper's jaws) may touch the object
             (the reported count); False: they count as any link does (a reach motion's approach).
+        fingers_apart: also count two fingers' links that intersect (:func:`finger_pairs`).
     """
 
     def __init__(self, robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M,
-                 touching: bool = True):
+                 touching: bool = True, fingers_apart: bool = False):
         import fcl
 
         self.robot, self.problem, self.object_tolerance = robot, problem, object_tolerance
         self.shapes = link_shapes(robot.urdf, "collision")
         self.link_objects = [fcl.CollisionObject(link_geometry(s), fcl.Transform()) for s in self.shapes]
         self.obstacles = [_environment_object(o) for o in environment_obstacles(robot, problem)]
-        self.self_pairs = self_collision_pairs(robot)
+        self.self_pairs = list(self_collision_pairs(robot))
+        if fingers_apart:  # two fingers through each other count too (the surface contact model)
+            self.self_pairs += [p for p in finger_pairs(robot) if p not in self.self_pairs]
         self.object = _environment_object(problem.object) if problem.object is not None else None
         self.touching = self.distal_links(robot, self.shapes, problem.fingers) if touching else set()
         # meshes: FCL finds where a link crosses the surface; inside and depth are measured (collision/mesh.py)

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.cache import scene_for
-from graspnet_torch.collision.scene import OBJECT_TOLERANCE_M, has_environment
+from graspnet_torch.collision.scene import OBJECT_TOLERANCE_M, CollisionScene, has_environment
 from graspnet_torch.collision.surface import pad_targets, surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.ik import refine
@@ -62,7 +62,8 @@ def contact_model(robot: Robot, problem: GraspProblem, solver: SolverCfg) -> str
 class ContactRule:
     """What a contact model asks of a grasp: ``model`` ('surface' | 'point'), how deep a link may
     go into the object (``object_tolerance``, m), whether the contact fingers' distal links may
-    touch it at any depth (``touching``), the pads' cone (``cone_deg``; the surface model)."""
+    touch it at any depth (``touching``), the pads' cone (``cone_deg``; the surface model), and
+    the scene that counts collisions so (:meth:`scene`)."""
 
     model: str
     object_tolerance: float
@@ -72,6 +73,11 @@ class ContactRule:
     @property
     def surface(self) -> bool:
         return self.model == "surface"
+
+    def scene(self, robot: Robot, problem: GraspProblem) -> CollisionScene:
+        """The FCL scene that counts a grasp's collisions under this rule (cached): the surface
+        model counts every link beyond ``object_tolerance`` and two fingers through each other."""
+        return scene_for(robot, problem, self.object_tolerance, self.touching, fingers_apart=self.surface)
 
     @classmethod
     def of(cls, model: str, solver: SolverCfg) -> ContactRule:

@@ -12,7 +12,6 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.solver.contact import POINT_RULE, ContactRule
 from graspnet_torch.solver.evaluation import Evaluation, Report
@@ -55,7 +54,7 @@ class ReportPart(ABC):
         report = self.report(config[rows[at].to(config.device)], part, rows[at])
         for k, trial in zip(at.tolist(), report.fields, strict=True):
             rule, posture = self.rule_of(int(pid[k])), trial_posture(self.robot, trial)
-            scene = scene_for(self.robot, problems[k], rule.object_tolerance, rule.touching)
+            scene = rule.scene(self.robot, problems[k])
             clear[k] = scene.check(posture).count == 0  # the pads are turned in after the search (solver/align.py)
         return clear
 

@@ -10,7 +10,6 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.rewards import Reward
 from graspnet_torch.robot.robot import Posture, Robot
@@ -50,7 +49,7 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     postures = [trial_posture(robot, f) for f in report.fields] if exact or rule.surface else []
     reports = None
     if exact:
-        reports = scene_for(robot, problem, rule.object_tolerance, rule.touching).check_many(postures)
+        reports = rule.scene(robot, problem).check_many(postures)
     collisions = None if reports is None else torch.tensor([c.count for c in reports])
     evaluation = replace(report.evaluation, collisions=collisions)
     r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
@@ -103,7 +102,7 @@ def turn_pads(robot: Robot, problem: GraspProblem, posture: Posture, solver: Sol
     fields["fingertip_error_mm"] = {f: float(e) for f, e in zip(problem.fingers, errors, strict=True)}
     fields["total_error_mm"] = float(errors.sum())
     fields.update(surface_fields(robot, problem, turned))
-    scene = scene_for(robot, problem, rule.object_tolerance, rule.touching)
+    scene = rule.scene(robot, problem)
     if errors.max() > solver.tolerance_mm or not within_cone(fields, rule.cone_deg) or scene.check(turned).count:
         return None
     return turned, fields

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.collision.surface import surface_normals
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.solver.contact import contact_model, tip_frames
+from graspnet_torch.solver.contact import ContactRule, contact_model, tip_frames
 from graspnet_torch.solver.postures import trial_posture
 
 SURFACE = {"contact_model": "surface", "normal_cone_deg": 90.0}  # the cone open: the search finds grasps
@@ -151,3 +152,26 @@ def test_the_search_turns_the_pads_in_where_the_cone_allows_it():
             if trial.success:
                 deepest, distance, angle = _independent(robot, problem, trial)
                 assert deepest <= 1.0 and distance.max() <= 1.0 and angle.max() <= cone and trial.collisions == 0
+
+
+def test_two_fingers_through_each_other_count_in_the_surface_model_only():
+    """The surface rule's scene counts two fingers' links that intersect (FCL); the point rule's
+    does not (the paper's count, unchanged). Random finger joints put index and middle, or thumb
+    and index, through each other in about half of the postures."""
+    robot = gt.load_robot("hand")
+    far = gt.GraspProblem.from_task("glass3").moved(np.array([[1, 0, 0, 5.0], [0, 1, 0, 0], [0, 0, 1, 0],
+                                                             [0, 0, 0, 1]]))  # the glass out of the way
+    surface = ContactRule.of("surface", gt.SolverCfg()).scene(robot, far)
+    point = ContactRule.of("point", gt.SolverCfg()).scene(robot, far)
+    home, (lo, hi) = robot.home_posture(), robot.finger_limits
+    rng = np.random.default_rng(0)
+    counted = 0
+    for _ in range(40):
+        q = torch.as_tensor(lo + (hi - lo) * rng.random(lo.shape))
+        posture = gt.Posture(palm_pose=home.palm_pose, fingers=q, body=home.body)
+        report = surface.check(posture)
+        assert point.check(posture).count == 0
+        if report.count:
+            counted += 1
+            assert all(a.split("_")[0] != b.split("_")[0] for a, b in report.self_pairs)  # two different fingers
+    assert 5 <= counted <= 35
