@@ -12,6 +12,7 @@ from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, I
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
 from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
 from graspnet_torch.physics import PhysicsCfg, PhysicsReport, simulate_grasp
+from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot import (
     ChainKernel,
     ChainSpec,
@@ -66,6 +67,7 @@ __all__ = [
     "FingerIK",
     "FingersCfg",
     "GraspProblem",
+    "GraspQuality",
     "GraspResult",
     "GraspnetError",
     "GripperCfg",
@@ -94,6 +96,7 @@ __all__ = [
     "available_robots",
     "available_tasks",
     "check_motion",
+    "grasp_quality",
     "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
