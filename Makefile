@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-retarget bench-proposal bench-solvers report-arm report-contact report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-retarget bench-proposal bench-solvers report-arm report-contact report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -91,6 +91,9 @@ bench-calls: $(STAMP)  ## many calls: per-call overhead and single-problem wall 
 
 bench-api: $(STAMP)  ## the Python API from a plain program: solve_many problems/s, gt.Solver overhead; 1 thread vs torch's own (targets 1,000/s, 2 ms; ~1 min)
 	$(PY) benchmarks/api_speed.py --check
+
+bench-quality: $(STAMP)  ## grasp quality per contact set (epsilon, sigma_min) beside an LP force-closure test, --check
+	$(PY) benchmarks/quality.py --check
 
 bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the same frames (installs the retarget extra; ~2 min)
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 
 import numpy as np
 import pytest
@@ -226,17 +225,3 @@ def test_bad_inputs_say_what_is_wrong():
         epsilon(p, inward(p), np.zeros(3), -0.1)
     with pytest.raises(ProblemError, match="torque length"):
         epsilon(np.zeros((3, 3)), inward(p), np.zeros(3), 0.5)
-
-
-def test_time_per_contact_set():
-    """Time per set, k = 3, 4, 5 contacts and 8 edges (random sets on a sphere, 30 each), printed
-    (pytest -s); a loose ceiling of 50 ms a set."""
-    rng = np.random.default_rng(0)
-    for k in (3, 4, 5):
-        p = rng.normal(size=(30, k, 3))
-        p /= np.linalg.norm(p, axis=-1, keepdims=True)
-        t = time.perf_counter()
-        q = grasp_quality(p, -p, np.zeros(3), 0.5)
-        ms = 1e3 * (time.perf_counter() - t) / 30
-        print(f"k={k}: {ms:.2f} ms per set, {int(q.force_closure.sum())}/30 force closure")
-        assert ms < 50
