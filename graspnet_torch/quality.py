@@ -203,16 +203,8 @@ def q1(G: Array, signed: bool = False) -> Array:
     return _like(out, G, batched)
 
 
-def epsilon(
-    contacts: Array,
-    normals: Array,
-    centre: Array,
-    friction: Array | float,
-    edges: int = 8,
-    length: Array | float | None = None,
-    tangents: Array | None = None,
-    signed: bool = False,
-) -> Array:
+def epsilon(contacts: Array, normals: Array, centre: Array, friction: Array | float, edges: int = 8,
+            length: Array | float | None = None, tangents: Array | None = None, signed: bool = False) -> Array:
     """Q1 (epsilon) of contact sets: (B, k, 3) -> (B,), or (k, 3) -> (); arguments as :func:`grasp_matrix`.
 
     Q1 = min over unit d of max_ij d . w_ij: the largest ball about the origin inside the hull of
@@ -224,16 +216,8 @@ def epsilon(
 ferrari_canny = epsilon
 
 
-def force_closure(
-    contacts: Array,
-    normals: Array,
-    centre: Array,
-    friction: Array | float,
-    edges: int = 8,
-    length: Array | float | None = None,
-    tangents: Array | None = None,
-    tol: float = 1e-9,
-) -> Any:
+def force_closure(contacts: Array, normals: Array, centre: Array, friction: Array | float, edges: int = 8,
+                  length: Array | float | None = None, tangents: Array | None = None, tol: float = 1e-9) -> Any:
     """Whether Q1 > tol (of the linearised cones): a bool for one set, a (B,) bool array / tensor for B."""
     eps = epsilon(contacts, normals, centre, friction, edges, length, tangents)
     closed = eps > tol
@@ -261,16 +245,9 @@ class GraspQuality:
         return {"epsilon": plain(self.epsilon), "min_singular_value": plain(self.min_singular_value)}
 
 
-def grasp_quality(
-    contacts: Array,
-    normals: Array,
-    centre: Array,
-    friction: Array | float,
-    edges: int = 8,
-    length: Array | float | None = None,
-    tangents: Array | None = None,
-    tol: float = 1e-9,
-) -> GraspQuality:
+def grasp_quality(contacts: Array, normals: Array, centre: Array, friction: Array | float, edges: int = 8,
+                  length: Array | float | None = None, tangents: Array | None = None, tol: float = 1e-9
+                  ) -> GraspQuality:
     """All the metrics of B contact sets at once (B, k, 3), or of one (k, 3) as floats.
 
     One batched grasp matrix and SVD, then one 6-D ConvexHull per set (a Python loop; about

@@ -334,9 +334,12 @@ def test_bad_reach_input_is_refused(tmp_path, text, args, message):
     refused(tmp_path, "solve_grasp.py", f"problem={path}", f"out={tmp_path / 'r.json'}", *args, message=message)
 
 
-def test_reach_of_many_problems_is_refused(tmp_path):
+@pytest.mark.parametrize(("switch", "message"), [
+    ("reach=true", "reach=true plans the motion of one problem"),
+    ("verify=physics", "verify=physics checks the result of one problem"),
+])
+def test_a_one_result_check_of_many_problems_is_refused(tmp_path, switch, message):
     folder = tmp_path / "problems"
     folder.mkdir()
     (folder / "a.yaml").write_text(ENV1)
-    refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", "reach=true",
-             message="reach=true plans the motion of one problem")
+    refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", switch, message=message)

@@ -208,10 +208,3 @@ def test_verify_physics_without_mujoco_is_refused(tmp_path, monkeypatch):
 def test_bad_verify_settings_are_refused(tmp_path, args, message):
     refused(tmp_path, "solve_grasp.py", "task=videotape5", f"out={tmp_path / 'r.json'}", *args, message=message)
 
-
-def test_verify_of_many_problems_is_refused(tmp_path):
-    folder = tmp_path / "problems"
-    folder.mkdir()
-    (folder / "a.yaml").write_text(PINCH)
-    refused(tmp_path, "solve_grasp.py", f"problem={folder}", f"out={tmp_path / 'out'}", "verify=physics",
-            message="verify=physics checks the result of one problem")
