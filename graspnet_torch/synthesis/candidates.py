@@ -1,0 +1,252 @@
+"""Contact sets a hand can touch with its pads: sampled hand postures whose chosen fingers' pads
+rest on the object's surface, facing into it.
+
+One candidate is made in three steps (every candidate of a call in one batch):
+
+1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
+   collision box's thinnest axis, on the fingers' side) at a random point of the plane of the
+   palm within the fingertips' reach, and at a random gap (``GAP_M``) from the palm's face, i.e.
+   the palm looks at the object from a random direction, at a random roll.
+2. *Fingers*: each finger closes along a random straight line in joint space, from an open
+   posture (``OPEN``: a random fraction of each joint's range from its lower limit) to a closed
+   one (``CLOSE``); ``STEPS`` samples of the line, then bisection, find where its pad sphere (the
+   tip frame's origin, radius the pad's depth) first touches the surface
+   (:func:`~graspnet_torch.collision.surface.surface_distance` = depth). A chosen finger stops
+   there; a finger that is not chosen stops one sample short of touching (or closed).
+3. *Check*: kept where every chosen finger touches (its pad within ``TOUCH_M`` of the surface),
+   every pad normal (the tip rotation times the pad normal) lies within ``cone_deg`` of the inward
+   normal at its touch point, and no link lies deeper than ``penetration_m`` in the object nor two
+   fingers through each other (the surface model's FCL scene).
+
+The contact is the touch point: the pad sphere's point nearest the surface. Everything is drawn
+from one ``numpy`` generator seeded by ``seed``: the same call gives the same sets.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from graspnet_torch.collision.cache import scene_for
+from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
+from graspnet_torch.solver.contact import tip_frames
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["CLOSE", "GAP_M", "OPEN", "STEPS", "TOUCH_M", "ContactSet", "pad_contact_sets", "placeholder_problem"]
+
+STEPS = 24  # samples of each finger's closing line
+BISECT = 14  # bisection steps after the first sample that touches
+OPEN = (0.0, 0.3)  # a finger's open posture: this fraction of each joint's range above its lower limit
+CLOSE = (0.45, 1.0)  # its closed posture
+GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
+TOUCH_M = 1e-3  # a pad touches within this of the surface
+BATCH = 64  # palm poses drawn at once
+LINES = 16  # closing lines tried per finger and palm pose
+
+
+@dataclass(frozen=True)
+class ContactSet:
+    """A contact set the hand touches with its pads.
+
+    Attributes:
+        fingers: the k chosen fingers.
+        contacts: (k, 3) the touch points, world.
+        normals: (k, 3) the object's inward unit normals there.
+        posture: the hand posture that touches them.
+        angles_deg: (k,) each pad normal's angle to its inward normal.
+    """
+
+    fingers: tuple[str, ...]
+    contacts: np.ndarray
+    normals: np.ndarray
+    posture: Posture
+    angles_deg: np.ndarray
+
+    def __iter__(self):  # unpacks as (contacts, normals, posture)
+        return iter((self.contacts, self.normals, self.posture))
+
+
+def placeholder_problem(robot: Robot, obj: Shape, fingers: Sequence[str], contacts: np.ndarray | None = None
+                        ) -> GraspProblem:
+    """A problem of ``robot`` holding ``obj`` (contacts: (k, 3) world, default the object's centre)."""
+    T = np.eye(4)
+    T[:3, :3] = _rotation(obj)
+    T[:3, 3] = obj.pose[:3]
+    pts = np.tile(obj.pose[:3], (len(fingers), 1)) if contacts is None else np.asarray(contacts).reshape(-1, 3)
+    local = (pts - T[:3, 3]) @ T[:3, :3]
+    data = {"robot": robot.cfg.name, "object": obj.to_mapping(),
+            "contacts": [{"finger": f, "position": p.tolist()} for f, p in zip(fingers, local, strict=True)]}
+    return GraspProblem.from_mapping(data, robot_cfg=robot.cfg, allow_outside_paths=True)
+
+
+def _rotation(obj: Shape) -> np.ndarray:
+    """(3, 3) a shape's rotation."""
+    return pose_to_matrix_np(obj.pose)[:3, :3]
+
+
+def _palm_front(robot: Robot) -> tuple[np.ndarray, float]:
+    """The palm's front axis (palm frame, unit) and its face's offset along it (m): the palm
+    collision box's thinnest axis, on the side of the home fingertips (no box: +y, 0)."""
+    home = robot.home_posture()
+    tips = robot.fingertips_palm(home.fingers).numpy().mean(axis=0)
+    box = next((s.shape for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link and s.shape.kind == "box"),
+               None)
+    if box is None:
+        return np.array([0.0, 1.0, 0.0]), 0.0
+    R = _rotation(box)
+    axis = int(np.argmin(box.size))
+    front = R[:, axis] * (1.0 if R[:, axis] @ (tips - box.pose[:3]) >= 0 else -1.0)
+    return front, float(front @ box.pose[:3] + box.size[axis] / 2)
+
+
+def _support(vertices: np.ndarray, centre: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """How far the object reaches from its centre along directions d (B, 3): (B,)."""
+    return ((vertices - centre) @ d.T).max(axis=0)
+
+
+def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray) -> np.ndarray:
+    """Signed gaps (m) of every pad sphere to the surface: head (..., 6), q (..., F, j) -> (..., F)."""
+    tips = robot.fingertips_world(head, q).numpy()
+    return surface_distance(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth
+
+
+def _close(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q_close: torch.Tensor,
+           depth: np.ndarray) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+    """Each finger closed along its line until its pad touches. head (B, 6), q_open / q_close
+    (B, F, j) -> the touching joints (B, F, j), touched (B, F) bool, the step before (B, F) in [0, 1]."""
+    B = q_open.shape[0]
+    ts = torch.linspace(0, 1, STEPS, dtype=torch.float64)
+    line = q_open[:, None] + ts[None, :, None, None] * (q_close - q_open)[:, None]  # (B, S, F, j)
+    gaps = _tip_gaps(robot, obj, head[:, None].expand(B, STEPS, 6), line, depth)  # (B, S, F)
+    inside = gaps <= 0
+    touched = inside.any(axis=1) & ~inside[:, 0]
+    first = np.where(touched, inside.argmax(axis=1), STEPS - 1)  # (B, F)
+    lo = np.where(touched, (first - 1) / (STEPS - 1), 1.0)
+    hi = first / (STEPS - 1)
+    lo_t, hi_t = torch.as_tensor(lo.copy()), torch.as_tensor(hi.copy())
+    for _ in range(BISECT):  # the pad on the surface: gap(lo) > 0 >= gap(hi)
+        mid = (lo_t + hi_t) / 2
+        g = _tip_gaps(robot, obj, head, q_open + mid[..., None] * (q_close - q_open), depth)
+        lo_t, hi_t = torch.where(torch.as_tensor(g > 0), mid, lo_t), torch.where(torch.as_tensor(g > 0), hi_t, mid)
+    t = torch.where(torch.as_tensor(touched), hi_t, torch.ones_like(hi_t))
+    before = np.where(touched, np.maximum(first - 1, 0) / (STEPS - 1), 1.0)
+    return q_open + t[..., None] * (q_close - q_open), touched, before
+
+
+def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, fingers: Sequence[str],
+                rows: list[int]) -> np.ndarray:
+    """(N, k) each chosen pad normal's angle (degrees) to the inward normal at its touch point:
+    head (N, 6), q (N, F, j)."""
+    names, frames = robot.link_frames_of(None, q, head)
+    R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
+    t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
+    contacts = t - surface_distance(obj, t)[:, None] * surface_normals(obj, t)
+    inward = -surface_normals(obj, contacts).reshape(len(q), len(rows), 3)
+    pad = np.einsum("nkij,kj->nki", R, np.stack([robot.pads[f].normal for f in fingers]))
+    return np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=-1), -1.0, 1.0)))
+
+
+def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = ("thumb", "index", "middle"),
+                     seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
+                     max_tries: int | None = None, stats: dict | None = None) -> list[ContactSet]:
+    """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring).
+
+    Draws palm poses in batches of ``BATCH`` (``LINES`` closing lines per finger each, a random
+    one of those that touch within the cone kept) until ``n`` are kept or ``max_tries`` palm
+    poses (default ``50 n``) were drawn. Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
+    (world; normals inward). ``stats``, if given, receives ``tried``, ``touching`` (every
+    chosen pad reached the surface), ``facing`` (and within the cone) and ``kept``.
+    """
+    if robot.has_body or robot.shared.n:
+        raise ProblemError(f"{robot.cfg.name}: pad_contact_sets places a free hand's palm (no arm, no shared joints)")
+    unknown = [f for f in fingers if f not in robot.pads]
+    if unknown or not fingers:
+        raise ProblemError(f"pad_contact_sets: fingers {list(fingers)}: not fingers with pads of {robot.cfg.name}")
+    rng = np.random.default_rng(seed)
+    names = list(robot.fingers)
+    rows = [names.index(f) for f in fingers]
+    chosen = np.zeros(len(names), dtype=bool)
+    chosen[rows] = True
+    depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in names])
+    lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
+    front, face = _palm_front(robot)
+    plane = np.linalg.svd(np.eye(3) - np.outer(front, front))[0][:, :2]  # (3, 2) the palm's plane
+    reach = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)]) @ plane
+    verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
+    centre = np.asarray(obj.pose[:3], dtype=np.float64)
+    problem = placeholder_problem(robot, obj, fingers)
+    scene = scene_for(robot, problem, penetration_m, False, fingers_apart=True)
+    max_tries = 50 * n if max_tries is None else max_tries
+    out: list[ContactSet] = []
+    tried = touching = facing = 0
+    while len(out) < n and tried < max_tries:
+        B = min(BATCH, max_tries - tried)
+        tried += B
+        R = Rotation.random(B, random_state=rng).as_matrix()  # (B, 3, 3) palm orientations
+        lateral = reach.min(axis=0) + rng.random((B, 2)) * np.ptp(reach, axis=0)
+        gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
+        d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
+        c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front  # object centre, palm
+        T = np.tile(np.eye(4), (B, 1, 1))
+        T[:, :3, :3] = R
+        T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
+        head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
+        span = hi - lo
+        heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
+        q_open = torch.as_tensor(lo + rng.uniform(*OPEN, (B * LINES, *lo.shape)) * span)
+        q_close = torch.as_tensor(lo + rng.uniform(*CLOSE, (B * LINES, *lo.shape)) * span)
+        q_touch, touched, before = _close(robot, obj, heads, q_open, q_close, depth)
+        q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
+        angles = _pad_angles(robot, obj, heads, q_touch, fingers, rows).reshape(B, LINES, len(rows))
+        good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg)  # (B, M, k)
+        pick = np.argmax(good + rng.random(good.shape), axis=1)  # (B, k): a random good line per finger
+        q = q_rest.clone()
+        q_touch = q_touch.view(B, LINES, *lo.shape)
+        for i, row in enumerate(rows):
+            q[:, row] = q_touch[torch.arange(B), torch.as_tensor(pick[:, i]), row]
+        ok = good.any(axis=1).all(axis=1)
+        touching += int(ok.sum())
+        for b in np.flatnonzero(ok):
+            posture = Posture(palm_pose=head[b], fingers=q[b], body=torch.zeros(0, dtype=torch.float64))
+            found = _touch(robot, obj, posture, fingers, cone_deg)
+            if found is None:
+                continue
+            facing += 1
+            if scene.check(posture).count:
+                continue
+            contacts, normals, angles = found
+            out.append(ContactSet(tuple(fingers), contacts, normals, posture, angles))
+            if len(out) == n:
+                break
+    if stats is not None:
+        stats.update(tried=tried, touching=touching, facing=facing, kept=len(out))
+    return out
+
+
+def _touch(robot: Robot, obj: Shape, posture: Posture, fingers: Sequence[str], cone_deg: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The touch points (k, 3), inward normals (k, 3) and pad angles (k,) of a posture, or None
+    where a pad is off the surface or turned beyond the cone."""
+    R, t = tip_frames(robot, posture, fingers)
+    depth = np.array([robot.pads[f].depth for f in fingers])
+    outward = surface_normals(obj, t)
+    contacts = t - (surface_distance(obj, t))[:, None] * outward
+    if np.any(np.abs(surface_distance(obj, contacts)) > TOUCH_M) or \
+            np.any(np.abs(np.linalg.norm(contacts - t, axis=1) - depth) > TOUCH_M):
+        return None
+    inward = -surface_normals(obj, contacts)
+    pad = np.einsum("kij,kj->ki", R, np.stack([robot.pads[f].normal for f in fingers]))
+    angles = np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=1), -1.0, 1.0)))
+    if np.any(angles > cone_deg + 1e-9) or not math.isfinite(float(angles.sum())):
+        return None
+    return contacts, inward, angles
