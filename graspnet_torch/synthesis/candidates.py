@@ -33,6 +33,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
+from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.collision.surface import surface_distance, surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.geometry import link_shapes
@@ -143,11 +144,39 @@ def _close(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q
     return q_open + t[..., None] * (q_close - q_open), touched, before
 
 
-def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, fingers: Sequence[str],
-                rows: list[int]) -> np.ndarray:
+def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray]]:
+    """Every finger link's collision shapes as spheres: (finger row, link, centres (s, 3) in the
+    link frame, radii (s,)) (:func:`~graspnet_torch.collision.spheres.shape_spheres`)."""
+    owner = {}
+    for i, finger in enumerate(robot.fingers.values()):
+        for joint in robot.urdf.path_joints(finger.chain.root, finger.chain.tip):
+            owner[joint.child] = i
+    out = []
+    for shape in link_shapes(robot.urdf):
+        if shape.link in owner:
+            centres, radii = shape_spheres(shape)
+            out.append((owner[shape.link], shape.link, centres, radii))
+    return out
+
+
+def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
+               spheres: list[tuple[int, str, np.ndarray, np.ndarray]]) -> np.ndarray:
+    """(N, F) each finger's least clearance (m, negative: how deep) from the object, its links as
+    spheres; frames (N, L, 4, 4) of the links ``names``."""
+    F = 1 + max(row for row, *_ in spheres)
+    out = np.full((len(frames), F), np.inf)
+    for row, link, centres, radii in spheres:
+        T = frames[:, names.index(link)]  # (N, 4, 4)
+        world = np.einsum("nij,sj->nsi", T[:, :3, :3], centres) + T[:, None, :3, 3]
+        gap = surface_distance(obj, world.reshape(-1, 3)).reshape(len(frames), -1) - radii
+        out[:, row] = np.minimum(out[:, row], gap.min(axis=1))
+    return out
+
+
+def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
+                frames: np.ndarray, fingers: Sequence[str], rows: list[int]) -> np.ndarray:
     """(N, k) each chosen pad normal's angle (degrees) to the inward normal at its touch point:
-    head (N, 6), q (N, F, j)."""
-    names, frames = robot.link_frames_of(None, q, head)
+    head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
     t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
     contacts = t - surface_distance(obj, t)[:, None] * surface_normals(obj, t)
@@ -173,17 +202,18 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     if unknown or not fingers:
         raise ProblemError(f"pad_contact_sets: fingers {list(fingers)}: not fingers with pads of {robot.cfg.name}")
     rng = np.random.default_rng(seed)
-    names = list(robot.fingers)
-    rows = [names.index(f) for f in fingers]
-    chosen = np.zeros(len(names), dtype=bool)
+    finger_names = list(robot.fingers)
+    rows = [finger_names.index(f) for f in fingers]
+    chosen = np.zeros(len(finger_names), dtype=bool)
     chosen[rows] = True
-    depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in names])
+    depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     front, face = _palm_front(robot)
     plane = np.linalg.svd(np.eye(3) - np.outer(front, front))[0][:, :2]  # (3, 2) the palm's plane
     reach = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)]) @ plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
+    spheres = _finger_spheres(robot)
     problem = placeholder_problem(robot, obj, fingers)
     scene = scene_for(robot, problem, penetration_m, False, fingers_apart=True)
     max_tries = 50 * n if max_tries is None else max_tries
@@ -207,11 +237,16 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         q_close = torch.as_tensor(lo + rng.uniform(*CLOSE, (B * LINES, *lo.shape)) * span)
         q_touch, touched, before = _close(robot, obj, heads, q_open, q_close, depth)
         q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
-        angles = _pad_angles(robot, obj, heads, q_touch, fingers, rows).reshape(B, LINES, len(rows))
-        good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg)  # (B, M, k)
+        names, frames = robot.link_frames_of(None, q_touch, heads)
+        angles = _pad_angles(robot, obj, heads, q_touch, names, frames, fingers, rows).reshape(B, LINES, len(rows))
+        clear = _clearance(obj, names, frames, spheres).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
+        good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg) & clear[:, :, rows]
+        q_rest = q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)
+        rest_clear = _clearance(obj, *robot.link_frames_of(None, q_rest, heads), spheres).reshape(B, LINES, -1)
         pick = np.argmax(good + rng.random(good.shape), axis=1)  # (B, k): a random good line per finger
-        q = q_rest.clone()
-        q_touch = q_touch.view(B, LINES, *lo.shape)
+        rest = np.argmax((rest_clear >= -penetration_m) + rng.random(rest_clear.shape), axis=1)  # (B, F)
+        q_touch, q_rest = q_touch.view(B, LINES, *lo.shape), q_rest.view(B, LINES, *lo.shape)
+        q = torch.stack([q_rest[torch.arange(B), torch.as_tensor(rest[:, i]), i] for i in range(len(lo))], dim=1)
         for i, row in enumerate(rows):
             q[:, row] = q_touch[torch.arange(B), torch.as_tensor(pick[:, i]), row]
         ok = good.any(axis=1).all(axis=1)
