@@ -40,6 +40,7 @@ from graspnet_torch.solver import (
 )
 from graspnet_torch.solver.kinds import KINDS, RobotKind, robot_kind  # registers the robot kinds
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
+from graspnet_torch.synthesis import ContactSet, SynthesizedGrasp, pad_contact_sets, synthesize_grasps
 from graspnet_torch.tasks import (
     Contact,
     GraspProblem,
@@ -61,6 +62,7 @@ __all__ = [
     "ConfigError",
     "ConfigurationNetwork",
     "Contact",
+    "ContactSet",
     "ExpertSet",
     "ExpertSetCfg",
     "FCNNTrainCfg",
@@ -90,6 +92,7 @@ __all__ = [
     "SigmaCfg",
     "Solver",
     "SolverCfg",
+    "SynthesizedGrasp",
     "Trajectory",
     "TrialResult",
     "__version__",
@@ -100,6 +103,7 @@ __all__ = [
     "load_finger_ik",
     "load_robot",
     "load_robot_cfg",
+    "pad_contact_sets",
     "plan_reach",
     "random_reachable_problem",
     "random_sequence",
@@ -108,4 +112,5 @@ __all__ = [
     "simulate_grasp",
     "solve",
     "solve_many",
+    "synthesize_grasps",
 ]
