@@ -12,7 +12,10 @@ One candidate is made in three steps (every candidate of a call in one batch):
    one (``CLOSE``); ``STEPS`` samples of the line, then bisection, find where its pad sphere (the
    tip frame's origin, radius the pad's depth) first touches the surface
    (:func:`~graspnet_torch.collision.surface.surface_distance` = depth). A chosen finger stops
-   there; a finger that is not chosen stops one sample short of touching (or closed).
+   there; a finger that is not chosen stops one sample short of touching (or closed). Of
+   ``LINES`` lines per finger, a random one that touches within the cone with its links clear of
+   the object is kept, the first chosen finger's (the thumb's) the one whose inward normal best
+   opposes the others' mean (force closure needs opposition).
 3. *Check*: kept where every chosen finger touches (its pad within ``TOUCH_M`` of the surface),
    every pad normal (the tip rotation times the pad normal) lies within ``cone_deg`` of the inward
    normal at its touch point, and no link lies deeper than ``penetration_m`` in the object nor two
@@ -174,15 +177,15 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
 
 
 def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
-                frames: np.ndarray, fingers: Sequence[str], rows: list[int]) -> np.ndarray:
-    """(N, k) each chosen pad normal's angle (degrees) to the inward normal at its touch point:
-    head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``."""
+                frames: np.ndarray, fingers: Sequence[str], rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(N, k) each chosen pad normal's angle (degrees) to the inward normal at its touch point, and
+    those normals (N, k, 3): head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
     t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
     contacts = t - surface_distance(obj, t)[:, None] * surface_normals(obj, t)
     inward = -surface_normals(obj, contacts).reshape(len(q), len(rows), 3)
     pad = np.einsum("nkij,kj->nki", R, np.stack([robot.pads[f].normal for f in fingers]))
-    return np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=-1), -1.0, 1.0)))
+    return np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=-1), -1.0, 1.0))), inward
 
 
 def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = ("thumb", "index", "middle"),
@@ -238,12 +241,17 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         q_touch, touched, before = _close(robot, obj, heads, q_open, q_close, depth)
         q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
         names, frames = robot.link_frames_of(None, q_touch, heads)
-        angles = _pad_angles(robot, obj, heads, q_touch, names, frames, fingers, rows).reshape(B, LINES, len(rows))
+        angles, inward = _pad_angles(robot, obj, heads, q_touch, names, frames, fingers, rows)
+        angles, inward = angles.reshape(B, LINES, len(rows)), inward.reshape(B, LINES, len(rows), 3)
         clear = _clearance(obj, names, frames, spheres).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
         good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg) & clear[:, :, rows]
         q_rest = q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)
         rest_clear = _clearance(obj, *robot.link_frames_of(None, q_rest, heads), spheres).reshape(B, LINES, -1)
         pick = np.argmax(good + rng.random(good.shape), axis=1)  # (B, k): a random good line per finger
+        if len(rows) > 1:  # the first finger (the thumb): its good line most opposed to the others' normals
+            others = inward[np.arange(B)[:, None], pick[:, 1:], np.arange(1, len(rows))].mean(axis=1)  # (B, 3)
+            oppose = -np.einsum("bmi,bi->bm", inward[:, :, 0], others)
+            pick[:, 0] = np.argmax(np.where(good[:, :, 0], oppose, -np.inf), axis=1)
         rest = np.argmax((rest_clear >= -penetration_m) + rng.random(rest_clear.shape), axis=1)  # (B, F)
         q_touch, q_rest = q_touch.view(B, LINES, *lo.shape), q_rest.view(B, LINES, *lo.shape)
         q = torch.stack([q_rest[torch.arange(B), torch.as_tensor(rest[:, i]), i] for i in range(len(lo))], dim=1)
