@@ -1,0 +1,91 @@
+"""Pad contact sets and synthesize_grasps: independent re-checks of what they return."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import graspnet_torch as gt
+from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
+from graspnet_torch.solver.contact import surface_fields
+from graspnet_torch.solver.postures import trial_posture
+from graspnet_torch.synthesis.candidates import placeholder_problem
+
+FINGERS = ("thumb", "index", "middle")
+
+
+@pytest.fixture(scope="module")
+def robot() -> gt.Robot:
+    return gt.load_robot("hand")
+
+
+def cube() -> Shape:
+    return Shape("box", (0.06, 0.06, 0.06), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+
+
+def tip_pose(robot: gt.Robot, posture: gt.Posture, finger: str) -> np.ndarray:
+    """The tip frame (4, 4) of a finger from the URDF link frames, tip offset applied."""
+    T = robot.link_frames(posture)[robot.cfg.fingers[finger].tip].copy()
+    offset = robot.cfg.fingers[finger].tip_offset
+    if offset is not None:
+        T[:3, 3] += T[:3, :3] @ np.asarray(offset)
+    return T
+
+
+@pytest.mark.parametrize("obj", [cube(), Shape("sphere", (0.04,), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))],
+                         ids=["box", "sphere"])
+def test_pad_contact_sets_touch_face_and_stay_out(robot: gt.Robot, obj: Shape) -> None:
+    sets = gt.pad_contact_sets(robot, obj, 4, FINGERS, seed=3)
+    assert sets
+    problem = placeholder_problem(robot, obj, FINGERS)
+    scene = CollisionScene(robot, problem, object_tolerance=0.001, touching=False, fingers_apart=True)
+    for s in sets:
+        assert s.contacts.shape == (3, 3) and s.normals.shape == (3, 3)
+        assert np.all(np.abs(surface_distance(obj, s.contacts)) < 1e-3)
+        inward = -surface_normals(obj, s.contacts)
+        for k, f in enumerate(FINGERS):
+            T = tip_pose(robot, s.posture, f)
+            pad = robot.pads[f]
+            assert abs(np.linalg.norm(s.contacts[k] - T[:3, 3]) - pad.depth) < 1e-3  # the pad sphere touches
+            angle = np.degrees(np.arccos(np.clip((T[:3, :3] @ pad.normal) @ inward[k], -1, 1)))
+            assert angle <= 30.0 + 1e-6
+        assert scene.check(s.posture).count == 0
+
+
+def test_pad_contact_sets_deterministic(robot: gt.Robot) -> None:
+    obj = gt.GraspProblem.from_task("glass3").object
+    a = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
+    b = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
+    c = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=6)
+    assert len(a) == len(b) == 2
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.contacts, y.contacts)
+        np.testing.assert_array_equal(x.posture.fingers.numpy(), y.posture.fingers.numpy())
+    assert not np.allclose(a[0].contacts, c[0].contacts)
+
+
+def test_contact_problem_in_object_frame(robot: gt.Robot) -> None:
+    obj = Shape("box", (0.06, 0.04, 0.08), np.array([0.05, -0.02, 0.2, 0.3, -0.2, 0.7]))
+    pts = np.array([[0.05, -0.02, 0.24], [0.08, -0.02, 0.2], [0.02, -0.02, 0.2]])
+    problem = placeholder_problem(robot, obj, FINGERS, pts)
+    np.testing.assert_allclose(problem.contacts_world(), pts, atol=1e-9)
+    assert np.allclose(pose_to_matrix_np(problem.object.pose), pose_to_matrix_np(obj.pose))
+
+
+@pytest.mark.slow
+def test_synthesize_grasps_box(robot: gt.Robot) -> None:
+    obj = cube()
+    grasps = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0)
+    assert grasps
+    for g in grasps:
+        assert g.success and g.quality.min_singular_value > 0
+        trial = g.result.best
+        posture = trial_posture(robot, trial)
+        fields = surface_fields(robot, g.problem, posture)  # re-measured from the reported posture
+        assert max(fields["pad_distance_mm"].values()) < 1.0
+        assert max(fields["normal_angle_deg"].values()) <= 30.0 + 1e-6
+        assert fields["penetration_mm"] <= 1.0 + 1e-6
+        np.testing.assert_allclose(g.problem.contacts_world(), g.contacts, atol=1e-9)
