@@ -55,6 +55,7 @@ def test_pad_contact_sets_touch_face_and_stay_out(robot: gt.Robot, obj: Shape) -
         assert scene.check(s.posture).count == 0
 
 
+@pytest.mark.slow
 def test_pad_contact_sets_deterministic(robot: gt.Robot) -> None:
     obj = gt.GraspProblem.from_task("glass3").object
     a = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
