@@ -166,10 +166,10 @@ class SolverCfg:
             contact, the pad facing into the object within ``normal_cone_deg``, no link deeper
             than ``penetration_mm`` in the object), 'point' (the paper's model: the finger's tip
             frame on the contact; the default for now), or 'auto' ('surface' where the problem has
-            an object, else 'point': without a surface there is nothing to touch). The surface
-            model turns the pads toward the object only after the search
-            (:mod:`graspnet_torch.solver.align`), which often leaves one outside the cone: it
-            becomes the default once the search itself sees the pads' normals.
+            an object, else 'point': without a surface there is nothing to touch). The search
+            sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`); the shipped hand's
+            thumb cannot face the paper's contact sets within 30 degrees, so 'point' stays the
+            default until contact sets are chosen for the pads.
         penetration_mm: in the surface model, how deep a link of the robot (the contact
             fingers' distal links included) may lie inside the object.
         normal_cone_deg: in the surface model, the largest angle between a contact finger's pad

@@ -55,7 +55,7 @@ class ReportPart(ABC):
         for k, trial in zip(at.tolist(), report.fields, strict=True):
             rule, posture = self.rule_of(int(pid[k])), trial_posture(self.robot, trial)
             scene = rule.scene(self.robot, problems[k])
-            clear[k] = scene.check(posture).count == 0  # the pads are turned in after the search (solver/align.py)
+            clear[k] = scene.check(posture).count == 0  # the pads' cone is in the model's error (pad_term.py)
         return clear
 
     def rule_of(self, problem: int) -> ContactRule:

@@ -7,23 +7,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 
-import numpy as np
 import torch
 
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.rewards import Reward
-from graspnet_torch.robot.robot import Posture, Robot
-from graspnet_torch.solver.align import align_pads
+from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.solver.contact import (
-    ContactRule,
     contact_rule,
     describe_pad,
     grasp_postures,
     posture_fields,
     surface_fields,
-    tip_frames,
-    tip_targets,
     within_cone,
 )
 from graspnet_torch.solver.environment import Environment, Report
@@ -59,12 +54,6 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
         fields, error = dict(f), report.error_mm[t]
         if rule.surface:  # the pads: on their contacts, facing into the object
             fields.update(surface_fields(robot, problem, postures[t]))
-            if report.landed[t] and count == 0 and not within_cone(fields, rule.cone_deg):
-                turned = turn_pads(robot, problem, postures[t], solver, rule)
-                if turned is not None:  # the pads turned in: this posture is the trial's
-                    postures[t], f2 = turned
-                    fields.update(f2)
-                    error = f2["total_error_mm"]
             touching[t] = touching[t] and within_cone(fields, rule.cone_deg) and \
                 max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm
         counts.append(count)
@@ -85,27 +74,6 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
             failure = f"no pad faces into the object: {describe_pad(out[worst].fields)} (solver.normal_cone_deg=" \
                       f"{solver.normal_cone_deg:g})"
     return out, failure
-
-
-def turn_pads(robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, rule: ContactRule
-              ) -> tuple[Posture, dict] | None:
-    """A landed, collision-free surface grasp whose pads face away, turned in (:func:`align_pads`):
-    the new posture and its fields (palm pose, joints, tip errors to their targets, the surface
-    fields), or None where the turned posture is not a grasp (a tip off its target, a pad still
-    outside the cone, a collision or a link too deep: FCL)."""
-    if robot.shared.n:
-        return None
-    turned = align_pads(robot, problem, posture, solver)
-    fields = posture_fields(robot, turned)
-    _, tips = tip_frames(robot, turned, problem.fingers)
-    errors = np.linalg.norm(tips - tip_targets(robot, problem, "surface"), axis=1) * 1000
-    fields["fingertip_error_mm"] = {f: float(e) for f, e in zip(problem.fingers, errors, strict=True)}
-    fields["total_error_mm"] = float(errors.sum())
-    fields.update(surface_fields(robot, problem, turned))
-    scene = rule.scene(robot, problem)
-    if errors.max() > solver.tolerance_mm or not within_cone(fields, rule.cone_deg) or scene.check(turned).count:
-        return None
-    return turned, fields
 
 
 COLLISIONS_NAMED = 3  # a "colliding" failure names this many of the most frequent colliding pairs
