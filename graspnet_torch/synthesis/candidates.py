@@ -45,7 +45,6 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver.contact import tip_frames
-from graspnet_torch.synthesis.opposition import opposed_bank, place
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CLOSE", "GAP_M", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet", "opposes", "pad_contact_sets",
@@ -60,7 +59,6 @@ TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
 OPPOSE = -0.3  # "opposed": the thumb's inward normal dotted with the others' mean lies below this
-SPREAD_M = 0.015  # an opposed placement's pads miss a common centre by at most this
 FRICTION = 0.6  # the friction "force_closure" is judged with
 
 
@@ -196,7 +194,7 @@ def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, n
 
 def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = ("thumb", "index", "middle"),
                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
-                     max_tries: int | None = None, stats: dict | None = None, opposed: bool = False,
+                     max_tries: int | None = None, stats: dict | None = None,
                      require: str | None = None) -> list[ContactSet]:
     """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring).
 
@@ -205,10 +203,9 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     poses (default ``50 n``) were drawn. Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
     (world; normals inward). ``stats``, if given, receives ``tried``, ``touching`` (every
     chosen pad reached the surface), ``facing`` (and within the cone), ``clean`` (and FCL-clean)
-    and ``kept``. ``opposed`` (experimental): palm placed thumb first
-    (:func:`~graspnet_torch.synthesis.opposition.place`), the lines through an opposed banked
-    posture; ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or
-    "force_closure" ones (None: every set). Measured: neither yet yields force-closure sets.
+    and ``kept``. ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or
+    "force_closure" ones (None: every set); measured on the shipped hand (thumb, index, middle):
+    force-closure sets on a 4 cm sphere (3 of 320 palm poses), none yet on a 6 cm cube or glass3.
     """
     if robot.has_body or robot.shared.n:
         raise ProblemError(f"{robot.cfg.name}: pad_contact_sets places a free hand's palm (no arm, no shared joints)")
@@ -234,9 +231,6 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     scene = scene_for(robot, problem, penetration_m, False, fingers_apart=True)
     max_tries = 50 * n if max_tries is None else max_tries
     out: list[ContactSet] = []
-    bank = opposed_bank(robot, rows, depth, rng) if opposed and len(rows) > 1 else None
-    if bank is not None and not len(bank.q):
-        raise ProblemError(f"pad_contact_sets: no opposed postures of {list(fingers)}")
     tried = touching = facing = clean = 0
     while len(out) < n and tried < max_tries:
         B = min(BATCH, max_tries - tried)
@@ -247,22 +241,13 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
         c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front  # object centre, palm
         span = hi - lo
-        if bank is not None:  # the centre where the opposed pads meet; the lines through that posture
-            R_b, placed, q_aim, miss = place(bank, obj, rng, B)
-            fits = miss <= SPREAD_M  # else no banked posture fits: the palm pose is dropped
-            R = np.where(fits[:, None, None], R_b, R)
-            c_palm = np.where(fits[:, None], placed, c_palm)
-            q_aim = np.repeat(q_aim, LINES, axis=0)
-            q_open = np.maximum(lo, q_aim - rng.uniform(0.1, 0.4, q_aim.shape) * span)
-            q_close = np.minimum(hi, q_aim + rng.uniform(0.05, 0.5, q_aim.shape) * (q_aim - q_open))
         T = np.tile(np.eye(4), (B, 1, 1))
         T[:, :3, :3] = R
         T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
         head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
         heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
-        if bank is None:
-            q_open = lo + rng.uniform(*OPEN, (B * LINES, *lo.shape)) * span
-            q_close = lo + rng.uniform(*CLOSE, (B * LINES, *lo.shape)) * span
+        q_open = lo + rng.uniform(*OPEN, (B * LINES, *lo.shape)) * span
+        q_close = lo + rng.uniform(*CLOSE, (B * LINES, *lo.shape)) * span
         q_open, q_close = torch.as_tensor(q_open), torch.as_tensor(q_close)
         q_touch, touched, before = _close(robot, obj, heads, q_open, q_close, depth)
         q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
@@ -283,7 +268,7 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         q = torch.stack([q_rest[torch.arange(B), torch.as_tensor(rest[:, i]), i] for i in range(len(lo))], dim=1)
         for i, row in enumerate(rows):
             q[:, row] = q_touch[torch.arange(B), torch.as_tensor(pick[:, i]), row]
-        ok = good.any(axis=1).all(axis=1) & (fits if bank is not None else True)
+        ok = good.any(axis=1).all(axis=1)
         touching += int(ok.sum())
         for b in np.flatnonzero(ok):
             posture = Posture(palm_pose=head[b], fingers=q[b], body=torch.zeros(0, dtype=torch.float64))
