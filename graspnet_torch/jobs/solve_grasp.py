@@ -33,6 +33,7 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.settings import build, clip, unset, with_defaults
 from graspnet_torch.solver.api import DTYPES, robot_and_ik, solve, starts_from_proposals, trial_posture
 from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.contact import contact_model
 from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.environment import Evaluation
 from graspnet_torch.solver.environments import build_environment, environment_class
@@ -203,7 +204,8 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
     """The checks of one problem that need its robot: collision meshes found and readable (when
     it has something to collide with), the robot and its FCNN checkpoint loaded (cached), its
     posture proposal model where the search starts from it (cached), every contact within reach,
-    a gripper's approach within its limits."""
+    a gripper's approach within its limits, the contact model possible (``surface``: an object
+    and fingers with pads)."""
     rc = problem.robot_cfg
     if problem.object is not None or problem.obstacles or rc.floor is not None or rc.self_collision:
         link_shapes(UrdfModel(rc.urdf, rc.mesh_roots, rc.allow_outside_paths), "collision")
@@ -211,6 +213,7 @@ def check_problem(problem: GraspProblem, solver: SolverCfg) -> None:
     if solver.method == "srv" and not robot.shared.names and starts_from_proposals(robot, [problem], solver):
         proposal_of(robot)  # its posture proposal model, if it has one (refused if corrupted); cached
     environment_class(robot).check(robot, problem, solver)  # every contact within reach; a gripper's approach
+    contact_model(robot, problem, solver)  # solver.contact_model=surface needs an object and pads
 
 
 def prepare_solve(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path

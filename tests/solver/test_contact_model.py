@@ -13,6 +13,7 @@ from graspnet_torch.collision.surface import surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.solver.contact import ContactRule, contact_model, tip_frames
 from graspnet_torch.solver.postures import trial_posture
+from tests.refusals import refused, write_problem
 
 SURFACE = {"contact_model": "surface", "normal_cone_deg": 90.0}  # the cone open: the search finds grasps
 
@@ -175,3 +176,22 @@ def test_two_fingers_through_each_other_count_in_the_surface_model_only():
             counted += 1
             assert all(a.split("_")[0] != b.split("_")[0] for a, b in report.self_pairs)  # two different fingers
     assert 5 <= counted <= 35
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["task=glass3", "solver.contact_model=pads"], "solver.contact_model"),
+    (["task=glass3", "solver.normal_cone_deg=120"], "solver.normal_cone_deg"),
+    (["task=glass3", "solver.penetration_mm=-1"], "solver.penetration_mm"),
+    (["task=glass3", "solver.squeeze_mm=500"], "solver.squeeze_mm"),
+])
+def test_bad_contact_settings_are_refused_on_the_command_line(tmp_path, args, message):
+    refused(tmp_path, "solve_grasp.py", *args, f"out={tmp_path / 'r.json'}", message=message)
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_the_surface_model_without_an_object_is_refused_before_any_work(tmp_path):
+    problem = write_problem(tmp_path, "robot: hand\ncontacts:\n  - {finger: thumb, position: [0.02, 0.05, 0.12]}\n"
+                                      "  - {finger: index, position: [0.0, 0.0, 0.2]}\n")
+    refused(tmp_path, "solve_grasp.py", f"problem={problem}", "solver.contact_model=surface",
+            f"out={tmp_path / 'r.json'}", message="contact_model=surface needs an object")
+    assert not (tmp_path / "r.json").exists()
