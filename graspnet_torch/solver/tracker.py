@@ -219,6 +219,13 @@ class Curves:
         return out
 
     def _assemble(self, values: list[Tensor], stop: Tensor, mean: bool) -> Tensor:
+        if len(self.spans) == 1 and self.spans[0][1] is None:  # every trial ran every iteration recorded
+            v = torch.stack(values)  # (K, T, ...)
+            v = v.mean(-1) if mean else v
+            K, T = v.shape[:2]
+            held = v[stop, torch.arange(T, device=v.device)]  # (T, ...): each trial's value at its stop
+            after = (torch.arange(K, device=v.device).view(-1, 1) > stop).view(K, T, *([1] * (v.dim() - 2)))
+            return torch.where(after, held, v)
         ends = [k for k, _ in self.spans[1:]] + [len(self.time)]
         parts = []
         for (k0, rows), k1 in zip(self.spans, ends, strict=True):
