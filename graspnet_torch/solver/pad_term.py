@@ -16,12 +16,14 @@ it the pad is free, so a finger whose error is within ``solver.tolerance_mm`` ha
 the cone (the search's stop rule, ``grasped``, and the polish's landing need it). :data:`PAD_WEIGHT`
 makes a pad turned 90 degrees away weigh as much as a tip some 50 mm off its target.
 
-What the shipped hand can reach: its thumb's pad faces across the palm (-x at home, the other
-pads +y), and no joint turns it about the thumb's own axis. With the tips on the targets of the
-paper's glass3, glass4, videotape5 and block5 and no link deeper than 1 mm, the thumb's pad came
-no nearer than about 39, 56, 84 and 67 degrees to the object's inward normal (1,000 least-squares
-starts over palm and fingers, any palm orientation; in the paper's palm box 43, 58, 71, 77): the
-default 30-degree cone is out of its reach there; 60 degrees is within it on glass3 and glass4.
+What the shipped hand can reach: its thumb has no axial rotation, so the side its flexion closes
+towards (+y of its tip frame) faces across the palm, not the fingers; its pad is given in the
+robot config on the distal sphere's side that faces them (-z; :mod:`graspnet_torch.robot.pads`).
+With the closing side as the pad, no posture put the thumb's pad within 39, 56, 84 and 67 degrees
+of the inward normal on glass3, glass4, videotape5 and block5 with no link deeper than 1 mm
+(1,000 least-squares starts each); with the given pad, postures within 30 degrees and 1 mm exist
+on glass3, videotape5 and block5 (worst pad 19, 23, 14 degrees), and glass4 came no nearer than
+about 32 degrees (its index and ring pads, side by side on the glass).
 """
 
 from __future__ import annotations

@@ -43,6 +43,8 @@ def _distal_sphere_radius(robot: gt.Robot, link: str) -> float:
 
 @pytest.mark.parametrize("name", ["hand", "arm_hand"])
 def test_shipped_hand_pads_are_the_distal_spheres_along_the_closing_direction(robots, name):
+    """The four fingers' pads are derived (the distal sphere along the closing direction); the
+    thumb's is the config's, on its distal sphere's side that faces the fingers (-z)."""
     robot = robots[name]
     pads = robot.pads
     assert list(pads) == list(robot.finger_names)
@@ -52,10 +54,46 @@ def test_shipped_hand_pads_are_the_distal_spheres_along_the_closing_direction(ro
         r = _distal_sphere_radius(robot, pad.link)
         assert r == pytest.approx(HAND_RADII[finger])
         assert abs(pad.depth - r) < 1e-4
-        np.testing.assert_allclose(pad.normal, [0.0, 1.0, 0.0], atol=1e-9)  # flexion about z moves the tip to +y
-        np.testing.assert_allclose(pad.normal, closing[finger], atol=1e-6)
-        np.testing.assert_allclose(pad.point, [0.0, r, 0.0], atol=1e-9)
+        side = [0.0, 0.0, -1.0] if finger == "thumb" else [0.0, 1.0, 0.0]  # flexion about z moves a tip to +y
+        np.testing.assert_allclose(pad.normal, side, atol=1e-9)
+        np.testing.assert_allclose(pad.point, r * np.asarray(side), atol=1e-9)
+        if finger != "thumb":
+            np.testing.assert_allclose(pad.normal, closing[finger], atol=1e-6)
     assert robot.pads is pads  # cached
+
+
+def _facing_share(pad_normal: np.ndarray, n: int = 20000) -> float:
+    """Of random thumb and index postures (independent FK: pytorch_kinematics on the URDF) whose
+    tips lie 30-90 mm apart with the index pad facing the thumb tip within 30 degrees, the share
+    where ``pad_normal`` (thumb tip frame) faces the index tip within 30 degrees."""
+    import pytorch_kinematics as pk
+    import torch
+
+    urdf = (repo_root() / "urdf" / "hand" / "hand.urdf").read_text()
+    rng = np.random.default_rng(0)
+    frames = {}
+    for f in ("thumb", "index"):
+        chain = pk.build_serial_chain_from_urdf(urdf, f"{f}_tip", "palm").to(dtype=torch.float64)
+        lo, hi = (np.asarray(a) for a in chain.get_joint_limits())
+        frames[f] = chain.forward_kinematics(torch.as_tensor(rng.uniform(lo, hi, (n, len(lo))))).get_matrix().numpy()
+    d = frames["index"][:, :3, 3] - frames["thumb"][:, :3, 3]
+    dist = np.linalg.norm(d, axis=1)
+    u = d / dist[:, None]
+    to_index = np.einsum("nji,nj->ni", frames["thumb"][:, :3, :3], u)
+    to_thumb = np.einsum("nji,nj->ni", frames["index"][:, :3, :3], -u)
+    cos30 = np.cos(np.radians(30))
+    pinch = (dist > 0.03) & (dist < 0.09) & (to_thumb[:, 1] > cos30)
+    assert pinch.sum() > 500
+    return float((to_index[pinch] @ pad_normal > cos30).mean())
+
+
+def test_shipped_thumb_pad_faces_the_fingers_where_its_closing_side_does_not(robots):
+    """Why the shipped hand's thumb pad is given: its closing side (+y) almost never faces the
+    index finger's pad in a pinch, the configured side (-z) often does."""
+    closing = _closing_directions(robots["hand"])["thumb"]
+    given = _facing_share(robots["hand"].pads["thumb"].normal)
+    derived = _facing_share(closing)
+    assert derived < 0.01 and given > 0.2
 
 
 def test_a_gripper_has_no_pads(robots):
