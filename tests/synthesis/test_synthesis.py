@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision.scene import CollisionScene
@@ -12,7 +13,7 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import surface_fields
 from graspnet_torch.solver.postures import trial_posture
-from graspnet_torch.synthesis.candidates import placeholder_problem
+from graspnet_torch.synthesis.candidates import _lines, placeholder_problem
 
 FINGERS = ("thumb", "index", "middle")
 
@@ -90,3 +91,20 @@ def test_synthesize_grasps_box(robot: gt.Robot) -> None:
         assert max(fields["normal_angle_deg"].values()) <= 30.0 + 1e-6
         assert fields["penetration_mm"] <= 1.0 + 1e-6
         np.testing.assert_allclose(g.problem.contacts_world(), g.contacts, atol=1e-9)
+
+
+def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
+    """Every finger's closing line starts by pushing its pad along the pad normal, the thumb's too
+    (its pad faces the fingers, off its flexion side); and a seed gives the same lines."""
+    lo, hi = robot.finger_limits
+    q0, q1 = _lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
+    again = _lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
+    np.testing.assert_array_equal(q0.numpy(), again[0].numpy())
+    np.testing.assert_array_equal(q1.numpy(), again[1].numpy())
+    assert np.all(q0.numpy() >= lo - 1e-12) and np.all(q1.numpy() <= hi + 1e-12)
+    names, frames = robot.link_frames_of(None, q0, torch.zeros(len(q0), 6, dtype=torch.float64))
+    R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in robot.fingers], :3, :3]
+    normal = np.einsum("nfij,fj->nfi", R, np.stack([robot.pads[f].normal for f in robot.fingers]))
+    step = robot.fingertips_palm(q0 + 0.05 * (q1 - q0)).numpy() - robot.fingertips_palm(q0).numpy()
+    cos = np.sum(step * normal, axis=-1) / np.linalg.norm(step, axis=-1)
+    assert cos.min() > 0.9
