@@ -64,6 +64,9 @@ class Environment(SearchPart, WholePart, ReportPart):
         polishes: the environment has an in-loop polish (:meth:`polish`).
         counts_collisions: its evaluations count collisions (the reward shapes them and the
             problem has something to collide with).
+        on_surface: its contact fingers' pads go onto the object's surface (the surface contact
+            model): its in-loop polish lands against the object by design, so it starts from the
+            first iteration as where nothing collides (``solver.polish.from_r_free``).
         error_key: the result field (JSON key) of the error a trial is ranked by.
         shared_slots: how many of the configuration's last columns are joints several fingers
             share (a free hand's; 0: the robot holds them, or has none).
@@ -81,3 +84,4 @@ class Environment(SearchPart, WholePart, ReportPart):
     subsets: bool = False
     polishes: bool = False
     counts_collisions: bool = False
+    on_surface: bool = False

@@ -110,6 +110,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)
         self.counts_collisions = self.proxy is not None
+        self.on_surface = self.pads is not None
 
     def rule_of(self, problem: int) -> ContactRule:
         """The contact rule of problem ``problem`` of the batch (its contact model)."""

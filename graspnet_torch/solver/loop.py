@@ -189,7 +189,7 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     first_from = None  # the first iteration's (solver.polish.from_r_free: nothing to collide with)
     if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
         polish_from = first_from = solver.polish.from_r
-        if solver.polish.from_r_free is not None and not env.counts_collisions:
+        if solver.polish.from_r_free is not None and (not env.counts_collisions or env.on_surface):
             first_from = solver.polish.from_r_free
     polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
     pending = torch.zeros(T, dtype=torch.bool, device=device)

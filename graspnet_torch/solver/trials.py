@@ -37,8 +37,8 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     configurations: the collision count by FCL (INTERFACE.md) of each reported posture when the
     problem has an object or obstacles, the noise-free reinforcement recomputed from them, and
     ``success``: the grasp (the report's ``landed``: every contact within ``solver.tolerance_mm``,
-    and no collision; in the surface model also every pad on its contact and facing into the
-    object). Also the one-line reason no trial succeeded, or None."""
+    and no collision; in the surface model instead every pad, measured, within the tolerance of its
+    contact and within the cone, and no collision). Also the one-line reason no trial succeeded, or None."""
     rule = contact_rule(robot, problem, solver)
     exact = has_environment(robot, problem)  # the postures are needed only to check them (FCL) or their pads
     postures = [trial_posture(robot, f) for f in report.fields] if exact or rule.surface else []
@@ -52,9 +52,10 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     for t, f in enumerate(report.fields):
         count = 0 if collisions is None else int(collisions[t])
         fields, error = dict(f), report.error_mm[t]
-        if rule.surface:  # the pads: on their contacts, facing into the object
+        if rule.surface:  # the pads, measured: on their contacts, facing into the object (the search's error
+            # adds a pad's hinge from 0.9 of the cone on, which a grasp within the cone need not meet)
             fields.update(surface_fields(robot, problem, postures[t]))
-            touching[t] = touching[t] and within_cone(fields, rule.cone_deg) and \
+            touching[t] = within_cone(fields, rule.cone_deg) and \
                 max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm
         counts.append(count)
         all_fields.append(fields)
