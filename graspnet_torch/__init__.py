@@ -40,7 +40,14 @@ from graspnet_torch.solver import (
 )
 from graspnet_torch.solver.kinds import KINDS, RobotKind, robot_kind  # registers the robot kinds
 from graspnet_torch.srv import ConfigurationNetwork, SigmaCfg, SRVFunction, SRVNetCfg
-from graspnet_torch.synthesis import ContactSet, SynthesizedGrasp, pad_contact_sets, synthesize_grasps
+from graspnet_torch.synthesis import (
+    BaselineGrasp,
+    ContactSet,
+    SynthesizedGrasp,
+    baseline_grasps,
+    pad_contact_sets,
+    synthesize_grasps,
+)
 from graspnet_torch.tasks import (
     Contact,
     GraspProblem,
@@ -55,6 +62,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "KINDS",
+    "BaselineGrasp",
     "ChainKernel",
     "ChainSpec",
     "CheckpointError",
@@ -98,6 +106,7 @@ __all__ = [
     "__version__",
     "available_robots",
     "available_tasks",
+    "baseline_grasps",
     "check_motion",
     "grasp_quality",
     "load_finger_ik",

@@ -1,10 +1,13 @@
 """Grasp synthesis: contact sets chosen on an object so that the hand can touch them with its
 pads (:mod:`~graspnet_torch.synthesis.candidates`), ranked by grasp quality and solved
-(:mod:`~graspnet_torch.synthesis.synthesize`)."""
+(:mod:`~graspnet_torch.synthesis.synthesize`); beside it, a planner with no contact reasoning
+(:mod:`~graspnet_torch.synthesis.baseline`: random palm poses, fingers closed until they touch)."""
 
 from __future__ import annotations
 
+from graspnet_torch.synthesis.baseline import BaselineGrasp, baseline_grasps
 from graspnet_torch.synthesis.candidates import ContactSet, pad_contact_sets
 from graspnet_torch.synthesis.synthesize import SynthesizedGrasp, rank_sets, synthesize_grasps
 
-__all__ = ["ContactSet", "SynthesizedGrasp", "pad_contact_sets", "rank_sets", "synthesize_grasps"]
+__all__ = ["BaselineGrasp", "ContactSet", "SynthesizedGrasp", "baseline_grasps", "pad_contact_sets", "rank_sets",
+           "synthesize_grasps"]
