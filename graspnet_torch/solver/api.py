@@ -93,7 +93,16 @@ KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper
 
 def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
     """A problem, a problem file or a shipped task's name -> the problem (a file read once while
-    its size and modification time stay the same)."""
+    its size and modification time stay the same); one with ``contacts: auto`` is refused (its
+    contacts are chosen by :func:`graspnet_torch.synthesis.synthesize_grasps`)."""
+    out = _given_problem(problem)
+    if out.auto is not None:
+        raise ProblemError(f"{out.source}: contacts: auto: the solver needs contacts; choose them on the object "
+                           f"with gt.synthesize_grasps or scripts/solve_grasp.py")
+    return out
+
+
+def _given_problem(problem: GraspProblem | str | Path) -> GraspProblem:
     if isinstance(problem, GraspProblem):
         return problem
     p = Path(str(problem))

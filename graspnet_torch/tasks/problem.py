@@ -24,13 +24,13 @@ from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, 
 from graspnet_torch.robot.shape import Shape, numbers, pose_degrees, unknown_keys
 from graspnet_torch.robot.transforms import rpy_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
+from graspnet_torch.tasks.auto_contacts import AUTO_KEYS, AutoContacts, auto_contacts
 from graspnet_torch.tasks.shapes import check_free_contacts, obstacles_of
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
 
 KNOWN_KEYS = {"robot", "object", "contacts", "points", "approach", "palm_bounds", "bounds", "obstacles", "name",
-              "description", "reference", "start",
-              "notes"}
+              "description", "reference", "start", "notes", *AUTO_KEYS}
 
 KIND_KEYS = {"contacts": "one point per finger", "points": "a gripper's two object points",
              "approach": "a gripper's approach configuration", "palm_bounds": "a free hand's palm box",
@@ -113,6 +113,8 @@ class GraspProblem:
             written (metres, degrees); the search stays near it. None: the robot's search space.
         start: a robot with a body: the configuration its reach motion starts from, by URDF joint
             name as written (metres, degrees; joints left out at home). None: the home posture.
+        auto: ``contacts: auto``: the fingers and number of grasps to choose contacts for on the
+            object (:mod:`graspnet_torch.tasks.auto_contacts`; ``contacts`` is then empty); else None.
         source: where it came from, for messages.
     """
 
@@ -130,6 +132,7 @@ class GraspProblem:
     points: np.ndarray | None = field(default=None, compare=False)
     approach: dict[str, float] | None = field(default=None, compare=False)
     start: dict[str, float] | None = field(default=None, compare=False)
+    auto: AutoContacts | None = field(default=None, compare=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -171,6 +174,13 @@ class GraspProblem:
             if data.get(key) is not None and key not in schema.keys:
                 raise ProblemError(f"{source}: '{key}' ({KIND_KEYS[key]}) does not apply to robot '{robot}' "
                                    f"({robot_cfg.kind}), whose problems give {', '.join(schema.keys)}")
+        auto = auto_contacts(data, source, robot_cfg)  # contacts: auto (tasks/auto_contacts.py)
+        if auto is not None:
+            obj = Shape.from_mapping(data["object"], f"{source}: object", folder=folder,
+                                     allow_outside_paths=allow_outside_paths)
+            _check_texts(data, source)
+            return cls(robot=robot, contacts=(), object=obj, name=data.get("name"), description=data.get("description"),
+                       source=source, robot_cfg=robot_cfg, auto=auto)
         if schema.targets == "points":  # a gripper with two marked points (MANUS): points instead of contacts
             return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)
         fingers = list(robot_cfg.fingers)

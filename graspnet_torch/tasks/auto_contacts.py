@@ -1,0 +1,89 @@
+"""``contacts: auto``: a problem that gives an object and a hand and lets the project choose the
+contacts on the object's surface (:func:`graspnet_torch.synthesis.synthesize_grasps`).
+
+A problem file::
+
+    robot: hand
+    object: {mesh: mug.obj, scale: 1.0, pose: [0, 0, 0.2, 0, 0, 0]}   # or a box / cylinder / sphere
+    contacts: auto
+    fingers: [thumb, index, middle]   # the fingers that touch; or a number: the first n fingers
+                                      # in the robot's order (thumb first); default 3 (or all, if fewer)
+    grasps: 5                         # how many grasps to return, best first (1-100; default 5)
+
+Only a free hand (a palm with fingers, no arm) is supported so far; ``fingers`` and ``grasps``
+apply only to ``contacts: auto``; obstacles are not supported with it yet.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.config import RobotCfg
+
+__all__ = ["AUTO_KEYS", "DEFAULT_FINGERS", "DEFAULT_GRASPS", "MAX_GRASPS", "AutoContacts", "auto_contacts"]
+
+AUTO_KEYS = ("fingers", "grasps")  # the keys only ``contacts: auto`` takes
+DEFAULT_FINGERS = 3  # the first three fingers (thumb, index, middle on the shipped hand)
+DEFAULT_GRASPS = 5
+MAX_GRASPS = 100
+
+
+@dataclass(frozen=True)
+class AutoContacts:
+    """What a ``contacts: auto`` problem asks for.
+
+    Attributes:
+        fingers: the fingers that touch the object, in the robot's finger order.
+        grasps: how many grasps to return, best first.
+    """
+
+    fingers: tuple[str, ...]
+    grasps: int = DEFAULT_GRASPS
+
+
+def _count(value: Any, where: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ProblemError(f"{where}: expected a whole number from {lo} to {hi}, got {value!r}"[:300])
+    return value
+
+
+def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContacts | None:
+    """The :class:`AutoContacts` of a parsed problem whose ``contacts`` is ``auto``; None for one
+    that gives its contacts (where ``fingers`` / ``grasps`` are refused). Checks the robot's kind,
+    the object, the fingers (names of the robot's fingers, each once, at least 2; or a count) and
+    the number of grasps: :class:`ProblemError`, one line naming the key."""
+    if data.get("contacts") != "auto":
+        given = [k for k in AUTO_KEYS if data.get(k) is not None]
+        if given:
+            raise ProblemError(f"{source}: {', '.join(given)}: only with 'contacts: auto' (the project chooses the "
+                               f"contacts); this problem lists its contacts")
+        return None
+    names = list(robot_cfg.fingers)
+    if robot_cfg.kind != "hand":
+        raise ProblemError(f"{source}: contacts: auto: robot '{robot_cfg.name}' ({robot_cfg.kind}): contacts are "
+                           f"chosen for a free hand (a palm with fingers, no arm) so far")
+    if data.get("object") is None:
+        raise ProblemError(f"{source}: contacts: auto needs an object (the contacts are chosen on its surface)")
+    if data.get("obstacles"):
+        raise ProblemError(f"{source}: contacts: auto: obstacles are not supported with chosen contacts yet")
+    raw = data.get("fingers", min(DEFAULT_FINGERS, len(names)))
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        if not 2 <= raw <= len(names):
+            raise ProblemError(f"{source}: fingers: {raw}: robot '{robot_cfg.name}' has {len(names)} fingers "
+                               f"({', '.join(names)}); give 2 to {len(names)}")
+        fingers = names[:raw]
+    elif isinstance(raw, list) and all(isinstance(f, str) for f in raw):
+        unknown = [f for f in raw if f not in names]
+        if unknown:
+            raise ProblemError(f"{source}: fingers: unknown finger(s) {', '.join(unknown)}"[:200] +
+                               f" for robot '{robot_cfg.name}' (fingers: {', '.join(names)})")
+        if len(set(raw)) != len(raw) or len(raw) < 2:
+            raise ProblemError(f"{source}: fingers: need 2 or more different fingers, got {raw}"[:300])
+        fingers = [f for f in names if f in raw]
+    else:
+        raise ProblemError(f"{source}: fingers: expected a list of finger names or a number, got {raw!r}"[:300])
+    grasps = _count(data.get("grasps", DEFAULT_GRASPS), f"{source}: grasps", 1, MAX_GRASPS)
+    return AutoContacts(tuple(fingers), grasps)

@@ -1,0 +1,64 @@
+"""``contacts: auto`` problems: read and checked (graspnet_torch.tasks.auto_contacts), refused by
+the solver, which needs contacts."""
+
+from __future__ import annotations
+
+import pytest
+
+import graspnet_torch as gt
+from graspnet_torch.tasks.auto_contacts import AutoContacts
+
+CUBE = {"shape": "box", "size": [0.06, 0.06, 0.06], "pose": [0, 0, 0.2, 0, 0, 0]}
+
+
+def _problem(**keys) -> gt.GraspProblem:
+    return gt.GraspProblem.from_mapping({"robot": "hand", "object": CUBE, "contacts": "auto", **keys}, "p.yaml")
+
+
+def test_auto_problem_reads_fingers_in_robot_order_and_grasps():
+    p = _problem(fingers=["middle", "thumb", "index"], grasps=3)
+    assert p.auto == AutoContacts(("thumb", "index", "middle"), 3)
+    assert p.contacts == () and p.object.kind == "box"
+
+
+def test_auto_problem_defaults_and_counts():
+    assert _problem().auto.fingers == ("thumb", "index", "middle") and _problem().auto.grasps == 5
+    assert _problem(fingers=4).auto.fingers == ("thumb", "index", "middle", "ring")
+
+
+@pytest.mark.parametrize(("keys", "message"), [
+    ({"fingers": 7}, r"p\.yaml: fingers: 7: robot 'hand' has 5 fingers"),
+    ({"fingers": 1}, r"fingers: 1: robot 'hand' has 5 fingers"),
+    ({"fingers": ["thumb", "toe"]}, r"fingers: unknown finger\(s\) toe"),
+    ({"fingers": ["thumb", "thumb"]}, r"fingers: need 2 or more different fingers"),
+    ({"fingers": "thumb"}, r"fingers: expected a list of finger names or a number"),
+    ({"grasps": 0}, r"p\.yaml: grasps: expected a whole number from 1 to 100"),
+    ({"grasps": 101}, r"grasps: expected a whole number from 1 to 100"),
+    ({"grasps": True}, r"grasps: expected a whole number"),
+    ({"object": None}, r"contacts: auto needs an object"),
+    ({"obstacles": [{"shape": "box", "size": [0.1, 0.1, 0.1], "pose": [0.3, 0, 0, 0, 0, 0]}]},
+     r"obstacles are not supported"),
+])
+def test_bad_auto_problems_are_refused_in_one_line(keys, message):
+    with pytest.raises(gt.ProblemError, match=message) as info:
+        _problem(**keys)
+    assert "\n" not in str(info.value)
+
+
+def test_auto_keys_only_with_auto_contacts():
+    data = {"robot": "hand", "object": CUBE, "grasps": 2,
+            "contacts": [{"finger": "thumb", "position": [0.03, 0, 0]}, {"finger": "index", "position": [-0.03, 0, 0]}]}
+    with pytest.raises(gt.ProblemError, match=r"grasps: only with 'contacts: auto'"):
+        gt.GraspProblem.from_mapping(data, "p.yaml")
+
+
+def test_auto_contacts_need_a_free_hand():
+    with pytest.raises(gt.ProblemError, match=r"robot 'arm_hand' \(arm_hand\): contacts are chosen for a free hand"):
+        gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml")
+
+
+def test_the_solver_refuses_auto_contacts(tmp_path):
+    path = tmp_path / "auto.yaml"
+    path.write_text("robot: hand\nobject: {shape: sphere, size: [0.04], pose: [0, 0, 0.2, 0, 0, 0]}\ncontacts: auto\n")
+    with pytest.raises(gt.ProblemError, match=r"contacts: auto: the solver needs contacts"):
+        gt.solve(path, trials=2)
