@@ -1,0 +1,249 @@
+"""An object in, grasps out, for a folder of meshes: the job behind ``scripts/synthesize_grasps.py``.
+
+Every check comes first (:func:`prepare_synthesize`: the settings, the meshes to read, the robot
+and its fingers' pads, the output folder), then each object is placed in front of the hand (its
+bounding box centred at :data:`OBJECT_CENTRE`), handed to :func:`gt.synthesize_grasps` and written
+to ``<out>/<object stem>.json``; then ``<out>/summary.csv``, one row per object. An object whose
+result file exists is skipped (the run resumes where it stopped); one whose mesh cannot be read,
+or where no grasp is found, is recorded with a one-line reason. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from graspnet_torch.errors import ConfigError, GraspnetError
+from graspnet_torch.files import check_output_path
+from graspnet_torch.io import atomic_write_text
+from graspnet_torch.jobs.configs import MAX_SEED
+from graspnet_torch.meshes import MESH_FORMATS, load_mesh
+from graspnet_torch.physics import simulate_grasp
+from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
+from graspnet_torch.robot.robot import Robot, load_robot
+from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
+from graspnet_torch.settings import Free, build, clip, setting
+from graspnet_torch.synthesis import synthesize_grasps
+from graspnet_torch.table import format_table
+
+__all__ = ["COLUMNS", "OBJECT_CENTRE", "SynthesizeGraspsJobCfg", "find_meshes", "object_shape",
+           "prepare_synthesize", "synthesize_objects"]
+
+OBJECT_CENTRE = (0.0, 0.0, 0.2)  # m, world: where each object's bounding box is centred (the hand's tasks' place)
+COLUMNS = ("object", "grasps", "best_holds", "top1_holds_all", "top5_any_holds_all", "best_epsilon",
+           "deepest_penetration_mm", "seconds", "reason")
+
+
+@dataclass(frozen=True)
+class SynthesizeGraspsJobCfg:
+    """``scripts/synthesize_grasps.py`` (configs/synthesize_grasps.yaml)."""
+
+    objects: str | None = None  # a folder of mesh files (.obj, .stl, .ply, ...) or one mesh file
+    robot: Free = None  # the robot group as composed (configs/robot/), a name or a YAML path
+    scale: float = setting(1.0, lo=0.0, lo_open=True, hi=MAX_SCALE)  # metres per mesh unit (0.001: millimetres)
+    fingers: list[str] = setting(factory=lambda: ["thumb", "index", "middle"])
+    grasps: int = setting(5, lo=1, hi=1000)  # the N best grasps kept per object
+    candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
+    trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set
+    seed: int = setting(0, lo=0, hi=MAX_SEED)
+    physics: bool = True  # check each grasp in MuJoCo (gt.simulate_grasp)
+    out: str | None = None  # the results folder (None: <run dir>/results)
+    threads: int = setting(1, lo=1, hi=1024)
+    progress: bool = True
+
+
+def find_meshes(objects: str | None) -> list[Path]:
+    """The mesh files of ``objects=`` (a folder: its files with a mesh suffix, sorted; or one
+    file), refused in one line when there is none or two would write the same result file."""
+    if not objects:
+        raise ConfigError("objects= is required: a folder of mesh files (.obj, .stl, .ply) or one mesh file")
+    path = Path(objects).expanduser()
+    suffixes = tuple("." + f for f in MESH_FORMATS)
+    if path.is_dir():
+        meshes = sorted(p for p in path.iterdir() if p.suffix.lower() in suffixes and p.is_file())
+        if not meshes:
+            raise ConfigError(f"objects={clip(objects, 120)}: no mesh files in the folder (expected "
+                              f"{', '.join(suffixes)})")
+    elif path.is_file():
+        if path.suffix.lower() not in suffixes:
+            raise ConfigError(f"objects={clip(objects, 120)}: not a mesh file (expected {', '.join(suffixes)})")
+        meshes = [path]
+    else:
+        raise ConfigError(f"objects={clip(objects, 120)}: no such folder or file")
+    stems: dict[str, Path] = {}
+    for p in meshes:
+        if p.stem in stems:
+            raise ConfigError(f"objects={clip(objects, 120)}: {clip(stems[p.stem].name, 60)} and {clip(p.name, 60)} "
+                              f"would both write {clip(p.stem, 60)}.json; rename one")
+        stems[p.stem] = p
+    return meshes
+
+
+def _check_fingers(robot: Robot, fingers: Sequence[str]) -> None:
+    """The robot is a free hand (synthesis places its palm) and ``fingers`` are two or more of its
+    fingers with pads."""
+    names = list(robot.finger_names)
+    padded = [f for f in names if f in robot.pads]
+    if robot.has_body or robot.shared.n or len(padded) < 2:
+        raise ConfigError(f"robot={robot.name}: grasp synthesis needs a free hand (no arm, no shared joints) with two "
+                          f"or more fingers with pads; the shipped one is robot=hand")
+    for f in fingers:
+        if f not in names:
+            raise ConfigError(f"fingers: unknown finger '{clip(f, 40)}' of robot {robot.name} (its fingers: "
+                              f"{', '.join(names)})")
+        if f not in robot.pads:
+            raise ConfigError(f"fingers: {f} of robot {robot.name} has no pad (its config's fingers.{f}.pad), which "
+                              f"grasp synthesis needs")
+    if len(fingers) < 2 or len(set(fingers)) != len(fingers):
+        raise ConfigError(f"fingers={clip(','.join(fingers), 80)}: expected two or more different fingers")
+
+
+def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir: str | Path
+                       ) -> tuple[SynthesizeGraspsJobCfg, RobotCfg, list[Path], Path]:
+    """Every check of the job, before any work and without writing anything: the settings, the
+    mesh files, the robot (loaded: cached for the job) and its fingers, the output folder.
+
+    Returns:
+        the settings, the robot's config, the mesh files and the results folder.
+    """
+    job = build(SynthesizeGraspsJobCfg, cfg)
+    meshes = find_meshes(job.objects)
+    robot_cfg = robot_cfg_from_setting(job.robot if job.robot is not None else "hand")
+    _check_fingers(load_robot(robot_cfg), job.fingers)
+    out = Path(job.out).expanduser() if job.out else Path(run_dir) / "results"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder")
+    check_output_path(str(out / "summary.csv"), "out", ConfigError)  # the folder can be made and written in
+    if job.physics:
+        try:
+            import mujoco  # noqa: F401  (only whether it imports)
+        except ImportError:
+            raise ConfigError("physics=true needs MuJoCo: pip install mujoco (or physics=false)") from None
+    return job, robot_cfg, meshes, out
+
+
+def object_shape(path: Path, scale: float) -> Shape:
+    """The mesh as the problem's object, its bounding box centred at :data:`OBJECT_CENTRE`
+    (unturned); a file that is not a solid mesh trimesh reads: a :class:`ProblemError`."""
+    check_mesh(path, "objects", scale)
+    lo, hi = load_mesh(path.resolve(), scale).bounds
+    centre = (np.asarray(lo) + np.asarray(hi)) / 2
+    pose = np.concatenate([np.asarray(OBJECT_CENTRE) - centre, np.zeros(3)])
+    return Shape("mesh", (), pose, path.resolve(), scale)
+
+
+def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> dict:
+    """The summary row of one object (``grasps``: its result file's, best first)."""
+    holds = [g["holds"] for g in grasps if g.get("holds") is not None]
+    full = [g["physics"]["of"] for g in grasps if g.get("physics")]
+    checked = bool(holds) and len(holds) == len(grasps)
+    pen = [g["result"].get("penetration_mm") for g in grasps]
+    pen = [p for p in pen if p is not None]
+    return {"object": name, "grasps": len(grasps), "best_holds": max(holds) if holds else None,
+            "top1_holds_all": (grasps[0]["holds"] == full[0]) if checked else None,
+            "top5_any_holds_all": any(h == n for h, n in zip(holds[:5], full[:5], strict=True)) if checked else None,
+            "best_epsilon": max(g["quality"]["epsilon"] for g in grasps) if grasps else None,
+            "deepest_penetration_mm": max(pen) if pen else None, "seconds": round(seconds, 2), "reason": reason}
+
+
+def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physics) -> dict:
+    """The result file's content for one object (a mesh that fails, or no grasp: with its reason)."""
+    t0 = time.perf_counter()
+    stats: dict = {}
+    data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
+                  "settings": {"fingers": list(job.fingers), "grasps": job.grasps, "candidates": job.candidates,
+                               "trials": job.trials, "seed": job.seed, "physics": job.physics},
+                  "stats": stats, "grasps": [], "reason": None}
+    grasps: list[dict] = []
+    try:
+        obj = object_shape(path, job.scale)
+        data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
+        found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=tuple(job.fingers),
+                                  candidates=job.candidates, seed=job.seed, trials=job.trials, physics=physics,
+                                  stats=stats)
+        grasps = [g.to_dict() for g in found]
+        if not grasps:
+            data["reason"] = (f"no grasp found: {stats.get('solved', 0)} of {job.candidates} contact sets solved, "
+                              f"none succeeded")
+    except GraspnetError as exc:
+        data["reason"] = " ".join(str(exc).split())
+    except Exception as exc:  # trimesh and the solver on an odd mesh: recorded, the other objects go on
+        data["reason"] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    if data["reason"]:
+        data["reason"] = clip(data["reason"], 300)
+    data["grasps"] = grasps
+    data["seconds"] = round(time.perf_counter() - t0, 3)
+    data["summary"] = _row(path.name, grasps, data["seconds"], data["reason"])
+    return data
+
+
+def _existing_row(path: Path, result: Path) -> dict:
+    """The summary row of an object done before (its result file's), or one saying why not."""
+    try:
+        row = json.loads(result.read_text())["summary"]
+        if isinstance(row, dict) and set(COLUMNS) <= set(row):
+            return row
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return {**dict.fromkeys(COLUMNS), "object": path.name, "grasps": 0,
+            "reason": f"{result.name} exists but is not this job's result: delete it to synthesize again"}
+
+
+def _csv(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: "" if row.get(k) is None else row[k] for k in COLUMNS})
+    return buf.getvalue()
+
+
+def _line(row: dict) -> str:
+    if row["reason"]:
+        return f"{row['object']}: {row['reason']}"
+    held = "" if row["best_holds"] is None else f", best holds {row['best_holds']}"
+    return f"{row['object']}: {row['grasps']} grasp(s){held}, {row['seconds']:.1f} s"
+
+
+def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, meshes: Sequence[Path],
+                       out: str | Path) -> list[dict]:
+    """Grasps of each mesh (module docstring): ``<out>/<stem>.json`` per object (skipped when it
+    exists), then ``<out>/summary.csv``; prints one line per object and the summary table.
+
+    Returns:
+        the summary rows, one per mesh, in order (:data:`COLUMNS`).
+    """
+    import torch
+
+    from graspnet_torch.experiments.report import progress
+
+    torch.set_num_threads(job.threads)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    robot = load_robot(robot_cfg)
+    physics = simulate_grasp if job.physics else None
+    rows = []
+    items = progress(meshes, total=len(meshes), desc="objects", unit="object") if job.progress else iter(meshes)
+    for path in items:
+        result = out / f"{path.stem}.json"
+        if result.exists():
+            rows.append(_existing_row(path, result))
+            print(f"{path.name}: skipped, {result} exists", flush=True)
+            continue
+        data = _synthesize_one(robot, path, job, physics)
+        atomic_write_text(result, json.dumps(data, indent=1))
+        rows.append(data["summary"])
+        print(_line(data["summary"]), flush=True)
+    atomic_write_text(out / "summary.csv", _csv(rows))
+    table = [[r[k] if r[k] is not None else "-" for k in COLUMNS[:-1]] for r in rows]
+    print(format_table(list(COLUMNS[:-1]), table, floatfmt=".3g"))
+    print(f"{len(rows)} object(s), {sum(1 for r in rows if r['grasps'])} with grasps: {out / 'summary.csv'}")
+    return rows
