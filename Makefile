@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-retarget bench-proposal bench-solvers report-arm report-contact report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -113,6 +113,9 @@ report-reach: $(STAMP)  ## the experiment reach: motions from home to every arm 
 
 report-contact: $(STAMP)  ## the experiment contact at its reduced protocol (10 poses per task, 3 arm seeds): pads vs points, MuJoCo (~10 min)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/contact hydra.run.dir=outputs/experiment/contact +experiment=contact experiments.contact.poses=10 experiments.contact.arm_seeds=3
+
+report-synthesis: $(STAMP)  ## the experiment synthesis at its reduced protocol (10 objects, both robots): synthesized grasps vs the baseline, MuJoCo, checks
+	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis experiments.synthesis.objects=10
 
 report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)
 	$(call EXPERIMENT_RUN,table3)

@@ -17,6 +17,7 @@ proxy        the collision proxy against FCL near meshes (beyond the paper) :cla
 proposal     posture proposals: what they cost and buy (beyond the paper)   :class:`ProposalExperimentCfg`
 reach        reach motions to every arm and MANUS grasp (beyond the paper)  :class:`ReachExperimentCfg`
 contact      pads on the surface beside the point model, in MuJoCo (beyond)  :class:`ContactCfg`
+synthesis    grasps synthesized for objects, beside a baseline (beyond)     :class:`SynthesisExperimentCfg`
 ===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -46,15 +47,17 @@ from graspnet_torch.experiments.random_hand import RandomHandCfg, run_random_han
 from graspnet_torch.experiments.reach import ReachExperimentCfg, run_reach
 from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.experiments.solvers import SolversCfg, run_solvers
+from graspnet_torch.experiments.synthesis import SynthesisExperimentCfg, run_synthesis
 from graspnet_torch.experiments.table2 import Table2Cfg, run_table2
 from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 from graspnet_torch.settings import DefaultsFile
 
 __all__ = ["DEFAULTS_FILES", "EXPERIMENTS", "ArmCfg", "ContactCfg", "Experiment", "ExperimentReport", "Fig10Cfg",
            "Figure", "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg",
-           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "Table2Cfg", "TradeoffCfg", "run_arm", "run_contact",
-           "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proposal", "run_proxy", "run_random_hand",
-           "run_reach", "run_solvers", "run_table2", "run_tables", "run_tradeoff"]
+           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "SynthesisExperimentCfg", "Table2Cfg", "TradeoffCfg",
+           "run_arm", "run_contact", "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proposal",
+           "run_proxy", "run_random_hand", "run_reach", "run_solvers", "run_synthesis", "run_table2", "run_tables",
+           "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,7 @@ _TABLE = (  # name, settings, run: in the order `make reproduce` runs them (the 
     ("objects", ObjectsCfg, run_objects), ("arm", ArmCfg, run_arm), ("random_hand", RandomHandCfg, run_random_hand),
     ("tradeoff", TradeoffCfg, run_tradeoff), ("proxy", ProxyCfg, run_proxy),
     ("proposal", ProposalExperimentCfg, run_proposal), ("reach", ReachExperimentCfg, run_reach),
-    ("contact", ContactCfg, run_contact))
+    ("contact", ContactCfg, run_contact), ("synthesis", SynthesisExperimentCfg, run_synthesis))
 EXPERIMENTS: dict[str, Experiment] = {name: Experiment(name, cfg, run) for name, cfg, run in _TABLE}
 
 # configs/experiment/<name>.yaml lists its experiment's settings; their values are written from the
