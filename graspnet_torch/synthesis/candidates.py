@@ -17,7 +17,8 @@ One candidate is made in three steps (every candidate of a call in one batch):
    limit: from high to low), and one moving the pad sideways is held at a random fraction
    (``HOLD``) of its range all along the line. ``STEPS`` samples of the line, then bisection,
    find where its pad sphere (the tip frame's origin, radius the pad's depth) first touches the
-   surface (:func:`~graspnet_torch.collision.surface.surface_distance` = depth). A chosen finger
+   surface (distance = depth, by :func:`~graspnet_torch.collision.surface.surface_distance_near`:
+   for a mesh within 0.58 mm of the exact distance, which the check of step 3 uses). A chosen finger
    stops there; a finger that is not chosen stops one sample short of touching (or closed). Of
    ``LINES`` lines per finger, a random one that touches within the cone (its touch point on the
    surface, see step 3) with its links clear of the object is kept, the first chosen finger's (the
@@ -44,7 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.spheres import shape_spheres
-from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import grasp_quality
 from graspnet_torch.robot.geometry import link_shapes
@@ -135,7 +136,7 @@ def _support(vertices: np.ndarray, centre: np.ndarray, d: np.ndarray) -> np.ndar
 def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray) -> np.ndarray:
     """Signed gaps (m) of every pad sphere to the surface: head (..., 6), q (..., F, j) -> (..., F)."""
     tips = robot.fingertips_world(head, q).numpy()
-    return surface_distance(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth
+    return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth
 
 
 def _close(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q_close: torch.Tensor,
@@ -223,7 +224,7 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
     for row, link, centres, radii in spheres:
         T = frames[:, names.index(link)]  # (N, 4, 4)
         world = np.einsum("nij,sj->nsi", T[:, :3, :3], centres) + T[:, None, :3, 3]
-        gap = surface_distance(obj, world.reshape(-1, 3)).reshape(len(frames), -1) - radii
+        gap = surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(frames), -1) - radii
         out[:, row] = np.minimum(out[:, row], gap.min(axis=1))
     return out
 

@@ -8,7 +8,13 @@ import pytest
 import trimesh
 
 import graspnet_torch as gt
-from graspnet_torch.collision.surface import pad_targets, surface_distance, surface_normals
+from graspnet_torch.collision.surface import (
+    NEAR_EDGE_M,
+    pad_targets,
+    surface_distance,
+    surface_distance_near,
+    surface_normals,
+)
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
@@ -116,6 +122,21 @@ def test_a_mesh_spheres_normals_are_near_the_spheres(tmp_path):
     cosine = (surface_normals(mesh, world) * surface_normals(sphere, world)).sum(axis=1)
     assert cosine.min() > np.cos(np.radians(5))  # facets of about 4 degrees
     np.testing.assert_allclose(surface_distance(mesh, world), 0.0, atol=2e-4)
+
+
+def test_the_near_distance_is_within_its_bound_of_the_exact_one(tmp_path):
+    """surface_distance_near on a mesh: never below the exact distance, at most edge / sqrt(3)
+    above it, the same sign; exact on primitives."""
+    mesh = _mesh_file(tmp_path, trimesh.creation.capsule(height=0.05, radius=0.02, count=[12, 12]), "capsule")
+    rng = np.random.default_rng(4)
+    pts = POSE[:3] + rng.normal(0.0, 0.03, (400, 3))
+    exact, near = surface_distance(mesh, pts), surface_distance_near(mesh, pts)
+    assert np.all(np.sign(near) == np.sign(exact))
+    excess = np.abs(near) - np.abs(exact)
+    assert excess.min() >= -1e-12 and excess.max() <= NEAR_EDGE_M / np.sqrt(3) + 1e-12
+    assert excess.max() > 1e-5  # an approximation, measured as one
+    box = Shape("box", (0.04, 0.05, 0.06), POSE)
+    np.testing.assert_array_equal(surface_distance_near(box, pts), surface_distance(box, pts))
 
 
 @pytest.mark.parametrize("task", ["glass3", "glass4"])
