@@ -3,8 +3,8 @@
 The job's own work (finding the meshes, placing each object, the result files, the summary, the
 resume, the one-line refusals) is checked on real mesh files. The grasps themselves come from
 ``gt.synthesize_grasps`` on the same object as a primitive (a box, a sphere) at the pose the job
-chose: its surface queries on a mesh are a Python loop per point, minutes per object on a loaded
-2-core machine (graspnet_torch/collision/surface.py, ``_mesh``), where the primitive takes seconds.
+chose: on the mesh itself the same settings took 33 s (box) and 85 s (sphere) on a loaded 2-core
+machine at 4ab3558 (the mesh surface queries), over this file's budget; the primitive takes seconds.
 """
 
 from __future__ import annotations
