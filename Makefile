@@ -114,7 +114,7 @@ report-reach: $(STAMP)  ## the experiment reach: motions from home to every arm 
 report-contact: $(STAMP)  ## the experiment contact at its reduced protocol (10 poses per task, 3 arm seeds): pads vs points, MuJoCo (~10 min)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/contact hydra.run.dir=outputs/experiment/contact +experiment=contact experiments.contact.poses=10 experiments.contact.arm_seeds=3
 
-report-synthesis: $(STAMP)  ## the experiment synthesis at its reduced protocol (10 objects, both robots): synthesized grasps vs the baseline, MuJoCo, checks
+report-synthesis: $(STAMP)  ## the experiment synthesis at its reduced protocol (10 objects, the shipped hand): synthesized grasps vs the baseline, MuJoCo, checks (minutes per object: mesh surface queries)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis experiments.synthesis.objects=10
 
 report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)

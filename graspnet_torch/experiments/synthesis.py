@@ -9,7 +9,9 @@ NNN/NNN.obj``, 1000 of them, scaled as their URDFs scale them: ``SCALE``), drawn
 by ``seed`` from those used nowhere for tuning or tests (``EXCLUDED``: 000-003 are
 :data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`, 010-012 tuned the synthesis), each 0.2 m above
 the origin; object k is synthesized with seed ``seed`` + k. Robots: the shipped hand (thumb, index,
-middle) and TriFinger by config (``examples/trifinger/trifinger.yaml``, its three fingers).
+middle); TriFinger by config (``examples/trifinger/trifinger.yaml``, its three fingers) only where
+``robots`` names it: both methods accept it but touch nothing (``BY_CONFIG``), so its target is
+reported missed, not run, by default.
 
 Per robot and method, over the objects: the share whose top-1 grasp holds 6/6, the share with any of
 the top ``grasps`` holding 6/6, the median best Ferrari-Canny epsilon (synthesis: the best reported
@@ -54,6 +56,10 @@ SCALE = 0.015  # random_urdfs/NNN/NNN.urdf: <mesh filename="NNN.obj" scale="0.01
 EXCLUDED = frozenset({0, 1, 2, 3, 10, 11, 12})  # used for tuning or tests (module docstring)
 POSE = np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0])
 TOP1_PCT = {"hand": 80.0, "trifinger": 60.0}  # the issue's targets
+BY_CONFIG = ("TriFinger by config is not run by default: gt.synthesize_grasps accepts it but no pad contact set "
+             "touches even a 6 cm cube (800 palm poses tried, 0 touching; Dexmate F5D6 the same; the shipped hand 17), "
+             "and gt.baseline_grasps closes no finger onto it (16 palm poses, 0 touching; the hand 9); "
+             "`experiments.synthesis.robots=[hand,trifinger]` runs it.")
 RATE, FIRST_S, DEPTH_MM = 10.0, 2.0, 1.0
 
 
@@ -65,7 +71,7 @@ class SynthesisExperimentCfg:
     seed: int = setting(2026, lo=0, hi=2**31 - 1)  # draws the objects; object k is synthesized with seed + k
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets (synthesis) and palm poses (baseline) per object
     grasps: int = setting(5, lo=1, hi=100)  # grasps reported per object
-    robots: tuple[str, ...] = setting(tuple(ROBOTS), choices=tuple(ROBOTS))
+    robots: tuple[str, ...] = setting(("hand",), choices=tuple(ROBOTS))  # trifinger: BY_CONFIG
     baseline: bool = True  # the planner with no contact reasoning beside the synthesis
     physics: bool = True  # the MuJoCo check of every grasp (without it nothing counts as holding)
 
@@ -181,7 +187,8 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
             "recomputed here, the deepest link of any reported grasp inside the object (FCL, no link exempt). "
             "Verified grasps/s: reported grasps holding 6/6 over the methods' total wall time (sampling, solving, "
             "physics; one thread); first verified: from the call's start to the first physics check holding 6/6 "
-            "(never on an object without one).\n\n" + markdown_table(headers, rows))
+            f"(never on an object without one).{'' if 'trifinger' in cfg.robots else ' ' + BY_CONFIG}\n\n"
+            + markdown_table(headers, rows))
     return ExperimentReport("synthesis", "An object in, grasps out: contact-based synthesis against a baseline",
                             body, figures=[_picture(results, objs, cfg, out)], numbers=numbers, timings=timings,
                             checks=checks, results=results)
@@ -194,6 +201,9 @@ def _checks(summaries: dict, cfg: SynthesisExperimentCfg, checks: list) -> None:
         target = TOP1_PCT[name]
         checks.append((f"{name}: top-1 grasp holds 6/6 on {s['top-1 holds %']:.0f} % of the objects >= {target:g} %",
                        s["top-1 holds %"] >= target))
+    if "trifinger" not in cfg.robots:
+        checks.append((f"trifinger (the hand by config): top-1 grasp holds 6/6 on >= {TOP1_PCT['trifinger']:g} % of "
+                       "the objects: not run (gt.synthesize_grasps touches nothing with it)", False))
     if "hand" in cfg.robots:
         s = summaries["hand", "synthesis"]
         checks.append((f"hand: {s['verified per s']:.2f} verified grasps/s >= {RATE:g}", s["verified per s"] >= RATE))

@@ -23,7 +23,7 @@ def test_registered_and_quick_is_hand_only_and_smaller():
     assert EXPERIMENTS["synthesis"].run is run_synthesis
     full = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], False)
     quick = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], True)
-    assert full == SynthesisExperimentCfg() and full.objects >= 100 and "trifinger" in full.robots
+    assert full == SynthesisExperimentCfg() and full.objects >= 100 and "hand" in full.robots
     assert quick.robots == ("hand",) and quick.objects < full.objects and quick.candidates < full.candidates
 
 
