@@ -33,9 +33,11 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.files import read_document
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
 from graspnet_torch.jobs.solve_grasp import check_problem, job_settings, prepare_solve, solve_grasp, with_robot_defaults
+from graspnet_torch.jobs.synthesize import prepare_auto, solve_auto_problem
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.settings import clip
 from graspnet_torch.solver.api import solve_many
@@ -266,7 +268,12 @@ def _problem_setting(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> str | None:
 
 def prepare_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path) -> None:
     """The checks of ``solve_grasp.py`` before any work: many problems or one."""
-    (prepare_many if is_many(_problem_setting(cfg)) else prepare_solve)(cfg, run_dir)
+    if is_many(_problem_setting(cfg)):
+        prepare_many(cfg, run_dir)
+    elif _auto(cfg):
+        prepare_auto(cfg, run_dir)
+    else:
+        prepare_solve(cfg, run_dir)
 
 
 def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path, overrides: Sequence[str] = ()) -> None:
@@ -274,5 +281,18 @@ def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path, over
     job's command line, its TensorBoard hparams)."""
     if is_many(_problem_setting(cfg)):
         solve_grasps(cfg, run_dir)
+    elif _auto(cfg):  # contacts: auto: chosen on the object (jobs/synthesize.py)
+        solve_auto_problem(cfg, run_dir)
     else:
         solve_grasp(cfg, run_dir, overrides)
+
+
+def _auto(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> bool:
+    """Whether the job's one problem file says ``contacts: auto`` (its refusals come later, from the job)."""
+    path = _problem_setting(cfg)
+    if not path:
+        return False
+    try:
+        return read_document(path, "problem file", ProblemError).get("contacts") == "auto"
+    except (ProblemError, AttributeError):
+        return False

@@ -11,6 +11,7 @@ or where no grasp is found, is recorded with a one-line reason. Every file is wr
 from __future__ import annotations
 
 import csv
+import importlib.util
 import io
 import json
 import time
@@ -20,11 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from graspnet_torch.errors import ConfigError, GraspnetError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import MAX_SEED
+from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem
 from graspnet_torch.meshes import MESH_FORMATS, load_mesh
 from graspnet_torch.physics import simulate_grasp
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
@@ -33,11 +36,13 @@ from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import Free, build, clip, setting
 from graspnet_torch.synthesis import synthesize_grasps
 from graspnet_torch.table import format_table
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["COLUMNS", "OBJECT_CENTRE", "SynthesizeGraspsJobCfg", "find_meshes", "object_shape",
-           "prepare_synthesize", "synthesize_objects"]
+           "prepare_auto", "prepare_synthesize", "solve_auto_problem", "synthesize_objects"]
 
 OBJECT_CENTRE = (0.0, 0.0, 0.2)  # m, world: where each object's bounding box is centred (the hand's tasks' place)
+CANDIDATES_PER_GRASP = 16  # contacts: auto: contact sets drawn per grasp asked for (at least 64)
 COLUMNS = ("object", "grasps", "best_holds", "top1_holds_all", "top5_any_holds_all", "best_epsilon",
            "deepest_penetration_mm", "seconds", "reason")
 
@@ -247,3 +252,45 @@ def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, m
     print(format_table(list(COLUMNS[:-1]), table, floatfmt=".3g"))
     print(f"{len(rows)} object(s), {sum(1 for r in rows if r['grasps'])} with grasps: {out / 'summary.csv'}")
     return rows
+
+
+def prepare_auto(cfg: Mapping[str, Any], run_dir: str | Path) -> tuple[Any, GraspProblem, Robot, Path]:
+    """Every check of a ``contacts: auto`` solve before any work and without writing anything: the
+    settings, the problem, the output path, the robot and its fingers' pads. Returns the job's
+    settings, the problem, the robot and the result path."""
+    job, _, robot_setting = job_settings(cfg)
+    problem = resolve_problem(job.problem, job.task, robot_setting, job.allow_outside_paths)
+    if problem.auto is None:
+        raise ConfigError(f"{problem.source}: not a contacts: auto problem")
+    out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
+    robot = load_robot(problem.robot_cfg)
+    _check_fingers(robot, problem.auto.fingers)
+    return job, problem, robot, out
+
+
+def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
+    """``scripts/solve_grasp.py problem=P`` where P says ``contacts: auto``: the contacts chosen on
+    its object (:func:`gt.synthesize_grasps`, its ``fingers`` and ``grasps``; ``seed``, ``trials``
+    (at most 8) and ``threads`` from the command line), each grasp checked in MuJoCo where
+    ``mujoco`` is installed, and ``out`` (default ``<run dir>/result.json``) written atomically: the
+    problem, the grasps best first (as in a ``synthesize_grasps.py`` result) and ``success`` (a
+    grasp found)."""
+    job, problem, robot, out = prepare_auto(cfg, run_dir)
+    auto = problem.auto
+    physics = simulate_grasp if importlib.util.find_spec("mujoco") is not None else None
+    torch.set_num_threads(job.threads)
+    t0, stats = time.perf_counter(), {}
+    found = synthesize_grasps(robot, problem.object, n_grasps=auto.grasps, fingers=auto.fingers,
+                              candidates=max(CANDIDATES_PER_GRASP * auto.grasps, 64), seed=job.seed,
+                              trials=min(job.trials, 8), physics=physics, stats=stats)
+    grasps = [g.to_dict() for g in found]
+    data = {"problem": problem.source, "robot": robot.name, "contacts": "auto", "fingers": list(auto.fingers),
+            "object": problem.object.to_mapping(), "success": bool(grasps), "physics_checked": physics is not None,
+            "grasps": grasps, "stats": stats, "seconds": round(time.perf_counter() - t0, 3)}
+    atomic_write_text(out, json.dumps(data, indent=1, allow_nan=False))
+    checked = f", holding {[g['holds'] for g in grasps]} of 6 pushes in MuJoCo" if physics is not None else \
+        " (mujoco is not installed: not checked in physics)"
+    print(f"{problem.name or problem.source}: {len(grasps)} grasp(s) on contacts chosen on the object{checked}; "
+          f"{data['seconds']:.1f} s")
+    print(f"result: {out}")
+    return data

@@ -1,0 +1,49 @@
+"""scripts/solve_grasp.py on a ``contacts: auto`` problem: contacts chosen on the object, the
+grasps written and re-checked independently; a bad one refused before anything is written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import graspnet_torch as gt
+from graspnet_torch.collision.surface import surface_distance
+from graspnet_torch.jobs.solve_many import prepare_job, run_job
+
+PROBLEM = """robot: hand
+object: {shape: box, size: [0.06, 0.06, 0.06], pose: [0, 0, 0.2, 0, 0, 0]}
+contacts: auto
+fingers: [thumb, index, middle]
+grasps: 1
+"""
+
+
+@pytest.mark.slow
+def test_auto_problem_gives_grasps_on_the_objects_surface(tmp_path):
+    problem = tmp_path / "cube.yaml"
+    problem.write_text(PROBLEM)
+    out = tmp_path / "result.json"
+    run_job({"problem": str(problem), "out": str(out), "seed": 0, "trials": 8}, tmp_path / "run")
+    data = json.loads(out.read_text())
+    assert data["contacts"] == "auto" and data["fingers"] == ["thumb", "index", "middle"]
+    assert data["success"] == bool(data["grasps"]) and len(data["grasps"]) <= 1
+    obj = gt.GraspProblem.from_file(problem).object
+    for g in data["grasps"]:
+        contacts = np.asarray(g["contacts_world"])
+        assert np.all(np.abs(surface_distance(obj, contacts)) < 1e-3)  # on the cube's surface
+        assert g["success"] and g["result"]["penetration_mm"] <= 1.0
+        assert max(g["result"]["pad_distance_mm"].values()) <= 1.0
+        assert max(g["result"]["normal_angle_deg"].values()) <= 30.0 + 1e-6
+        if data["physics_checked"]:
+            assert g["holds"] == sum(g["physics"]["directions"].values())
+
+
+def test_a_bad_auto_problem_is_refused_before_anything_is_written(tmp_path):
+    problem = tmp_path / "bad.yaml"
+    problem.write_text(PROBLEM.replace("fingers: [thumb, index, middle]", "fingers: [thumb, toe]"))
+    out = tmp_path / "result.json"
+    with pytest.raises(gt.ProblemError, match=r"fingers: unknown finger\(s\) toe"):
+        prepare_job({"problem": str(problem), "out": str(out)}, tmp_path / "run")
+    assert not out.exists()
