@@ -28,6 +28,7 @@ from graspnet_torch.jobs.configs import (
 )
 from graspnet_torch.jobs.reproduce import ReproduceJobCfg
 from graspnet_torch.jobs.solve_grasp import job_settings
+from graspnet_torch.jobs.synthesize import SynthesizeGraspsJobCfg
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.trajectory import TooManyRows, time_path
 from graspnet_torch.paths import repo_root
@@ -37,7 +38,7 @@ from tests.refusals import check_refusal, refused
 
 SCRIPTS = {"solve_grasp": SolveGraspJobCfg, "train_fcnn": TrainFCNNJobCfg, "train_posture": TrainPostureJobCfg,
            "reproduce": ReproduceJobCfg, "reference_posture": ReferencePostureJobCfg,
-           "inspect_robots": InspectRobotsJobCfg}
+           "inspect_robots": InspectRobotsJobCfg, "synthesize_grasps": SynthesizeGraspsJobCfg}
 
 
 # ------------------------------------------------------------------ reach settings
