@@ -58,7 +58,7 @@ from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver import GraspResult
 from graspnet_torch.solver.contact import posture_fields
 from graspnet_torch.solver.result import TrialResult
-from graspnet_torch.synthesis.candidates import placeholder_problem
+from graspnet_torch.synthesis.candidates import placeholder_problem, tip_jacobians
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_DEG", "TOUCH_M", "BaselineGrasp",
@@ -74,7 +74,6 @@ PENETRATION_M = 1e-3  # no link deeper than this in the object
 MIN_TOUCHING = 2  # fingers that must touch
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
 RIM = 12  # points around each of a cylinder's rims
-STEP_RAD = 1e-6  # the finite-difference step of the tip Jacobian
 
 
 @dataclass
@@ -194,12 +193,7 @@ def _closing(robot: Robot, q_open: np.ndarray, front: np.ndarray) -> np.ndarray:
     """(B, F, n) each joint's closing direction (+1 up, -1 down, 0 held) at the open postures
     q_open (B, F, n): the sign of its tip motion along the palm's front axis, where its cosine
     reaches ``FORWARD`` (module docstring, step 2)."""
-    n = q_open.shape[-1]
-    shifted = np.repeat(q_open[None], n + 1, axis=0)  # (n + 1, B, F, n): q, then each joint nudged
-    for j in range(n):
-        shifted[j + 1, ..., j] += STEP_RAD
-    tips = robot.fingertips_palm(torch.as_tensor(shifted)).numpy()  # (n + 1, B, F, 3)
-    J = np.moveaxis(tips[1:] - tips[0], 0, -1) / STEP_RAD  # (B, F, 3, n)
+    J = tip_jacobians(robot, q_open)  # (B, F, 3, n)
     length = np.linalg.norm(J, axis=-2)
     cos = np.einsum("i,bfij->bfj", front, J) / np.maximum(length, 1e-9) * (length > 1e-9)
     return np.where(cos >= FORWARD, 1.0, np.where(cos <= -FORWARD, -1.0, 0.0))

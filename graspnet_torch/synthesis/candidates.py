@@ -56,7 +56,7 @@ from graspnet_torch.solver.contact import tip_frames
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["CLOSE", "FORWARD", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet", "opposes",
-           "pad_contact_sets", "placeholder_problem"]
+           "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
 
 STEPS = 24  # samples of each finger's closing line
 BISECT = 14  # bisection steps after the first sample that touches
@@ -167,18 +167,25 @@ def _pad_forward(robot: Robot, q: np.ndarray) -> np.ndarray:
     pad normal: the tip's (finite-difference) Jacobian column dotted with the tip-frame pad normal,
     over the column's length (a cosine; 0 for padding or a joint that does not move the tip); palm
     frame, q (N, F, n). A finger without a pad: normal +y of its tip frame."""
-    N, _, n = q.shape
+    N = q.shape[0]
     normal = np.stack([robot.pads[f].normal if f in robot.pads else np.array([0.0, 1.0, 0.0]) for f in robot.fingers])
     names, frames = robot.link_frames_of(None, torch.as_tensor(q), torch.zeros(N, 6, dtype=torch.float64))
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in robot.fingers], :3, :3]  # (N, F, 3, 3)
     forward = np.einsum("nfij,fj->nfi", R, normal)
+    J = tip_jacobians(robot, q)
+    length = np.linalg.norm(J, axis=-2)
+    return np.einsum("nfi,nfij->nfj", forward, J) / np.maximum(length, 1e-9) * (length > 1e-9)
+
+
+def tip_jacobians(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """(N, F, 3, n) every finger's tip Jacobian in the palm frame at joints q (N, F, n), by finite
+    differences (step ``STEP_RAD``) of :meth:`Robot.fingertips_palm`."""
+    n = q.shape[-1]
     shifted = np.repeat(q[None], n + 1, axis=0)  # (n + 1, N, F, n): q, then each joint nudged
     for j in range(n):
         shifted[j + 1, ..., j] += STEP_RAD
     tips = robot.fingertips_palm(torch.as_tensor(shifted)).numpy()  # (n + 1, N, F, 3)
-    J = np.moveaxis(tips[1:] - tips[0], 0, -1) / STEP_RAD  # (N, F, 3, n)
-    length = np.linalg.norm(J, axis=-2)
-    return np.einsum("nfi,nfij->nfj", forward, J) / np.maximum(length, 1e-9) * (length > 1e-9)
+    return np.moveaxis(tips[1:] - tips[0], 0, -1) / STEP_RAD
 
 
 def _lines(robot: Robot, lo: np.ndarray, span: np.ndarray, rng: np.random.Generator, N: int
