@@ -45,7 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.spheres import shape_spheres
-from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
+from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals, touch_points
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import grasp_quality
 from graspnet_torch.robot.geometry import link_shapes
@@ -243,11 +243,11 @@ def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, n
     head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
     t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
-    contacts = t - surface_distance(obj, t)[:, None] * surface_normals(obj, t)
-    inward = -surface_normals(obj, contacts).reshape(len(q), len(rows), 3)
+    _, outward, off_by = touch_points(obj, t)
+    inward = -outward.reshape(len(q), len(rows), 3)
     pad = np.einsum("nkij,kj->nki", R, np.stack([robot.pads[f].normal for f in fingers]))
     angles = np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=-1), -1.0, 1.0)))
-    off = np.abs(surface_distance(obj, contacts)).reshape(angles.shape) > TOUCH_M  # e.g. a box's edge
+    off = off_by.reshape(angles.shape) > TOUCH_M  # e.g. a box's edge
     return np.where(off, np.inf, angles), inward
 
 

@@ -14,6 +14,7 @@ from graspnet_torch.collision.surface import (
     surface_distance,
     surface_distance_near,
     surface_normals,
+    touch_points,
 )
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
@@ -122,6 +123,27 @@ def test_a_mesh_spheres_normals_are_near_the_spheres(tmp_path):
     cosine = (surface_normals(mesh, world) * surface_normals(sphere, world)).sum(axis=1)
     assert cosine.min() > np.cos(np.radians(5))  # facets of about 4 degrees
     np.testing.assert_allclose(surface_distance(mesh, world), 0.0, atol=2e-4)
+
+
+def test_touch_points_of_a_mesh_box_are_the_primitives(tmp_path):
+    """touch_points: a mesh box's nearest points and normals (trimesh's closest point) agree with
+    the primitive box's exact ones, off the edges."""
+    size = (0.04, 0.05, 0.06)
+    mesh = _mesh_file(tmp_path, trimesh.creation.box(extents=size), "box")
+    box = Shape("box", size, POSE)
+    rng = np.random.default_rng(5)
+    half = np.asarray(size) / 2
+    local = rng.uniform(-1, 1, (300, 3)) * (half - 0.003)  # off the edges ...
+    axis = rng.integers(0, 3, 300)
+    rows = np.arange(300)
+    local[rows, axis] = rng.choice([-1.0, 1.0], 300) * (half[axis] + rng.uniform(0.001, 0.01, 300))  # ... off a face
+    T = pose_to_matrix_np(POSE)
+    world = local @ T[:3, :3].T + T[:3, 3]
+    c_mesh, n_mesh, off_mesh = touch_points(mesh, world)
+    c_box, n_box, off_box = touch_points(box, world)
+    np.testing.assert_allclose(c_mesh, c_box, atol=2e-5)
+    np.testing.assert_allclose(n_mesh, n_box, atol=1e-9)
+    assert off_mesh.max() == 0.0 and off_box.max() < 1e-9
 
 
 def test_the_near_distance_is_within_its_bound_of_the_exact_one(tmp_path):
