@@ -32,11 +32,12 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.tasks import GraspProblem
 
-__all__ = ["NEAR_EDGE_M", "ON_SURFACE", "pad_targets", "surface_distance", "surface_distance_near", "surface_normals",
-           "touch_points"]
+__all__ = ["NEAR_EDGE_M", "NEAR_REACH_M", "ON_SURFACE", "pad_targets", "surface_distance", "surface_distance_near",
+           "surface_normals", "touch_points"]
 
 ON_SURFACE = 1e-7  # m: a mesh point this near its closest surface point takes that triangle's normal
 NEAR_EDGE_M = 1e-3  # m: surface_distance_near's mesh pieces' longest edge
+NEAR_REACH_M = 0.02  # m: surface_distance_near reports no mesh distance beyond this
 
 
 def _local(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -127,21 +128,24 @@ def _vertex_tree(path: Path, scale: float) -> cKDTree:
     mesh = mesh_query(Shape("mesh", (), np.zeros(6), path, scale))[0].mesh
     v, f = trimesh.remesh.subdivide_to_size(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces),
                                             max_edge=NEAR_EDGE_M, max_iter=20)
-    return cKDTree(np.asarray(v, dtype=np.float64)[np.unique(np.asarray(f))])
+    return cKDTree(np.asarray(v, dtype=np.float64)[np.unique(np.asarray(f))], leafsize=32)
 
 
 def surface_distance_near(obj: Shape, points: np.ndarray) -> np.ndarray:
     """(k,) :func:`surface_distance`, fast and near: exact for primitives; for a mesh, the distance
     to the nearest vertex of its triangles split to edges of at most :data:`NEAR_EDGE_M` (a point of
     a triangle lies within ``edge / sqrt(3)`` of one of its vertices, so it exceeds the exact
-    distance by at most 0.58 mm), signed by the mesh's inside test. For searches that call it on
-    many points (a grasp sampler's closing lines); the exact one checks what they find."""
+    distance by at most 0.58 mm), signed by the mesh's inside test, and a point farther than
+    :data:`NEAR_REACH_M` from the surface (outside or in) reported at that distance (a nearest
+    neighbour far from every vertex is the slow query). For searches that call it on many points
+    (a grasp sampler's closing lines), which ask only whether a sphere touches; the exact one
+    checks what they find."""
     if obj.kind != "mesh":
         return surface_distance(obj, points)
     p, _ = _local(obj, points)
     query, _ = mesh_query(obj)
-    d, _ = _vertex_tree(Path(obj.mesh).resolve(), obj.scale).query(p)
-    return np.where(query.inside(p), -1.0, 1.0) * d
+    d, _ = _vertex_tree(Path(obj.mesh).resolve(), obj.scale).query(p, distance_upper_bound=NEAR_REACH_M)
+    return np.where(query.inside(p), -1.0, 1.0) * np.minimum(d, NEAR_REACH_M)
 
 
 def touch_points(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
