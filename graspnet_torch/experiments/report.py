@@ -51,7 +51,8 @@ class ExperimentReport:
         figures: the PNGs it wrote, in order, with their captions.
         tables: the paper's tables this body holds (``Table 2``), checked for by ``reproduce``.
         numbers: every result that the same seeds reproduce exactly (errors, counts, statistics).
-        timings: wall-clock results (seconds, rates, and what a time budget bought): they vary.
+        timings: wall-clock results (seconds, rates, and what a time budget bought): they vary;
+            None: never reached (a time to something that did not happen).
         mismatches: what does not match the paper, one sentence each.
         checks: this project's own targets (the issues'): (what, met).
         settings: the experiment's settings as run.
@@ -65,7 +66,7 @@ class ExperimentReport:
     figures: list[Figure] = field(default_factory=list)
     tables: list[str] = field(default_factory=list)
     numbers: dict[str, float] = field(default_factory=dict)
-    timings: dict[str, float] = field(default_factory=dict)
+    timings: dict[str, float | None] = field(default_factory=dict)
     mismatches: list[str] = field(default_factory=list)
     checks: list[tuple[str, bool]] = field(default_factory=list)
     settings: dict[str, Any] = field(default_factory=dict)

@@ -168,8 +168,8 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
             for key in ("top-1 holds %", "any holds %", "median best epsilon", "with a grasp %", "deepest mm",
                         "verified"):
                 numbers[f"{name}/{method}/{key}"] = float(s[key])
-            for key in ("verified per s", "median first s", "s per object"):
-                timings[f"{name}/{method}/{key}"] = float(s[key])
+            for key in ("verified per s", "median first s", "s per object"):  # never: null (strict JSON)
+                timings[f"{name}/{method}/{key}"] = None if math.isinf(s[key]) else float(s[key])
     _checks(summaries, cfg, checks)
     headers = ["robot", "method", "objects", "with a grasp %", "top-1 holds 6/6 %", f"any of top {cfg.grasps} holds %",
                "median best epsilon", "deepest mm", "verified grasps/s", "median s to first verified",
