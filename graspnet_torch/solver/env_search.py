@@ -37,8 +37,10 @@ class SearchPart(ABC):
 
     def grasped(self, evaluation: Evaluation, tolerance: float) -> Tensor:
         """(T,) whether each configuration is a grasp in the model: every contact finger within
-        ``tolerance`` metres of its contact and no collision where they are counted."""
-        far = evaluation.finger_errors.amax(-1) if evaluation.finger_errors is not None else evaluation.error
+        ``tolerance`` metres of its contact (the surface model: its pad, within the cone) and no
+        collision where they are counted."""
+        errors = evaluation.grasp_errors()
+        far = errors.amax(-1) if errors is not None else evaluation.error
         ok = far < tolerance
         if evaluation.collisions is not None:
             ok = ok & (evaluation.collisions == 0)

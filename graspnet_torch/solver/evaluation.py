@@ -12,7 +12,8 @@ from torch import Tensor
 __all__ = ["Done", "Evaluation", "Report"]
 
 Done = Callable[[Tensor], Tensor]  # done(converged (B,) bool) -> (B,) bool: the rows that may stop
-_PARTS = ("error", "finger_errors", "joints", "collisions", "alignment", "config")  # Evaluation's fields, in order
+# Evaluation's fields, in order
+_PARTS = ("error", "finger_errors", "joints", "collisions", "alignment", "config", "contact_errors")
 
 
 @dataclass
@@ -29,6 +30,10 @@ class Evaluation:
         config: (T, n) the configuration that was evaluated: the proposal itself, or where the
             environment settled it (a gripper's settling steps). :meth:`Environment.evaluate` always
             sets it; evaluations built otherwise (a polish, a report) may leave it None.
+        contact_errors: (T, F) the surface model's grasp test per contact finger: the pad's
+            distance to its contact, metres, infinite where the pad faces outside the cone
+            (``finger_errors`` adds the pad's hinge, which starts inside the cone, for the search
+            to aim there); None: ``finger_errors`` is the test.
     """
 
     error: Tensor
@@ -37,6 +42,11 @@ class Evaluation:
     collisions: Tensor | None = None
     alignment: Tensor | None = None
     config: Tensor | None = None
+    contact_errors: Tensor | None = None
+
+    def grasp_errors(self) -> Tensor | None:
+        """(T, F) what the grasp test compares with the tolerance per contact finger (None: no fingers)."""
+        return self.contact_errors if self.contact_errors is not None else self.finger_errors
 
     def tensors(self) -> dict[str, Tensor]:
         """The parts that are present, by name."""

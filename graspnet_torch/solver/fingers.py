@@ -214,14 +214,16 @@ class FingerEnvironment(WholeConfiguration, Environment):
         collision count (B,) of the whole posture (the fingers without a contact at home)."""
         palm, levels = self.palm_and_levels(config)
         q, errors = self.finger_joints(config, palm, trials)
+        contact = None
         if self.pads is not None:  # the surface model: a pad facing away counts as a tip off its target
-            errors = errors + self.pads.penalty(self.pad_normals(palm[0], config, q), trials)
+            penalty = self.pads.penalty(self.pad_normals(palm[0], config, q), trials)
+            errors, contact = errors + penalty, self.pads.contact_errors(errors, penalty, trials)
         collisions = None
         if self.proxy is not None:
             collisions = self.proxy.count(palm, self._every(q, trials), self.body(config), levels, self._pid(trials),
                                           self._all_bases(config))
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions,
-                          config=config)
+                          config=config, contact_errors=contact)
 
     def pad_normals(self, R: Tensor, config: Tensor, q: Tensor) -> Tensor:
         """The contact fingers' pad normals in the environment's frame (B, F, 3) with the palm
@@ -251,10 +253,12 @@ class FingerEnvironment(WholeConfiguration, Environment):
                 q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
             if self.mask is not None:
                 err = err * self.mask
+            contact = None
             if self.pads is not None:
-                err = err + self.pads.penalty(self.pad_normals(self.palm_frame(config)[0], config, q))
+                penalty = self.pads.penalty(self.pad_normals(self.palm_frame(config)[0], config, q))
+                err, contact = err + penalty, self.pads.contact_errors(err, penalty).clone()
             evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
-                                    collisions=evaluation.collisions)
+                                    collisions=evaluation.collisions, contact_errors=contact)
         if whole:
             x = self.whole_start(config, evaluation.joints)
             config, evaluation = self.whole_result(self.local_solve(x, self.polish_iterations, self.polish_tol, done),

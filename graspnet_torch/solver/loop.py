@@ -324,8 +324,9 @@ def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, 
     new_r = reward(new_ev, iteration)
     better = new_r > r[idx]
     if landed_only:  # landed, and (grasp rule) with the summed error within tolerance too: not a near miss
-        better &= new_r > threshold if tolerance is None else \
-            env.grasped(new_ev, tolerance) & (new_ev.error.to(new_r.device) <= tolerance)
+        # (the surface model: every pad within tolerance, facing within the cone, is the grasp itself)
+        better &= new_r > threshold if tolerance is None else env.grasped(new_ev, tolerance) & (
+            env.on_surface or new_ev.error.to(new_r.device) <= tolerance)
     take = torch.zeros_like(near).index_fill(0, idx[better], True)
     best.config = config.index_copy(0, idx, torch.where(better.unsqueeze(1), new_config, config[idx]))
     best.evaluation = ev.put(idx, new_ev.where(better, part), best.config)

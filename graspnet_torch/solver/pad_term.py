@@ -70,6 +70,7 @@ class PadTerm:
         outward: (F, 3), or (T, F, 3) for a batch: the object's outward normal at each contact.
         weight: (F,) or (T, F): :data:`PAD_WEIGHT` where the finger has a surface contact, else 0.
         margin: c, the chord of the margin's angle.
+        cone: the chord of the cone's angle (the grasp test's: :meth:`contact_errors`).
     """
 
     def __init__(self, robot: Robot, problems: Sequence[GraspProblem], rules: Sequence[ContactRule],
@@ -90,6 +91,7 @@ class PadTerm:
         self.weight64 = torch.as_tensor(weight, dtype=torch.float64)
         cone = max(r.cone_deg for r in rules if r.surface)
         self.margin = 2 * math.sin(math.radians(cone * PAD_MARGIN) / 2)
+        self.cone = 2 * math.sin(math.radians(cone) / 2)  # the chord of the cone itself
         self.batch = len(problems) > 1
         pads = robot.pads
         self.normals64 = torch.as_tensor(np.stack([pads[f].normal for f in fingers]), dtype=torch.float64)  # (F, 3)
@@ -144,6 +146,14 @@ class PadTerm:
         outward, weight, _, _ = self._consts(world)
         miss = world + self._rows(outward, rows)
         return self._rows(weight, rows) * (miss.norm(dim=-1) - self.margin).clamp_min(0)
+
+    def contact_errors(self, tip: Tensor, penalty: Tensor, rows: Tensor | None = None) -> Tensor:
+        """The grasp test's errors (B, F) of the trials ``rows``: the tips' (pads') distances
+        ``tip`` (B, F), infinite where the pad faces outside the cone, read from its ``penalty``
+        (B, F) (:meth:`penalty`; the hinge exceeds w (cone - c) exactly there)."""
+        _, weight, _, _ = self._consts(penalty)
+        slack = self._rows(weight, rows) * (self.cone - self.margin)
+        return torch.where(penalty <= slack * (1 + 1e-6), tip, torch.full_like(tip, float("inf")))
 
     def residual(self, world: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """Pad normals in the world (B, F, 3) -> the residual (B, F, 3) and its derivative with

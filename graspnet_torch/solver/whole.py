@@ -223,14 +223,16 @@ class WholeConfiguration:
         B, F, j = solved.x.shape[0], len(self.idx), self.robot.joints_per_finger
         goal = self._goal64(None if rows is None else rows.cpu())
         finger_err = (goal - solved.value[:, : 3 * F]).reshape(B, F, 3).norm(dim=-1)
-        if self.pads is not None:  # the pads' penalties (the norms of their residuals), as in evaluate
-            finger_err = finger_err + solved.value[:, 3 * F:].reshape(B, F, 3).norm(dim=-1)
         kw = {"dtype": like.dtype, "device": like.device}
+        contact = None
+        if self.pads is not None:  # the pads' penalties (the norms of their residuals), as in evaluate
+            penalty = solved.value[:, 3 * F:].reshape(B, F, 3).norm(dim=-1)
+            finger_err, contact = finger_err + penalty, self.pads.contact_errors(finger_err, penalty, rows).to(**kw)
         count = solved.count
         return solved.x[:, : self.n].to(**kw), Evaluation(
             error=finger_err.sum(1).to(**kw), finger_errors=finger_err.to(**kw),
             joints=solved.x[:, self.n:].reshape(B, F, j).to(**kw),
-            collisions=None if count is None else count.to(like.device))
+            collisions=None if count is None else count.to(like.device), contact_errors=contact)
 
     def polish(self, config: Tensor, evaluation: Evaluation, trials: Tensor, done: Done | None = None
                ) -> tuple[Tensor, Evaluation]:
