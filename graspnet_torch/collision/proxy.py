@@ -133,6 +133,7 @@ class CollisionProxy:
             skip[:, k] = [self.links[li] in links for li in cl.link]
         self.thresholds = [group_thresholds(g, cl.radii, cl.bound_r, margin, skip, kw) for g in self.groups]
         self._true = torch.ones((), dtype=torch.bool, device=device)
+        self._radii = torch.as_tensor(np.nan_to_num(cl.radii, nan=0.0), **kw)  # (C, K): padding 0 (never tested)
         # elementwise tests per sphere: one per primitive, one per plane of a convex piece
         self._dense_cost = sum(len(g.index) * (g.size.shape[-2] if g.kind == "convex" else 1) for g in self.groups)
         # the robot's own links (self_collision: true): capsules and boxes, every primitive of one
@@ -178,10 +179,23 @@ class CollisionProxy:
             stacked = torch.cat([stacked, torch.stack(levels, dim=2).flatten(1, 2).transpose(0, 1)])
         return stacked
 
-    def sphere_centres(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None) -> Tensor:
-        """World centres of every cluster's spheres (padding included): (T, C, CLUSTER, 3)."""
-        frames = self.frames(palm, fingers, body)[self._cluster_frame]  # (C, T, 3, 4)
+    def sphere_centres(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
+                       bases: tuple[Tensor, Tensor] | None = None) -> Tensor:
+        """World centres of every cluster's spheres (padding included): (T, C, CLUSTER, 3)
+        (arguments as :meth:`count`'s)."""
+        frames = self.frames(palm, fingers, body, None, bases)[self._cluster_frame]  # (C, T, 3, 4)
         return (frames @ self._cluster_local.unsqueeze(1)).permute(1, 0, 3, 2)
+
+    def centres(self, frames: Tensor, spheres: Tensor | None = None) -> Tensor:
+        """World centres (T, S, 3) of the spheres ``spheres`` (S,) (indices into the C x ``CLUSTER``
+        of :meth:`sphere_centres`, flattened; None: all) from every frame (n_frames, T, 3, 4) of
+        :meth:`frames`."""
+        C = self._cluster_local.shape[0]
+        frame = self._cluster_frame.repeat_interleave(CLUSTER)
+        local = self._cluster_local.transpose(1, 2).reshape(C * CLUSTER, 4)
+        if spheres is not None:
+            frame, local = frame[spheres], local[spheres]
+        return (frames[frame] @ local[:, None, :, None]).squeeze(-1).transpose(0, 1)
 
     def pairs(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
               body_levels: list[Tensor] | None = None, problem_index: Tensor | None = None) -> Tensor:
@@ -262,6 +276,32 @@ class CollisionProxy:
         if self._self.tested:
             out = out + self._self.hits(frames).sum(-1)
         return out
+
+    def penetrations(self, centres: Tensor, spheres: Tensor | None = None, problem_index: Tensor | None = None
+                     ) -> Tensor:
+        """How far spheres reach into the obstacles and the object: centres (T, S, 3) of the spheres
+        ``spheres`` (S,) (indices into the C x ``CLUSTER`` of :meth:`sphere_centres`, flattened;
+        None: all) -> (T, S) metres, per sphere the root sum of squares over the elements
+        :meth:`count` tests it against (the floor left out) of max(0, rho - sd(c)); zero where it
+        at most touches. ``problem_index`` as :meth:`count`'s."""
+        pid = problem_index if self.n_problems > 1 else None
+        radii = self._radii.reshape(-1) if spheres is None else self._radii.reshape(-1)[spheres]
+        sq = centres.new_zeros(centres.shape[:-1])
+        for g, th in zip(self.groups, self.thresholds, strict=True):
+            if g.kind == "plane":
+                continue
+            pos = th.pos.flatten(0, 1) if spheres is None else th.pos.flatten(0, 1)[spheres]  # (S, O_g)
+            size = None if pid is None else g.size[pid].unsqueeze(1)  # (T, 1, O_g, s)
+            sd = g.signed_distance(g.local(centres, pid), size)  # (T, S, O_g)
+            sq = sq + ((radii[:, None] - sd).clamp(min=0) * pos).square().sum(-1)
+        return sq.sqrt()
+
+    def link_depths(self, penetrations: Tensor, spheres: Tensor | None = None) -> Tensor:
+        """(T, S) sphere penetrations (:meth:`penetrations`) -> (T, L) each link's (``self.links``):
+        the root sum of squares over its spheres; a smooth residual for a least-squares solver
+        to drive to zero."""
+        of = self._link_of_cluster.repeat_interleave(CLUSTER, 0)  # (C K, L)
+        return (penetrations.square() @ (of if spheres is None else of[spheres])).sqrt()
 
     def self_hits(self, palm: tuple[Tensor, Tensor], fingers: Tensor, body: Tensor | None = None,
                   body_levels: list[Tensor] | None = None) -> Tensor:

@@ -102,11 +102,15 @@ class FingerEnvironment(WholeConfiguration, Environment):
         if any(rule.surface for rule in self.rules):
             self.pads = PadTerm(robot, problems, self.rules, self.fingers, runs, robot.joints_per_finger)
 
+        rule, batch = self.rules[0], problems if len(problems) > 1 else self.problem  # one proxy: the first's rule
         if collisions and has_environment(robot, self.problem):
-
-            rule = self.rules[0]  # one proxy for the batch: its first problem's rule
-            self.proxy = proxy_for(robot, problems if len(problems) > 1 else self.problem, dtype=dtype, device=device,
+            self.proxy = proxy_for(robot, batch, dtype=dtype, device=device,
                                    object_tolerance=rule.object_tolerance, touching=rule.touching)
+        self.depth_proxy = None  # the surface model: how deep the links reach, a residual of the whole polish
+        if self.pads is not None and has_environment(robot, self.problem):
+            self.depth_proxy = proxy_for(robot, batch, dtype=torch.float64, object_tolerance=rule.object_tolerance,
+                                         touching=rule.touching)
+        if self.proxy is not None or self.depth_proxy is not None:
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)
         self.counts_collisions = self.proxy is not None
@@ -199,11 +203,11 @@ class FingerEnvironment(WholeConfiguration, Environment):
     def _every(self, q: Tensor, rows: Tensor | None) -> Tensor:
         """Every finger's joints (B, F_all, j): the contact fingers' ``q`` (B, F, j), the others
         (and in a batch, the fingers a trial's problem does not use) at home."""
-        home = self.home.expand(q.shape[0], -1, -1)
+        home = self.home.to(q).expand(q.shape[0], -1, -1)
         mask = self._rows(self.mask, rows)
         if mask is not None:
-            q = torch.where(mask.unsqueeze(-1) > 0, q, home[:, self.idx])
-        return home.index_copy(1, self._idx, q)
+            q = torch.where(mask.to(q.device).unsqueeze(-1) > 0, q, home[:, self.idx])
+        return home.index_copy(1, self._idx.to(q.device), q)
 
     def _pid(self, rows: Tensor | None) -> Tensor | None:
         return self._rows(self.problem_index, rows) if self.problem_index is not None else None

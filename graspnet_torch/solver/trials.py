@@ -53,7 +53,7 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
         count = 0 if collisions is None else int(collisions[t])
         fields, error = dict(f), report.error_mm[t]
         if rule.surface:  # the pads, measured: on their contacts, facing into the object (the search's error
-            # adds a pad's hinge from 0.9 of the cone on, which a grasp within the cone need not meet)
+            # adds a pad's hinge from 0.97 of the cone on, which a grasp within the cone need not meet)
             fields.update(surface_fields(robot, problem, postures[t]))
             touching[t] = within_cone(fields, rule.cone_deg) and \
                 max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm

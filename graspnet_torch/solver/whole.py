@@ -22,7 +22,9 @@ if TYPE_CHECKING:
     from graspnet_torch.least_squares import LMResult
     from graspnet_torch.robot.robot import Posture, Robot
 
-__all__ = ["WholeConfiguration"]
+__all__ = ["DEPTH_STEP", "WholeConfiguration"]
+
+DEPTH_STEP = 1e-7  # the forward differences' step of the depth residuals (radians, metres; float64)
 
 
 class WholeConfiguration:
@@ -39,6 +41,7 @@ class WholeConfiguration:
     contacts64: Tensor
     lower: Tensor
     proxy: CollisionProxy | None
+    depth_proxy: CollisionProxy | None
     joint_box: tuple[Tensor, Tensor] | None
     polish_iterations: int
     polish_tol: float
@@ -161,6 +164,29 @@ class WholeConfiguration:
         J[..., n:].view(B, F, 3, F, j).diagonal(dim1=1, dim2=3).copy_(fingers.permute(0, 2, 3, 1))  # block diagonal
         return r.reshape(B, -1), J.reshape(B, 3 * F, -1)
 
+    def whole_depths(self, x: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """The surface model's depth residuals of x (B, m) of the trials ``rows``: how far each
+        link reaches into the object and obstacles (B, L)
+        (:meth:`~graspnet_torch.collision.proxy.CollisionProxy.link_depths`, goal 0), and their
+        Jacobian (B, L, m) by forward differences: the m + 1 points of every row in one batched
+        call, the spheres that penetrate in some row only (the others' derivative is zero)."""
+        B, m = x.shape
+        X = (x.unsqueeze(1) + torch.cat([x.new_zeros(1, m), DEPTH_STEP * torch.eye(m, dtype=x.dtype)])).reshape(-1, m)
+        every = None if rows is None else rows.repeat_interleave(m + 1)
+        F, j, proxy = len(self.idx), self.robot.joints_per_finger, self.depth_proxy
+        config = X[:, : self.n]
+        frames = proxy.frames(self.palm_frame(config), self._every(X[:, self.n:].reshape(-1, F, j), every),
+                              self.body(config), None, self._all_bases(config))  # (n_frames, B (m + 1), 3, 4)
+        value = proxy.penetrations(proxy.centres(frames[:, :: m + 1]), None, self._pid(rows))  # (B, S): at x
+        spheres = (value > 0).any(0).nonzero().squeeze(1)
+        depths = proxy.link_depths(value)
+        if spheres.numel() == 0:
+            return depths, x.new_zeros(B, depths.shape[1], m)
+        moved = proxy.link_depths(proxy.penetrations(proxy.centres(frames, spheres), spheres, self._pid(every)),
+                                  spheres)
+        moved = moved.view(B, m + 1, -1)
+        return depths, ((moved[:, 1:] - moved[:, :1]) / DEPTH_STEP).transpose(1, 2)
+
     def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
         """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
         F, j = len(self.idx), self.robot.joints_per_finger
@@ -186,9 +212,17 @@ class WholeConfiguration:
             (v, J), (pv, pJ) = self.whole_tips(xx, rr), self.whole_pads(xx, rr)
             return torch.cat([v, pv], 1), torch.cat([J, pJ], 1)
 
+        def tips_pads_depths(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
+            rr = r if trials is None else trials[r]
+            (v, J), (dv, dJ) = tips_and_pads(xx, r), self.whole_depths(xx, rr)
+            return torch.cat([v, dv], 1), torch.cat([J, dJ], 1)
+
         goal, model = self._goal64(trials), tips
         if self.pads is not None:  # the surface model: the pads' residuals too (goal 0)
             goal, model = torch.cat([goal, torch.zeros_like(goal)], -1), tips_and_pads
+            if self.depth_proxy is not None:  # ... and how deep the links reach into the object (goal 0)
+                links = len(self.depth_proxy.links)
+                goal, model = torch.cat([goal, goal.new_zeros(*goal.shape[:-1], links)], -1), tips_pads_depths
 
         def count(xx: Tensor, r: Tensor) -> Tensor:
             return self._count64(xx, r if trials is None else trials[r])
@@ -226,7 +260,7 @@ class WholeConfiguration:
         kw = {"dtype": like.dtype, "device": like.device}
         contact = None
         if self.pads is not None:  # the pads' penalties (the norms of their residuals), as in evaluate
-            penalty = solved.value[:, 3 * F:].reshape(B, F, 3).norm(dim=-1)
+            penalty = solved.value[:, 3 * F: 6 * F].reshape(B, F, 3).norm(dim=-1)
             finger_err, contact = finger_err + penalty, self.pads.contact_errors(finger_err, penalty, rows).to(**kw)
         count = solved.count
         return solved.x[:, : self.n].to(**kw), Evaluation(
