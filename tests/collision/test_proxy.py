@@ -165,3 +165,29 @@ def test_the_proxy_arm_chain_gives_the_kernel_palm_frame(arm_hand):
     R0, t0 = arm_hand.palm_frame(body)
     assert len(levels) == 7
     assert torch.allclose(R, R0, atol=1e-12) and torch.allclose(t, t0, atol=1e-12)
+
+
+def test_link_depths_agree_with_fcl_on_the_free_hand_and_its_object():
+    """The surface model's depth residual per link (CollisionProxy.link_depths, the spheres' signed
+    distances) against FCL's penetration of the same link (no tolerance, no link exempt), on
+    random hand configurations around glass3: a link FCL finds 3 mm or more inside has a positive
+    depth, and a link the proxy finds 3 mm or more inside is inside by FCL too."""
+    hand = gt.load_robot("hand")
+    problem = gt.GraspProblem.from_task("glass3")
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), 300, torch.Generator().manual_seed(3))
+    proxy = CollisionProxy(hand, problem, dtype=torch.float64, touching=False)
+    palm = pose_to_rt(pose)
+    depths = proxy.link_depths(proxy.penetrations(proxy.sphere_centres(palm, q).flatten(1, 2)))  # (T, L)
+    scene = CollisionScene(hand, problem, object_tolerance=0.0, touching=False)
+    fcl = np.zeros(tuple(depths.shape))
+    for k in range(len(q)):
+        inside = scene.check(Posture(palm_pose=pose[k], fingers=q[k], body=torch.zeros(0))).object_links
+        for link, depth in inside.items():
+            if link in proxy.links:
+                fcl[k, proxy.links.index(link)] = depth
+    proxy_depth = depths.numpy()
+    deep_by_fcl, deep_by_proxy = fcl >= 0.003, proxy_depth >= 0.003
+    assert deep_by_fcl.sum() > 20 and deep_by_proxy.sum() > 20  # the sample has links well inside
+    assert (proxy_depth[deep_by_fcl] > 0).mean() >= 0.99
+    assert (fcl[deep_by_proxy] > 0).mean() >= 0.99
+    assert (proxy_depth[fcl == 0] == 0).mean() >= 0.95  # and clear links have no depth

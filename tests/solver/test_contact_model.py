@@ -195,3 +195,20 @@ def test_the_surface_model_without_an_object_is_refused_before_any_work(tmp_path
     refused(tmp_path, "solve_grasp.py", f"problem={problem}", "solver.contact_model=surface",
             f"out={tmp_path / 'r.json'}", message="contact_model=surface needs an object")
     assert not (tmp_path / "r.json").exists()
+
+
+def test_the_depth_residuals_and_their_jacobian_against_central_differences():
+    """The whole polish's depth residuals (one per link: how far it reaches into the object) are
+    positive where some link is inside, and their Jacobian (forward differences over the
+    penetrating spheres only, every row's m + 1 points in one call) is the central differences'
+    of the whole residual."""
+    _, _, env = _surface_env()
+    x = env.random_whole(16, torch.Generator().manual_seed(2))
+    value, J = env.whole_depths(x)
+    inside = value.amax(1) > 1e-4
+    assert int(inside.sum()) >= 3  # random postures: some links in the glass
+    h, m = 1e-6, x.shape[1]
+    central = torch.stack([(env.whole_depths(x + h * e)[0] - env.whole_depths(x - h * e)[0]) / (2 * h)
+                           for e in torch.eye(m, dtype=x.dtype)], -1)  # (B, L, m)
+    torch.testing.assert_close(J[inside], central[inside], atol=1e-4, rtol=1e-4)
+    assert J[inside].abs().max() > 0.01
