@@ -7,11 +7,13 @@ checked in MuJoCo (:func:`gt.simulate_grasp`, the pinned protocol: 6/6 pushes).
 Objects: ``objects`` of pybullet's procedurally generated objects (``pybullet_data/random_urdfs/
 NNN/NNN.obj``, 1000 of them, scaled as their URDFs scale them: ``SCALE``), drawn without replacement
 by ``seed`` from those used nowhere for tuning or tests (``EXCLUDED``: 000-003 are
-:data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`, 010-012 tuned the synthesis), each 0.2 m above
-the origin; object k is synthesized with seed ``seed`` + k. Robots: the shipped hand (thumb, index,
-middle); TriFinger by config (``examples/trifinger/trifinger.yaml``, its three fingers) only where
-``robots`` names it: both methods accept it but touch nothing (``BY_CONFIG``), so its target is
-reported missed, not run, by default.
+:data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`, 010-012 tuned the synthesis), each with its
+bounding box centred 0.2 m above the origin (as the synthesis job places an object:
+:func:`~graspnet_torch.tasks.objects.centred_mesh`); object k is synthesized with seed ``seed`` +
+k. Robots: the shipped hand (thumb, index, middle); TriFinger by config
+(``examples/trifinger/trifinger.yaml``, its three fingers) only where ``robots`` names it: both
+methods accept it but touch nothing (``BY_CONFIG``), so its target is reported missed, not run, by
+default.
 
 Per robot and method, over the objects: the share whose top-1 grasp holds 6/6, the share with any of
 the top ``grasps`` holding 6/6, the median best Ferrari-Canny epsilon (synthesis: the best reported
@@ -44,6 +46,7 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.table import markdown_table
+from graspnet_torch.tasks.objects import centred_mesh
 from graspnet_torch.viz import Panel, render_robot
 from graspnet_torch.viz.result import posture_panels
 
@@ -54,7 +57,6 @@ ROBOTS = {"hand": ("hand", ("thumb", "index", "middle")),  # name -> (robot conf
 METHODS = ("synthesis", "baseline")
 SCALE = 0.015  # random_urdfs/NNN/NNN.urdf: <mesh filename="NNN.obj" scale="0.015 0.015 0.015"/>
 EXCLUDED = frozenset({0, 1, 2, 3, 10, 11, 12})  # used for tuning or tests (module docstring)
-POSE = np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0])
 TOP1_PCT = {"hand": 80.0, "trifinger": 60.0}  # the issue's targets
 BY_CONFIG = ("TriFinger by config is not run by default: gt.synthesize_grasps accepts it but no pad contact set "
              "touches even a 6 cm cube (800 palm poses tried, 0 touching; Dexmate F5D6 the same; the shipped hand 17), "
@@ -82,7 +84,7 @@ def object_pool() -> list[int]:
 
 
 def pick_objects(n: int, seed: int) -> list[tuple[str, Shape]]:
-    """``n`` random objects drawn by ``seed`` (name ``blobNNN``, shape 0.2 m above the origin)."""
+    """``n`` random objects drawn by ``seed`` (name ``blobNNN``, bounding box centred 0.2 m above the origin)."""
     import pybullet_data
 
     pool = object_pool()
@@ -90,8 +92,7 @@ def pick_objects(n: int, seed: int) -> list[tuple[str, Shape]]:
         raise ConfigError(f"experiments.synthesis.objects: {n} exceeds the {len(pool)} unused random objects")
     root = Path(pybullet_data.getDataPath()) / "random_urdfs"
     picked = sorted(np.random.default_rng(seed).choice(pool, size=n, replace=False).tolist())
-    return [(f"blob{k:03d}", Shape("mesh", (), POSE.copy(), root / f"{k:03d}" / f"{k:03d}.obj", SCALE))
-            for k in picked]
+    return [(f"blob{k:03d}", centred_mesh(root / f"{k:03d}" / f"{k:03d}.obj", SCALE)) for k in picked]
 
 
 def _depth_mm(robot, grasp) -> float:
@@ -175,7 +176,8 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
                "median best epsilon", "deepest mm", "verified grasps/s", "median s to first verified",
                "s per object"]
     body = (f"**An object in, grasps out.** {cfg.objects} of pybullet's random objects (`random_urdfs`, scale "
-            f"{SCALE:g} as their URDFs, 0.2 m above the origin), drawn with seed {cfg.seed} from the 993 that no "
+            f"{SCALE:g} as their URDFs, bounding box centred 0.2 m above the origin), drawn with seed {cfg.seed} from "
+            f"the 993 that no "
             f"tuning or test uses ({', '.join(f'{k:03d}' for k in sorted(EXCLUDED))} left out): "
             f"{', '.join(n for n, _ in objs[:12])}{' ...' if len(objs) > 12 else ''}. Object k with seed "
             f"{cfg.seed} + k, {cfg.candidates} candidates (contact sets; the baseline's palm poses), the top "

@@ -20,28 +20,29 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
-from graspnet_torch.errors import ConfigError, GraspnetError
+from graspnet_torch.errors import ConfigError, GraspnetError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import MAX_SEED
 from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem
-from graspnet_torch.meshes import MESH_FORMATS, load_mesh
+from graspnet_torch.meshes import MESH_FORMATS
 from graspnet_torch.physics import simulate_grasp
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot, load_robot
 from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import Free, build, clip, setting
 from graspnet_torch.synthesis import synthesize_grasps
+from graspnet_torch.synthesis.candidates import check_pad_fingers
 from graspnet_torch.table import format_table
+from graspnet_torch.tasks.auto_contacts import contact_fingers
+from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["COLUMNS", "OBJECT_CENTRE", "SynthesizeGraspsJobCfg", "find_meshes", "object_shape",
            "prepare_auto", "prepare_synthesize", "solve_auto_problem", "synthesize_objects"]
 
-OBJECT_CENTRE = (0.0, 0.0, 0.2)  # m, world: where each object's bounding box is centred (the hand's tasks' place)
 CANDIDATES_PER_GRASP = 16  # contacts: auto: contact sets drawn per grasp asked for (at least 64)
 COLUMNS = ("object", "grasps", "best_holds", "top1_holds_all", "top5_any_holds_all", "best_epsilon",
            "deepest_penetration_mm", "seconds", "reason")
@@ -93,22 +94,13 @@ def find_meshes(objects: str | None) -> list[Path]:
 
 
 def _check_fingers(robot: Robot, fingers: Sequence[str]) -> None:
-    """The robot is a free hand (synthesis places its palm) and ``fingers`` are two or more of its
-    fingers with pads."""
-    names = list(robot.finger_names)
-    padded = [f for f in names if f in robot.pads]
-    if robot.has_body or robot.shared.n or len(padded) < 2:
-        raise ConfigError(f"robot={robot.name}: grasp synthesis needs a free hand (no arm, no shared joints) with two "
-                          f"or more fingers with pads; the shipped one is robot=hand")
-    for f in fingers:
-        if f not in names:
-            raise ConfigError(f"fingers: unknown finger '{clip(f, 40)}' of robot {robot.name} (its fingers: "
-                              f"{', '.join(names)})")
-        if f not in robot.pads:
-            raise ConfigError(f"fingers: {f} of robot {robot.name} has no pad (its config's fingers.{f}.pad), which "
-                              f"grasp synthesis needs")
-    if len(fingers) < 2 or len(set(fingers)) != len(fingers):
-        raise ConfigError(f"fingers={clip(','.join(fingers), 80)}: expected two or more different fingers")
+    """The robot and ``fingers`` can have contacts chosen (the checks of
+    :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers` and
+    :func:`~graspnet_torch.synthesis.candidates.check_pad_fingers`), as a setting: :class:`ConfigError`."""
+    try:
+        check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.name, "fingers"))
+    except ProblemError as e:
+        raise ConfigError(str(e)) from None
 
 
 def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir: str | Path
@@ -137,12 +129,10 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
 
 def object_shape(path: Path, scale: float) -> Shape:
     """The mesh as the problem's object, its bounding box centred at :data:`OBJECT_CENTRE`
-    (unturned); a file that is not a solid mesh trimesh reads: a :class:`ProblemError`."""
+    (:func:`~graspnet_torch.tasks.objects.centred_mesh`); a file that is not a solid mesh trimesh
+    reads: a :class:`ProblemError`."""
     check_mesh(path, "objects", scale)
-    lo, hi = load_mesh(path.resolve(), scale).bounds
-    centre = (np.asarray(lo) + np.asarray(hi)) / 2
-    pose = np.concatenate([np.asarray(OBJECT_CENTRE) - centre, np.zeros(3)])
-    return Shape("mesh", (), pose, path.resolve(), scale)
+    return centred_mesh(path, scale)
 
 
 def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> dict:
@@ -264,7 +254,7 @@ def prepare_auto(cfg: Mapping[str, Any], run_dir: str | Path) -> tuple[Any, Gras
         raise ConfigError(f"{problem.source}: not a contacts: auto problem")
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     robot = load_robot(problem.robot_cfg)
-    _check_fingers(robot, problem.auto.fingers)
+    check_pad_fingers(robot, problem.auto.fingers)  # its names and count: checked as the file was read
     return job, problem, robot, out
 
 

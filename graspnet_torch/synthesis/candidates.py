@@ -53,10 +53,11 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver.contact import tip_frames
+from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CLOSE", "FORWARD", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet", "opposes",
-           "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
+__all__ = ["CLOSE", "FORWARD", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet", "check_pad_fingers",
+           "opposes", "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
 
 STEPS = 24  # samples of each finger's closing line
 BISECT = 14  # bisection steps after the first sample that touches
@@ -251,6 +252,19 @@ def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, n
     return np.where(off, np.inf, angles), inward
 
 
+def check_pad_fingers(robot: Robot, fingers: Sequence[str]) -> None:
+    """What choosing contacts needs of the robot (:func:`pad_contact_sets`): a free hand (its palm is
+    placed: no arm, no shared joints) and a pad on each of ``fingers`` (checked by
+    :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers`); :class:`ProblemError` otherwise."""
+    if robot.has_body or robot.shared.n:
+        raise ProblemError(f"robot {robot.cfg.name}: contacts are chosen for a free hand (no arm, no shared joints); "
+                           f"the shipped one is robot=hand")
+    for f in fingers:
+        if f not in robot.pads:
+            raise ProblemError(f"fingers: {f} of robot {robot.cfg.name} has no pad (its config's fingers.{f}.pad), "
+                               f"which choosing contacts needs")
+
+
 def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = ("thumb", "index", "middle"),
                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
                      max_tries: int | None = None, stats: dict | None = None,
@@ -267,11 +281,7 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     its thumb pad facing the fingers), 64 sets, seed 0: a 6 cm cube 64 sets of 3136 palm poses (55
     force closure), a 4 cm sphere 64 of 1280 (62), glass3 64 of 1728 (53); 2.3-11 s on one thread.
     """
-    if robot.has_body or robot.shared.n:
-        raise ProblemError(f"{robot.cfg.name}: pad_contact_sets places a free hand's palm (no arm, no shared joints)")
-    unknown = [f for f in fingers if f not in robot.pads]
-    if unknown or not fingers:
-        raise ProblemError(f"pad_contact_sets: fingers {list(fingers)}: not fingers with pads of {robot.cfg.name}")
+    check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.cfg.name, "fingers"))
     rng = np.random.default_rng(seed)
     finger_names = list(robot.fingers)
     rows = [finger_names.index(f) for f in fingers]

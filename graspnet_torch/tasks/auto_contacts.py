@@ -16,14 +16,15 @@ apply only to ``contacts: auto``; obstacles are not supported with it yet.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.config import RobotCfg
 
-__all__ = ["AUTO_KEYS", "DEFAULT_FINGERS", "DEFAULT_GRASPS", "MAX_GRASPS", "AutoContacts", "auto_contacts"]
+__all__ = ["AUTO_KEYS", "DEFAULT_FINGERS", "DEFAULT_GRASPS", "MAX_GRASPS", "AutoContacts", "auto_contacts",
+           "contact_fingers"]
 
 AUTO_KEYS = ("fingers", "grasps")  # the keys only ``contacts: auto`` takes
 DEFAULT_FINGERS = 3  # the first three fingers (thumb, index, middle on the shipped hand)
@@ -69,21 +70,29 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
         raise ProblemError(f"{source}: contacts: auto needs an object (the contacts are chosen on its surface)")
     if data.get("obstacles"):
         raise ProblemError(f"{source}: contacts: auto: obstacles are not supported with chosen contacts yet")
-    raw = data.get("fingers", min(DEFAULT_FINGERS, len(names)))
+    fingers = contact_fingers(names, data.get("fingers", min(DEFAULT_FINGERS, len(names))), robot_cfg.name,
+                              f"{source}: fingers")
+    grasps = _count(data.get("grasps", DEFAULT_GRASPS), f"{source}: grasps", 1, MAX_GRASPS)
+    return AutoContacts(fingers, grasps)
+
+
+def contact_fingers(names: Sequence[str], raw: Any, robot: str, where: str) -> tuple[str, ...]:
+    """The fingers that touch, in the robot's finger order (``names``), from ``raw``: a list of
+    two or more of its fingers, each once, or a count (its first n fingers, 2 to all). The one
+    check of a fingers setting (a problem file's ``fingers``, the synthesis job's, gt.synthesize_grasps');
+    :class:`ProblemError` naming ``where`` otherwise."""
+    names = list(names)
     if isinstance(raw, int) and not isinstance(raw, bool):
         if not 2 <= raw <= len(names):
-            raise ProblemError(f"{source}: fingers: {raw}: robot '{robot_cfg.name}' has {len(names)} fingers "
-                               f"({', '.join(names)}); give 2 to {len(names)}")
-        fingers = names[:raw]
-    elif isinstance(raw, list) and all(isinstance(f, str) for f in raw):
+            raise ProblemError(f"{where}: {raw}: robot '{robot}' has {len(names)} fingers ({', '.join(names)}); "
+                               f"give 2 to {len(names)}")
+        return tuple(names[:raw])
+    if isinstance(raw, list | tuple) and all(isinstance(f, str) for f in raw):
         unknown = [f for f in raw if f not in names]
         if unknown:
-            raise ProblemError(f"{source}: fingers: unknown finger(s) {', '.join(unknown)}"[:200] +
-                               f" for robot '{robot_cfg.name}' (fingers: {', '.join(names)})")
+            raise ProblemError(f"{where}: unknown finger(s) {', '.join(unknown)}"[:200] +
+                               f" for robot '{robot}' (fingers: {', '.join(names)})")
         if len(set(raw)) != len(raw) or len(raw) < 2:
-            raise ProblemError(f"{source}: fingers: need 2 or more different fingers, got {raw}"[:300])
-        fingers = [f for f in names if f in raw]
-    else:
-        raise ProblemError(f"{source}: fingers: expected a list of finger names or a number, got {raw!r}"[:300])
-    grasps = _count(data.get("grasps", DEFAULT_GRASPS), f"{source}: grasps", 1, MAX_GRASPS)
-    return AutoContacts(tuple(fingers), grasps)
+            raise ProblemError(f"{where}: need 2 or more different fingers, got {list(raw)}"[:300])
+        return tuple(f for f in names if f in raw)
+    raise ProblemError(f"{where}: expected a list of finger names or a number, got {raw!r}"[:300])

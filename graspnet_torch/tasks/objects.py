@@ -19,10 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["REAL_OBJECTS", "as_mesh", "random_pose", "real_objects"]
+__all__ = ["OBJECT_CENTRE", "REAL_OBJECTS", "as_mesh", "centred_mesh", "random_pose", "real_objects"]
+
+OBJECT_CENTRE = (0.0, 0.0, 0.2)  # m, world: where an object given alone is centred (the hand's tasks' place)
 
 # name -> (file under pybullet_data, scale to metres): hand-sized, closed surfaces but the mug's
 REAL_OBJECTS = {
@@ -49,6 +52,14 @@ def real_objects() -> dict[str, tuple[Path, float]]:
                           "pip install pybullet (or pip install -e '.[dev]')") from None
     root = Path(pybullet_data.getDataPath())
     return {name: (root / rel, scale) for name, (rel, scale) in REAL_OBJECTS.items()}
+
+
+def centred_mesh(path: Path, scale: float = 1.0, centre: tuple[float, float, float] = OBJECT_CENTRE) -> Shape:
+    """A mesh file as an object whose bounding box is centred at ``centre`` (world, unturned): how
+    an object given without a pose is placed (the synthesis job, the synthesis experiment)."""
+    lo, hi = load_mesh(Path(path).resolve(), scale).bounds
+    pose = np.concatenate([np.asarray(centre) - (np.asarray(lo) + np.asarray(hi)) / 2, np.zeros(3)])
+    return Shape("mesh", (), pose, Path(path).resolve(), scale)
 
 
 def random_pose(rng: np.random.Generator, radius: float = 0.3) -> np.ndarray:
