@@ -58,15 +58,16 @@ def _cached(cache: OrderedDict[tuple, T], key: tuple, build: Callable[[], T]) ->
 
 def proxy_for(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], dtype: torch.dtype = torch.float32,
               device: torch.device | str = "cpu", clearance: float = 0.0, object_tolerance: float = OBJECT_TOLERANCE_M,
-              touching: bool = True) -> CollisionProxy:
+              touching: bool = True, fingers_apart: bool = False) -> CollisionProxy:
     """The torch collision proxy of a robot and a problem (or a batch), built once per geometry
-    and rule (``object_tolerance``, ``touching``: :class:`CollisionProxy`)."""
+    and rule (``object_tolerance``, ``touching``, ``fingers_apart``: :class:`CollisionProxy`)."""
     problems = (problem,) if not isinstance(problem, Sequence) else tuple(problem)
     key = (id(robot), tuple(geometry_key(p) for p in problems), dtype, str(device), clearance, object_tolerance,
-           touching)
+           touching, fingers_apart)
     arg = problems[0] if len(problems) == 1 and not isinstance(problem, Sequence) else list(problems)
     return _cached(_PROXIES, key, lambda: CollisionProxy(robot, arg, object_tolerance, dtype=dtype, device=device,
-                                                         clearance=clearance, touching=touching))
+                                                         clearance=clearance, touching=touching,
+                                                         fingers_apart=fingers_apart))
 
 
 def scene_for(robot: Robot, problem: GraspProblem, object_tolerance: float = OBJECT_TOLERANCE_M,

@@ -30,7 +30,7 @@ from torch import Tensor
 
 from graspnet_torch.collision.convex import piece_distance
 from graspnet_torch.collision.primitives import group_thresholds, primitive_groups
-from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, self_collision_pairs
+from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, finger_pairs, self_collision_pairs
 from graspnet_torch.collision.self_collision import SelfCollisionModel
 from graspnet_torch.collision.spheres import CLUSTER, sphere_clusters
 from graspnet_torch.errors import ProblemError
@@ -40,8 +40,10 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CollisionProxy"]
+__all__ = ["FINGER_GAP_M", "CollisionProxy"]
 
+FINGER_GAP_M = 0.001  # two fingers' spheres overlap from this gap on: the spheres lie inside a link's
+# box and miss its edges, where FCL finds two side-by-side fingers touching
 DENSE_LIMIT = 1 << 13  # T x clusters x CLUSTER x elements below which every sphere is tested (no broad phase)
 
 
@@ -61,6 +63,8 @@ class CollisionProxy:
         touching: whether the contact fingers' distal links may touch the object at any depth
             (the point contact model); False: they count as every link does, beyond
             ``object_tolerance`` (the surface model).
+        fingers_apart: :meth:`penetrations` also measures two fingers through each other (the
+            surface model's rule; :meth:`count` does not count them: FCL does).
 
     Call :meth:`count` with the palm frame, the body joints (robots with an arm) and every
     finger's joints. Two phases, as FCL: each link's spheres are cut into clusters of at most
@@ -81,8 +85,10 @@ class CollisionProxy:
 
     def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], object_tolerance: float = 0.002,
                  dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", clearance: float = 0.0,
-                 touching: bool = True):
+                 touching: bool = True, fingers_apart: bool = False):
         self.robot = robot
+        self.fingers_apart = fingers_apart
+        self._finger_spheres: tuple[Tensor, Tensor] | None = None
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         problem = problems[0]
         self.n_problems = len(problems)
@@ -295,6 +301,48 @@ class CollisionProxy:
             sd = g.signed_distance(g.local(centres, pid), size)  # (T, S, O_g)
             sq = sq + ((radii[:, None] - sd).clamp(min=0) * pos).square().sum(-1)
         return sq.sqrt()
+
+    def overlapping_pairs(self, centres: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Two fingers through each other (where the proxy was built with ``fingers_apart``):
+        centres (T, S, 3) of every sphere (flattened C x ``CLUSTER``) -> the (t, i, j) of each
+        pair of spheres i < j of two different fingers' links apart at home
+        (:func:`~graspnet_torch.collision.scene.finger_pairs`) that overlap in row t, each (N,)."""
+        apart, fingers = self._finger_spheres_apart()
+        if fingers.numel() == 0:
+            empty = torch.zeros(0, dtype=torch.long, device=centres.device)
+            return empty, empty, empty
+        c, r = centres[:, fingers], self._radii.reshape(-1)[fingers]
+        gap = torch.cdist(c, c, compute_mode="donot_use_mm_for_euclid_dist")  # exact in float64
+        hit = (gap < r[:, None] + r[None, :] + FINGER_GAP_M) & apart[fingers][:, fingers]
+        t, i, j = hit.triu(1).nonzero(as_tuple=True)
+        return t, fingers[i], fingers[j]
+
+    def overlaps(self, ci: Tensor, cj: Tensor, i: Tensor, j: Tensor) -> Tensor:
+        """The overlap r_i + r_j + :data:`FINGER_GAP_M` - |c_i - c_j|, clamped at 0, of spheres i and
+        j (N,) at centres ci, cj (N, ..., 3) -> (N, ...)."""
+        r = self._radii.reshape(-1)
+        shape = (-1,) + (1,) * (ci.dim() - 2)
+        return ((r[i] + r[j] + FINGER_GAP_M).view(shape) - (ci - cj).norm(dim=-1)).clamp(min=0)
+
+    def sphere_links(self) -> Tensor:
+        """(S,) each sphere's link (index into ``self.links``), flattened C x ``CLUSTER``."""
+        return self._cluster_link.repeat_interleave(CLUSTER)
+
+    def _finger_spheres_apart(self) -> tuple[Tensor, Tensor]:
+        """(S, S) bool, the sphere pairs of :meth:`overlapping_pairs`, and (S_f,) the spheres in
+        some pair; computed once."""
+        if self._finger_spheres is None:
+            link = self.sphere_links()
+            valid = self._radii.reshape(-1) > 0
+            pairs = torch.zeros(len(self.links), len(self.links), dtype=torch.bool, device=link.device)
+            if self.fingers_apart:
+                for a, b in finger_pairs(self.robot):
+                    if a in self.links and b in self.links:
+                        i, j = self.links.index(a), self.links.index(b)
+                        pairs[i, j] = pairs[j, i] = True
+            apart = pairs[link][:, link] & valid[:, None] & valid[None, :]
+            self._finger_spheres = (apart, apart.any(1).nonzero().squeeze(1))
+        return self._finger_spheres
 
     def link_depths(self, penetrations: Tensor, spheres: Tensor | None = None) -> Tensor:
         """(T, S) sphere penetrations (:meth:`penetrations`) -> (T, L) each link's (``self.links``):

@@ -109,7 +109,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
         self.depth_proxy = None  # the surface model: how deep the links reach, a residual of the whole polish
         if self.pads is not None and has_environment(robot, self.problem):
             self.depth_proxy = proxy_for(robot, batch, dtype=torch.float64, object_tolerance=rule.object_tolerance,
-                                         touching=rule.touching)
+                                         touching=rule.touching, fingers_apart=True)
         if self.proxy is not None or self.depth_proxy is not None:
             self.home = robot.home_posture(dtype).fingers.to(device)  # (F_all, j): fingers without a contact
             self._idx = torch.as_tensor(self.idx, device=device)

@@ -166,10 +166,12 @@ class WholeConfiguration:
 
     def whole_depths(self, x: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """The surface model's depth residuals of x (B, m) of the trials ``rows``: how far each
-        link reaches into the object and obstacles (B, L)
-        (:meth:`~graspnet_torch.collision.proxy.CollisionProxy.link_depths`, goal 0), and their
-        Jacobian (B, L, m) by forward differences: the m + 1 points of every row in one batched
-        call, the spheres that penetrate in some row only (the others' derivative is zero)."""
+        link reaches into the object and obstacles, and into another finger (B, L), the root sum
+        of squares of its spheres' penetrations and overlaps
+        (:class:`~graspnet_torch.collision.proxy.CollisionProxy`: ``penetrations``,
+        ``overlapping_pairs``; goal 0), and their Jacobian (B, L, m) by forward differences: the
+        m + 1 points of every row in one batched call, on the spheres that penetrate or overlap at
+        x only (the others' derivative is zero)."""
         B, m = x.shape
         X = (x.unsqueeze(1) + torch.cat([x.new_zeros(1, m), DEPTH_STEP * torch.eye(m, dtype=x.dtype)])).reshape(-1, m)
         every = None if rows is None else rows.repeat_interleave(m + 1)
@@ -177,15 +179,27 @@ class WholeConfiguration:
         config = X[:, : self.n]
         frames = proxy.frames(self.palm_frame(config), self._every(X[:, self.n:].reshape(-1, F, j), every),
                               self.body(config), None, self._all_bases(config))  # (n_frames, B (m + 1), 3, 4)
-        value = proxy.penetrations(proxy.centres(frames[:, :: m + 1]), None, self._pid(rows))  # (B, S): at x
-        spheres = (value > 0).any(0).nonzero().squeeze(1)
-        depths = proxy.link_depths(value)
+        at = proxy.centres(frames[:, :: m + 1])  # (B, S, 3): every sphere at x
+        value = proxy.penetrations(at, None, self._pid(rows))  # (B, S)
+        t, a, b = proxy.overlapping_pairs(at)  # (N,): row, sphere, sphere
+        link, L = proxy.sphere_links(), len(proxy.links)
+        sq = proxy.link_depths(value).square()
+        if t.numel():
+            o2 = proxy.overlaps(at[t, a], at[t, b], a, b).square()
+            sq = sq.index_put((t, link[a]), o2, accumulate=True).index_put((t, link[b]), o2, accumulate=True)
+        spheres = torch.unique(torch.cat([(value > 0).any(0).nonzero().squeeze(1), a, b]))
         if spheres.numel() == 0:
-            return depths, x.new_zeros(B, depths.shape[1], m)
-        moved = proxy.link_depths(proxy.penetrations(proxy.centres(frames, spheres), spheres, self._pid(every)),
-                                  spheres)
-        moved = moved.view(B, m + 1, -1)
-        return depths, ((moved[:, 1:] - moved[:, :1]) / DEPTH_STEP).transpose(1, 2)
+            return sq.sqrt(), x.new_zeros(B, L, m)
+        moved = proxy.centres(frames, spheres)  # (B (m + 1), S', 3)
+        msq = proxy.link_depths(proxy.penetrations(moved, spheres, self._pid(every)), spheres).square()
+        if t.numel():
+            col = torch.searchsorted(spheres, torch.stack([a, b]))  # a, b among the spheres
+            r = (t * (m + 1)).unsqueeze(1) + torch.arange(m + 1)  # (N, m + 1): each pair's rows
+            o2 = proxy.overlaps(moved[r, col[0].unsqueeze(1)], moved[r, col[1].unsqueeze(1)], a, b).square()
+            msq = msq.index_put((r.reshape(-1), link[a].repeat_interleave(m + 1)), o2.reshape(-1), accumulate=True)
+            msq = msq.index_put((r.reshape(-1), link[b].repeat_interleave(m + 1)), o2.reshape(-1), accumulate=True)
+        d, moved_d = sq.sqrt(), msq.sqrt().view(B, m + 1, L)
+        return d, ((moved_d[:, 1:] - moved_d[:, :1]) / DEPTH_STEP).transpose(1, 2)
 
     def _count64(self, x: Tensor, rows: Tensor | None = None) -> Tensor:
         """The proxy's collision count (B,) of x (B, m) of the trials ``rows``."""
