@@ -191,3 +191,31 @@ def test_link_depths_agree_with_fcl_on_the_free_hand_and_its_object():
     assert (proxy_depth[deep_by_fcl] > 0).mean() >= 0.99
     assert (fcl[deep_by_proxy] > 0).mean() >= 0.99
     assert (proxy_depth[fcl == 0] == 0).mean() >= 0.95  # and clear links have no depth
+
+
+def test_overlapping_finger_pairs_agree_with_fcl_fingers_through_each_other():
+    """The surface model's fingers-apart residual (CollisionProxy.overlapping_pairs, sphere pairs of
+    two fingers within FINGER_GAP_M) against FCL's rule (CollisionScene fingers_apart: two
+    fingers' links intersecting), on random hand postures: none at the home posture, and where
+    FCL finds two fingers through each other the proxy finds an overlapping pair of those links."""
+    hand = gt.load_robot("hand")
+    problem = gt.GraspProblem.from_task("glass3")
+    proxy = CollisionProxy(hand, problem, dtype=torch.float64, touching=False, fingers_apart=True)
+    home = hand.home_posture(torch.float64)
+    palm = pose_to_rt(home.palm_pose.unsqueeze(0))
+    t, _, _ = proxy.overlapping_pairs(proxy.sphere_centres(palm, home.fingers.unsqueeze(0)).flatten(1, 2))
+    assert t.numel() == 0
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), 300, torch.Generator().manual_seed(4))
+    t, a, b = proxy.overlapping_pairs(proxy.sphere_centres(pose_to_rt(pose), q).flatten(1, 2))
+    link = proxy.sphere_links()
+    found = {(int(k), frozenset((proxy.links[int(link[i])], proxy.links[int(link[j])])))
+             for k, i, j in zip(t, a, b, strict=True)}
+    scene = CollisionScene(hand, problem, object_tolerance=0.001, touching=False, fingers_apart=True)
+    through, seen = 0, 0
+    for k in range(len(q)):
+        report = scene.check(Posture(palm_pose=pose[k], fingers=q[k], body=torch.zeros(0)))
+        for x, y in report.self_pairs:
+            through += 1
+            seen += (k, frozenset((x, y))) in found
+    assert through > 20  # random postures put fingers through each other
+    assert seen / through >= 0.9, (seen, through)
