@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -94,6 +94,9 @@ bench-api: $(STAMP)  ## the Python API from a plain program: solve_many problems
 
 bench-quality: $(STAMP)  ## grasp quality per contact set (epsilon, sigma_min) beside an LP force-closure test, --check
 	$(PY) benchmarks/quality.py --check
+
+bench-contact: $(STAMP)  ## the surface contact model's wall time beside the point model's (target <= 2x)
+	$(PY) benchmarks/contact_models.py --check
 
 bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the same frames (installs the retarget extra; ~2 min)
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
