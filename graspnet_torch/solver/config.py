@@ -167,9 +167,9 @@ class SolverCfg:
             than ``penetration_mm`` in the object), 'point' (the paper's model: the finger's tip
             frame on the contact; the default for now), or 'auto' ('surface' where the problem has
             an object, else 'point': without a surface there is nothing to touch). The search
-            sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`); the shipped hand's
-            thumb cannot face the paper's contact sets within 30 degrees, so 'point' stays the
-            default until contact sets are chosen for the pads.
+            sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`) and the whole polish
+            how deep each link reaches (docs/interface.md, "Pads on the surface", which also says
+            why 'point' is still the default).
         penetration_mm: in the surface model, how deep a link of the robot (the contact
             fingers' distal links included) may lie inside the object.
         normal_cone_deg: in the surface model, the largest angle between a contact finger's pad
