@@ -1,7 +1,7 @@
 """An object in, grasps out: the best grasps of each mesh in a folder, with a summary table.
 
     python scripts/synthesize_grasps.py objects=FOLDER robot=hand
-    python scripts/synthesize_grasps.py objects=mug.stl scale=0.001 grasps=3 physics=false out=results/
+    python scripts/synthesize_grasps.py objects=mug.stl scale=0.001 grasps=3 verify=none out=results/
     python scripts/synthesize_grasps.py -m hydra/launcher=joblib objects=FOLDER seed=0,1,2
 
 Writes ``<out>/<object>.json`` per mesh (contacts, quality, the solve, the physics check) and

@@ -43,6 +43,7 @@ class ReachExperimentCfg:
     manus_positions: int = setting(64, lo=1, hi=64)  # of the protocol's 64 cube positions
     random_problems: int = setting(20, lo=1, hi=1000)  # random arm problems with 2-3 obstacles
     timeout_s: float = setting(5.0, lo=0.0, lo_open=True, hi=600.0)  # reach.timeout_s
+    contact_model: str = setting("point", choices=("point", "auto"))  # auto: the surface model where there is an object
 
 
 @dataclass
@@ -78,24 +79,25 @@ def _reach(row: _Row, problem: gt.GraspProblem, result: gt.GraspResult, cfg: gt.
 
 def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
     reach = gt.ReachCfg(enabled=True, timeout_s=cfg.timeout_s)
+    solver = {"contact_model": cfg.contact_model}
     arm, manus = gt.load_robot("arm_hand"), gt.load_robot("manus")
     rows: list[_Row] = []
     for task in progress(("env1", "env2", "fig10"), desc="reach: arm environments", unit="task"):
         row = _Row(task)
         problem = gt.GraspProblem.from_task(task)
         for seed in range(cfg.arm_seeds):
-            _reach(row, problem, gt.solve(problem, trials=16, seed=seed), reach, arm)
+            _reach(row, problem, gt.solve(problem, trials=16, seed=seed, solver=solver), reach, arm)
         rows.append(row)
     row = _Row("MANUS protocol")
     positions = protocol_positions()[:: max(1, 64 // cfg.manus_positions)][: cfg.manus_positions]
     problems = [cube_problem(x, y) for x, y in positions]
-    for problem, result in zip(problems, gt.solve_many(problems, trials=8, seed=0), strict=True):
+    for problem, result in zip(problems, gt.solve_many(problems, trials=8, seed=0, solver=solver), strict=True):
         _reach(row, problem, result, reach, manus)
     rows.append(row)
     row = _Row("random arm problems, 2-3 obstacles")
     randoms = random_obstacle_problems(arm, cfg.random_problems, 7, clear_of=[arm.home_posture()])
     for k, problem in enumerate(progress(randoms, desc="reach: random arm problems", unit="problem")):
-        _reach(row, problem, gt.solve(problem, trials=16, seed=k + 1), reach, arm)
+        _reach(row, problem, gt.solve(problem, trials=16, seed=k + 1, solver=solver), reach, arm)
     rows.append(row)
     table = []
     for r in rows:
@@ -116,7 +118,9 @@ def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
     body = "\n\n".join([
         " ".join(__doc__.split("\n\n")[0].split()),
         f"Here: {cfg.arm_seeds} grasps per arm environment, {len(problems)} MANUS positions, "
-        f"{cfg.random_problems} random arm problems; reach.timeout_s = {cfg.timeout_s:g} s, the check's step "
+        f"{cfg.random_problems} random arm problems; solver.contact_model = {cfg.contact_model} (auto: the surface "
+        f"model's pads where the problem has an object, the pre-grasp backed off along the normals); "
+        f"reach.timeout_s = {cfg.timeout_s:g} s, the check's step "
         f"{reach.resolution_deg:g} degree / {reach.resolution_mm:g} mm.",
         markdown_table(["grasps", "solved", "motion found", "re-checked clean", "planning s (median)",
                         "planning s (p95)", "motion s (median)", "why not (count)"], table), ""])

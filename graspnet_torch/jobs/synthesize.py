@@ -60,7 +60,7 @@ class SynthesizeGraspsJobCfg:
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
     trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set
     seed: int = setting(0, lo=0, hi=MAX_SEED)
-    physics: bool = True  # check each grasp in MuJoCo (gt.simulate_grasp)
+    verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo (gt.simulate_grasp)
     out: str | None = None  # the results folder (None: <run dir>/results)
     threads: int = setting(1, lo=1, hi=1024)
     progress: bool = True
@@ -119,11 +119,11 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     if out.exists() and not out.is_dir():
         raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder")
     check_output_path(str(out / "summary.csv"), "out", ConfigError)  # the folder can be made and written in
-    if job.physics:
+    if job.verify == "physics":
         try:
             import mujoco  # noqa: F401  (only whether it imports)
         except ImportError:
-            raise ConfigError("physics=true needs MuJoCo: pip install mujoco (or physics=false)") from None
+            raise ConfigError("verify=physics needs MuJoCo: pip install mujoco (or verify=none)") from None
     return job, robot_cfg, meshes, out
 
 
@@ -140,7 +140,7 @@ def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> d
     holds = [g["holds"] for g in grasps if g.get("holds") is not None]
     full = [g["physics"]["of"] for g in grasps if g.get("physics")]
     checked = bool(holds) and len(holds) == len(grasps)
-    pen = [g["result"].get("penetration_mm") for g in grasps]
+    pen = [g.get("penetration_mm") for g in grasps]
     pen = [p for p in pen if p is not None]
     return {"object": name, "grasps": len(grasps), "best_holds": max(holds) if holds else None,
             "top1_holds_all": (grasps[0]["holds"] == full[0]) if checked else None,
@@ -155,7 +155,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     stats: dict = {}
     data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
                   "settings": {"fingers": list(job.fingers), "grasps": job.grasps, "candidates": job.candidates,
-                               "trials": job.trials, "seed": job.seed, "physics": job.physics},
+                               "trials": job.trials, "seed": job.seed, "verify": job.verify},
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
     try:
@@ -224,7 +224,7 @@ def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, m
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     robot = load_robot(robot_cfg)
-    physics = simulate_grasp if job.physics else None
+    physics = simulate_grasp if job.verify == "physics" else None
     rows = []
     items = progress(meshes, total=len(meshes), desc="objects", unit="object") if job.progress else iter(meshes)
     for path in items:
@@ -263,8 +263,9 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
     its object (:func:`gt.synthesize_grasps`, its ``fingers`` and ``grasps``; ``seed``, ``trials``
     (at most 8) and ``threads`` from the command line), each grasp checked in MuJoCo where
     ``mujoco`` is installed, and ``out`` (default ``<run dir>/result.json``) written atomically: the
-    problem, the grasps best first (as in a ``synthesize_grasps.py`` result) and ``success`` (a
-    grasp found)."""
+    best grasp's fields at the top level (a result's, with its ``contacts``), the problem, ``auto``
+    (the fingers and grasps asked for) and ``grasps``, best first (as in a ``synthesize_grasps.py``
+    result); ``success``: a grasp found."""
     job, problem, robot, out = prepare_auto(cfg, run_dir)
     auto = problem.auto
     physics = simulate_grasp if importlib.util.find_spec("mujoco") is not None else None
@@ -274,9 +275,12 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
                               candidates=max(CANDIDATES_PER_GRASP * auto.grasps, 64), seed=job.seed,
                               trials=min(job.trials, 8), physics=physics, stats=stats)
     grasps = [g.to_dict() for g in found]
-    data = {"problem": problem.source, "robot": robot.name, "contacts": "auto", "fingers": list(auto.fingers),
-            "object": problem.object.to_mapping(), "success": bool(grasps), "physics_checked": physics is not None,
-            "grasps": grasps, "stats": stats, "seconds": round(time.perf_counter() - t0, 3)}
+    best = dict(grasps[0]) if grasps else {"success": False, "reason": "no grasp found: none of the chosen contact "
+                                                                         "sets was solved"}
+    data = {**best, "problem": problem.source, "robot": robot.name,
+            "auto": {"fingers": list(auto.fingers), "grasps": auto.grasps}, "object": problem.object.to_mapping(),
+            "physics_checked": physics is not None, "grasps": grasps, "stats": stats,
+            "seconds": round(time.perf_counter() - t0, 3)}
     atomic_write_text(out, json.dumps(data, indent=1, allow_nan=False))
     checked = f", holding {[g['holds'] for g in grasps]} of 6 pushes in MuJoCo" if physics is not None else \
         " (mujoco is not installed: not checked in physics)"

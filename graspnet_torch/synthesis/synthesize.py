@@ -62,20 +62,23 @@ class SynthesizedGrasp:
         return None if self.physics is None else sum(self.physics.directions.values())
 
     def to_dict(self) -> dict:
-        """The grasp as JSON: its contacts (world and object frame, m, one per finger), quality,
-        whether it succeeded, the solve's reported trial (:meth:`GraspResult.to_dict` without the
-        other trials: a surface grasp's pregrasp and squeeze postures included) and the physics
-        check's ``report.to_dict()["physics"]`` (None: not checked)."""
-        result = {k: v for k, v in self.result.to_dict().items() if k != "trials"}
-        result["trials_run"] = len(self.result.trials)
+        """The grasp as JSON: every field of its solve's result (:meth:`GraspResult.to_dict` without
+        the other trials: the reported trial's fields at the top, a surface grasp's pregrasp and
+        squeeze included; ``trials_run``: how many trials the solve ran), then its ``fingers``, its
+        ``contacts`` (object frame, as a problem file lists them) and ``contacts_world`` (m), its
+        ``quality``, ``holds`` and the physics check's ``report.to_dict()["physics"]`` (None: not
+        checked)."""
+        data = {k: v for k, v in self.result.to_dict().items() if k != "trials"}
         physics = None if self.physics is None else self.physics.to_dict().get("physics")
-        return {"fingers": [c.finger for c in self.problem.contacts],
-                "contacts_world": np.asarray(self.contacts, dtype=np.float64).tolist(),
-                "contacts_object": [np.asarray(c.position, dtype=np.float64).tolist() for c in self.problem.contacts],
-                "quality": {"epsilon": float(self.quality.epsilon),
-                            "min_singular_value": float(self.quality.min_singular_value),
-                            "force_closure": bool(self.quality.force_closure)},
-                "success": self.success, "holds": self.holds, "result": result, "physics": physics}
+        data.update({"trials_run": len(self.result.trials), "fingers": [c.finger for c in self.problem.contacts],
+                     "contacts": [{"finger": c.finger, "position": np.asarray(c.position, dtype=np.float64).tolist()}
+                                  for c in self.problem.contacts],
+                     "contacts_world": np.asarray(self.contacts, dtype=np.float64).tolist(),
+                     "quality": {"epsilon": float(self.quality.epsilon),
+                                 "min_singular_value": float(self.quality.min_singular_value),
+                                 "force_closure": bool(self.quality.force_closure)},
+                     "success": self.success, "holds": self.holds, "physics": physics})
+        return data
 
 
 def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION

@@ -7,7 +7,8 @@ A problem file::
     object: {mesh: mug.obj, scale: 1.0, pose: [0, 0, 0.2, 0, 0, 0]}   # or a box / cylinder / sphere
     contacts: auto
     fingers: [thumb, index, middle]   # the fingers that touch; or a number: the first n fingers
-                                      # in the robot's order (thumb first); default 3 (or all, if fewer)
+                                      # in the robot's order (thumb first); default 3 (or all, if fewer);
+                                      # or, instead, n_fingers: 3 (the same as fingers: 3)
     grasps: 5                         # how many grasps to return, best first (1-100; default 5)
 
 Only a free hand (a palm with fingers, no arm) is supported so far; ``fingers`` and ``grasps``
@@ -26,7 +27,7 @@ from graspnet_torch.robot.config import RobotCfg
 __all__ = ["AUTO_KEYS", "DEFAULT_FINGERS", "DEFAULT_GRASPS", "MAX_GRASPS", "AutoContacts", "auto_contacts",
            "contact_fingers"]
 
-AUTO_KEYS = ("fingers", "grasps")  # the keys only ``contacts: auto`` takes
+AUTO_KEYS = ("fingers", "n_fingers", "grasps")  # the keys only ``contacts: auto`` takes
 DEFAULT_FINGERS = 3  # the first three fingers (thumb, index, middle on the shipped hand)
 DEFAULT_GRASPS = 5
 MAX_GRASPS = 100
@@ -70,8 +71,13 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
         raise ProblemError(f"{source}: contacts: auto needs an object (the contacts are chosen on its surface)")
     if data.get("obstacles"):
         raise ProblemError(f"{source}: contacts: auto: obstacles are not supported with chosen contacts yet")
-    fingers = contact_fingers(names, data.get("fingers", min(DEFAULT_FINGERS, len(names))), robot_cfg.name,
-                              f"{source}: fingers")
+    if data.get("fingers") is not None and data.get("n_fingers") is not None:
+        raise ProblemError(f"{source}: fingers and n_fingers: give one (n_fingers: N is fingers: N)")
+    key = "n_fingers" if data.get("n_fingers") is not None else "fingers"
+    raw = data.get(key, min(DEFAULT_FINGERS, len(names)))
+    if key == "n_fingers" and (not isinstance(raw, int) or isinstance(raw, bool)):
+        raise ProblemError(f"{source}: n_fingers: expected a number of fingers, got {raw!r}"[:300])
+    fingers = contact_fingers(names, raw, robot_cfg.name, f"{source}: {key}")
     grasps = _count(data.get("grasps", DEFAULT_GRASPS), f"{source}: grasps", 1, MAX_GRASPS)
     return AutoContacts(fingers, grasps)
 

@@ -27,15 +27,18 @@ def test_auto_problem_gives_grasps_on_the_objects_surface(tmp_path):
     out = tmp_path / "result.json"
     run_job({"problem": str(problem), "out": str(out), "seed": 0, "trials": 8}, tmp_path / "run")
     data = json.loads(out.read_text())
-    assert data["contacts"] == "auto" and data["fingers"] == ["thumb", "index", "middle"]
+    assert data["auto"] == {"fingers": ["thumb", "index", "middle"], "grasps": 1}
     assert data["success"] == bool(data["grasps"]) and len(data["grasps"]) <= 1
+    if data["grasps"]:  # the top level is the best grasp: its contacts, pads and postures
+        best = data["grasps"][0]
+        assert all(data[k] == best[k] for k in ("contacts", "palm_pose", "joints", "squeeze", "quality"))
     obj = gt.GraspProblem.from_file(problem).object
     for g in data["grasps"]:
         contacts = np.asarray(g["contacts_world"])
         assert np.all(np.abs(surface_distance(obj, contacts)) < 1e-3)  # on the cube's surface
-        assert g["success"] and g["result"]["penetration_mm"] <= 1.0
-        assert max(g["result"]["pad_distance_mm"].values()) <= 1.0
-        assert max(g["result"]["normal_angle_deg"].values()) <= 30.0 + 1e-6
+        assert g["success"] and g["penetration_mm"] <= 1.0
+        assert max(g["pad_distance_mm"].values()) <= 1.0
+        assert max(g["normal_angle_deg"].values()) <= 30.0 + 1e-6
         if data["physics_checked"]:
             assert g["holds"] == sum(g["physics"]["directions"].values())
 

@@ -58,7 +58,7 @@ def primitive_synthesis(monkeypatch):
 
 
 def _settings(folder, out, **kw):
-    return {"objects": str(folder), "out": str(out), "candidates": 16, "grasps": 2, "physics": False,
+    return {"objects": str(folder), "out": str(out), "candidates": 16, "grasps": 2, "verify": "none",
             "progress": False, "scale": 1.0, **kw}
 
 
@@ -81,16 +81,16 @@ def _check_results(out, physics: bool, names=("ball.obj", "box.stl", "broken.stl
         assert not row["reason"] and data["grasps"], row
         assert {"generate_s", "solve_s", "physics_s", "solved", "succeeded"} <= set(data["stats"])
         for g in data["grasps"]:
-            assert g["success"] and g["result"]["success"] and len(g["contacts_world"]) == 3
-            assert len(g["contacts_object"]) == 3 and g["fingers"] == ["thumb", "index", "middle"]
+            assert g["success"] and g["contact_model"] == "surface" and len(g["contacts_world"]) == 3
+            assert [c["finger"] for c in g["contacts"]] == g["fingers"] == ["thumb", "index", "middle"]
             assert {"epsilon", "min_singular_value", "force_closure"} <= set(g["quality"])
-            assert "trials" not in g["result"] and g["result"]["trials_run"] == 8
+            assert "trials" not in g and g["trials_run"] == 8 and "palm_pose" in g  # every field of a result
             assert (g["physics"] is not None) == physics
             if physics:
                 assert g["physics"]["of"] == 6 and g["holds"] == g["physics"]["holds"]
         best_eps = max(g["quality"]["epsilon"] for g in data["grasps"])
         assert float(row["best_epsilon"]) == pytest.approx(best_eps)
-        pen = [g["result"]["penetration_mm"] for g in data["grasps"] if "penetration_mm" in g["result"]]
+        pen = [g["penetration_mm"] for g in data["grasps"] if "penetration_mm" in g]
         assert (float(row["deepest_penetration_mm"]) == pytest.approx(max(pen))) if pen else \
             row["deepest_penetration_mm"] == ""
         if physics:
@@ -165,6 +165,6 @@ def test_with_physics(tmp_path, primitive_synthesis):
     """Each kept grasp checked in MuJoCo: its holds of 6 in the result and the summary."""
     folder, out = _objects(tmp_path / "objects"), tmp_path / "out"
     (folder / "ball.obj").unlink()
-    synthesize_objects(*prepare_synthesize(_settings(folder, out, physics=True), tmp_path / "run"))
+    synthesize_objects(*prepare_synthesize(_settings(folder, out, verify="physics"), tmp_path / "run"))
     rows = _check_results(out, physics=True, names=("box.stl", "broken.stl"))
     assert rows["box.stl"]["best_holds"] != ""

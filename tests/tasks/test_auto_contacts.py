@@ -24,6 +24,7 @@ def test_auto_problem_reads_fingers_in_robot_order_and_grasps():
 def test_auto_problem_defaults_and_counts():
     assert _problem().auto.fingers == ("thumb", "index", "middle") and _problem().auto.grasps == 5
     assert _problem(fingers=4).auto.fingers == ("thumb", "index", "middle", "ring")
+    assert _problem(n_fingers=4).auto == _problem(fingers=4).auto  # n_fingers: N is fingers: N
 
 
 @pytest.mark.parametrize(("keys", "message"), [
@@ -32,6 +33,9 @@ def test_auto_problem_defaults_and_counts():
     ({"fingers": ["thumb", "toe"]}, r"fingers: unknown finger\(s\) toe"),
     ({"fingers": ["thumb", "thumb"]}, r"fingers: need 2 or more different fingers"),
     ({"fingers": "thumb"}, r"fingers: expected a list of finger names or a number"),
+    ({"n_fingers": 6}, r"p\.yaml: n_fingers: 6: robot 'hand' has 5 fingers"),
+    ({"n_fingers": ["thumb", "index"]}, r"n_fingers: expected a number of fingers"),
+    ({"n_fingers": 2, "fingers": ["thumb", "index"]}, r"fingers and n_fingers: give one"),
     ({"grasps": 0}, r"p\.yaml: grasps: expected a whole number from 1 to 100"),
     ({"grasps": 101}, r"grasps: expected a whole number from 1 to 100"),
     ({"grasps": True}, r"grasps: expected a whole number"),
