@@ -44,6 +44,7 @@ __all__ = ["FINGER_GAP_M", "CollisionProxy"]
 
 FINGER_GAP_M = 0.001  # two fingers' spheres overlap from this gap on: the spheres lie inside a link's
 # box and miss its edges, where FCL finds two side-by-side fingers touching
+PENETRATION_CHUNK = 1 << 21  # rows x spheres x elements that :meth:`CollisionProxy.penetrations` takes at once
 DENSE_LIMIT = 1 << 13  # T x clusters x CLUSTER x elements below which every sphere is tested (no broad phase)
 
 
@@ -291,14 +292,29 @@ class CollisionProxy:
         :meth:`count` tests it against (the floor left out) of max(0, rho - sd(c)); zero where it
         at most touches. ``problem_index`` as :meth:`count`'s."""
         pid = problem_index if self.n_problems > 1 else None
+        T, S = centres.shape[:2]
+        rows = max(1, PENETRATION_CHUNK // max(1, S * sum(len(g.index) for g in self.groups)))
+        if T > rows:  # in chunks of rows: a batch's forward differences of a mesh's many pieces
+            return torch.cat([self.penetrations(centres[a: a + rows], spheres,
+                                                None if pid is None else pid[a: a + rows]) for a in range(0, T, rows)])
         radii = self._radii.reshape(-1) if spheres is None else self._radii.reshape(-1)[spheres]
-        sq = centres.new_zeros(centres.shape[:-1])
+        sq = centres.new_zeros(T, S)
         for g, th in zip(self.groups, self.thresholds, strict=True):
             if g.kind == "plane":
                 continue
             pos = th.pos.flatten(0, 1) if spheres is None else th.pos.flatten(0, 1)[spheres]  # (S, O_g)
+            local = g.local(centres, pid)  # (T, S, O_g, 3)
+            if g.kind == "convex":  # the pieces' planes only where the sphere meets the piece's bounding sphere
+                centre, reach = (g.centre[0], g.radius[0]) if pid is None else \
+                    (g.centre[pid, None], g.radius[pid, None])
+                near = pos & ((local - centre).norm(dim=-1) < radii[:, None] + reach)  # (T, S, O_g)
+                t, k, o = near.nonzero(as_tuple=True)
+                planes = g.size[0][o] if pid is None else g.size[pid[t], o]  # (N, F, 4)
+                d = piece_distance(local[t, k, o].unsqueeze(1), planes).squeeze(1)
+                sq = sq.index_put((t, k), (radii[k] - d).clamp(min=0).square(), accumulate=True)
+                continue
             size = None if pid is None else g.size[pid].unsqueeze(1)  # (T, 1, O_g, s)
-            sd = g.signed_distance(g.local(centres, pid), size)  # (T, S, O_g)
+            sd = g.signed_distance(local, size)  # (T, S, O_g)
             sq = sq + ((radii[:, None] - sd).clamp(min=0) * pos).square().sum(-1)
         return sq.sqrt()
 
@@ -311,10 +327,16 @@ class CollisionProxy:
         if fingers.numel() == 0:
             empty = torch.zeros(0, dtype=torch.long, device=centres.device)
             return empty, empty, empty
-        c, r = centres[:, fingers], self._radii.reshape(-1)[fingers]
-        gap = torch.cdist(c, c, compute_mode="donot_use_mm_for_euclid_dist")  # exact in float64
-        hit = (gap < r[:, None] + r[None, :] + FINGER_GAP_M) & apart[fingers][:, fingers]
-        t, i, j = hit.triu(1).nonzero(as_tuple=True)
+        r, pairs = self._radii.reshape(-1)[fingers], apart[fingers][:, fingers].triu(1)
+        reach = r[:, None] + r[None, :] + FINGER_GAP_M
+        rows = max(1, PENETRATION_CHUNK // fingers.numel() ** 2)
+        found = []
+        for a in range(0, centres.shape[0], rows):  # in chunks of rows: S_f^2 distances each
+            c = centres[a: a + rows, fingers]
+            gap = torch.cdist(c, c, compute_mode="donot_use_mm_for_euclid_dist")  # exact in float64
+            t, i, j = ((gap < reach) & pairs).nonzero(as_tuple=True)
+            found.append((t + a, i, j))
+        t, i, j = (torch.cat(x) for x in zip(*found, strict=True))
         return t, fingers[i], fingers[j]
 
     def overlaps(self, ci: Tensor, cj: Tensor, i: Tensor, j: Tensor) -> Tensor:

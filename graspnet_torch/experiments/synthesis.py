@@ -7,7 +7,7 @@ checked in MuJoCo (:func:`gt.simulate_grasp`, the pinned protocol: 6/6 pushes).
 Objects: ``objects`` of pybullet's procedurally generated objects (``pybullet_data/random_urdfs/
 NNN/NNN.obj``, 1000 of them, scaled as their URDFs scale them: ``SCALE``), drawn without replacement
 by ``seed`` from those used nowhere for tuning or tests (``EXCLUDED``: 000-003 are
-:data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`, 010-012 tuned the synthesis), each with its
+:data:`~graspnet_torch.tasks.objects.REAL_OBJECTS`, 010-012 tuned the synthesis, 168 is empty), each with its
 bounding box centred 0.2 m above the origin (as the synthesis job places an object:
 :func:`~graspnet_torch.tasks.objects.centred_mesh`); object k is synthesized with seed ``seed`` +
 k. Robots: the shipped hand (thumb, index, middle); TriFinger by config
@@ -56,7 +56,8 @@ ROBOTS = {"hand": ("hand", ("thumb", "index", "middle")),  # name -> (robot conf
           "trifinger": ("examples/trifinger/trifinger.yaml", ("f0", "f120", "f240"))}
 METHODS = ("synthesis", "baseline")
 SCALE = 0.015  # random_urdfs/NNN/NNN.urdf: <mesh filename="NNN.obj" scale="0.015 0.015 0.015"/>
-EXCLUDED = frozenset({0, 1, 2, 3, 10, 11, 12})  # used for tuning or tests (module docstring)
+EXCLUDED = frozenset({0, 1, 2, 3, 10, 11, 12, 168})  # used for tuning or tests (module docstring); 168: its .obj
+# has no faces (the one of the 1000 that trimesh reads empty)
 TOP1_PCT = {"hand": 80.0, "trifinger": 60.0}  # the issue's targets
 BY_CONFIG = ("TriFinger by config is not run by default: gt.synthesize_grasps accepts it but no pad contact set "
              "touches even a 6 cm cube (800 palm poses tried, 0 touching; Dexmate F5D6 the same; the shipped hand 17), "
@@ -69,7 +70,7 @@ RATE, FIRST_S, DEPTH_MM = 10.0, 2.0, 1.0
 class SynthesisExperimentCfg:
     """``+experiment=synthesis``."""
 
-    objects: int = setting(100, lo=1, hi=993)  # pybullet random objects, drawn by `seed` (EXCLUDED never)
+    objects: int = setting(100, lo=1, hi=992)  # pybullet random objects, drawn by `seed` (EXCLUDED never)
     seed: int = setting(2026, lo=0, hi=2**31 - 1)  # draws the objects; object k is synthesized with seed + k
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets (synthesis) and palm poses (baseline) per object
     grasps: int = setting(5, lo=1, hi=100)  # grasps reported per object
@@ -177,8 +178,8 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
                "s per object"]
     body = (f"**An object in, grasps out.** {cfg.objects} of pybullet's random objects (`random_urdfs`, scale "
             f"{SCALE:g} as their URDFs, bounding box centred 0.2 m above the origin), drawn with seed {cfg.seed} from "
-            f"the 993 that no "
-            f"tuning or test uses ({', '.join(f'{k:03d}' for k in sorted(EXCLUDED))} left out): "
+            f"the {1000 - len(EXCLUDED)} that no tuning or test uses and are not empty "
+            f"({', '.join(f'{k:03d}' for k in sorted(EXCLUDED))} left out): "
             f"{', '.join(n for n, _ in objs[:12])}{' ...' if len(objs) > 12 else ''}. Object k with seed "
             f"{cfg.seed} + k, {cfg.candidates} candidates (contact sets; the baseline's palm poses), the top "
             f"{cfg.grasps} grasps reported. Synthesis: `gt.synthesize_grasps` (pad contact sets ranked by "

@@ -167,13 +167,19 @@ def test_the_proxy_arm_chain_gives_the_kernel_palm_frame(arm_hand):
     assert torch.allclose(R, R0, atol=1e-12) and torch.allclose(t, t0, atol=1e-12)
 
 
-def test_link_depths_agree_with_fcl_on_the_free_hand_and_its_object():
+@pytest.mark.parametrize("as_mesh", [False, True])
+def test_link_depths_agree_with_fcl_on_the_free_hand_and_its_object(as_mesh, tmp_path):
     """The surface model's depth residual per link (CollisionProxy.link_depths, the spheres' signed
-    distances) against FCL's penetration of the same link (no tolerance, no link exempt), on
-    random hand configurations around glass3: a link FCL finds 3 mm or more inside has a positive
-    depth, and a link the proxy finds 3 mm or more inside is inside by FCL too."""
+    distances; a mesh object's by its convex pieces) against FCL's penetration of the same link
+    (no tolerance, no link exempt), on random hand configurations around glass3 (its cylinder, or
+    the cylinder as a mesh file): a link FCL finds 3 mm or more inside has a positive depth, and a
+    link the proxy finds 3 mm or more inside is inside by FCL too."""
+    from graspnet_torch.tasks.objects import as_mesh as mesh_of
+
     hand = gt.load_robot("hand")
     problem = gt.GraspProblem.from_task("glass3")
+    if as_mesh:
+        problem = mesh_of(problem, tmp_path)
     pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), 300, torch.Generator().manual_seed(3))
     proxy = CollisionProxy(hand, problem, dtype=torch.float64, touching=False)
     palm = pose_to_rt(pose)
