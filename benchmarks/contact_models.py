@@ -2,7 +2,7 @@
 surface model (pads on the surface, nothing inside, fingers apart) beside the paper's point model
 (its peer: the fingertip centres on the contacts), on the same problems, same seeds, same run.
 
-    python benchmarks/contact_models.py [--poses 10] [--check]
+    python benchmarks/contact_models.py [--poses 10] [--threads 1] [--check]
 
 Problems: glass3, glass4, videotape5 and block5 with their objects at ``--poses`` random poses each
 (the experiment ``contact``'s moved tasks), 20 trials, problem k with seed k; the two models
@@ -12,7 +12,6 @@ model's median at most 2x the point model's.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -20,7 +19,7 @@ import numpy as np
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.benchmarking import check_targets
+from graspnet_torch.benchmarking import bench_args, check_targets
 from graspnet_torch.experiments.contact import ContactCfg, moved_tasks
 
 SLOWER = 2.0
@@ -28,11 +27,7 @@ MODELS = ("point", "surface")
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--poses", type=int, default=10)
-    ap.add_argument("--check", action="store_true")
-    args = ap.parse_args()
-    torch.set_num_threads(1)
+    args = bench_args(__doc__, [("--poses", int, 10)])
     print(f"torch threads: {torch.get_num_threads()}")
     problems = moved_tasks(ContactCfg(poses=args.poses))
     for model in MODELS:  # warm-up: caches, kernels, the FCNN

@@ -11,7 +11,6 @@ cone edges. Target: at most 10 ms per set for k = 5 (``--check``).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -20,7 +19,7 @@ import torch
 from scipy.optimize import linprog
 
 import graspnet_torch as gt
-from graspnet_torch.benchmarking import check_targets
+from graspnet_torch.benchmarking import bench_args, check_targets
 from graspnet_torch.quality import grasp_matrix
 
 TARGET_MS = 10.0
@@ -45,11 +44,7 @@ def lp_force_closure(G: np.ndarray) -> bool:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sets", type=int, default=200)
-    ap.add_argument("--check", action="store_true")
-    args = ap.parse_args()
-    torch.set_num_threads(1)
+    args = bench_args(__doc__, [("--sets", int, 200)])
     print(f"torch threads: {torch.get_num_threads()}")
     rng = np.random.default_rng(0)
     rows, checks = [], []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import graspnet_torch as gt
 from graspnet_torch.solver import SolverCfg
@@ -49,14 +49,17 @@ def check_targets(checks: Sequence[tuple[str, bool]], check: bool) -> int:
     return 1 if check and not all(ok for _, ok in checks) else 0
 
 
-def bench_args(doc: str) -> argparse.Namespace:
-    """``--threads`` (default 1, pinned here: on a busy 2-core machine 2 threads ran 10-90x slower)
-    and ``--check`` (exit 1 when a target is missed), the options every speed benchmark takes."""
+def bench_args(doc: str, extra: Sequence[tuple[str, type, Any]] = ()) -> argparse.Namespace:
+    """``--threads`` (default 1, pinned here: on a busy 2-core machine 2 threads ran 10-90x
+    slower) and ``--check`` (exit 1 when a target is missed), the options every speed
+    benchmark takes; ``extra``: its own options as (flag, type, default)."""
     import torch
 
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--check", action="store_true")
+    for flag, kind, default in extra:
+        ap.add_argument(flag, type=kind, default=default)
     args = ap.parse_args()
 
     torch.set_num_threads(args.threads)
