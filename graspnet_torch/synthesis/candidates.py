@@ -56,8 +56,8 @@ from graspnet_torch.solver.contact import tip_frames
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CLOSE", "FORWARD", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet", "check_pad_fingers",
-           "opposes", "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
+__all__ = ["CLOSE", "FORWARD", "FRICTION", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet",
+           "check_pad_fingers", "opposes", "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
 
 STEPS = 24  # samples of each finger's closing line
 BISECT = 14  # bisection steps after the first sample that touches
@@ -68,7 +68,7 @@ TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
 OPPOSE = -0.3  # "opposed": the thumb's inward normal dotted with the others' mean lies below this
-FRICTION = 0.6  # the friction "force_closure" is judged with
+FRICTION = 0.6  # the friction grasp quality and "force_closure" are measured with (the physics check's too)
 FORWARD = 0.3  # a joint turns a pad "forward" when its tip motion's cosine to the pad normal is at least this
 HOLD = (0.35, 0.65)  # a joint that turns its pad sideways: held at this fraction of its range
 STEP_RAD = 1e-6  # the finite-difference step of the tip Jacobian

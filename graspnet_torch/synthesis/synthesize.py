@@ -21,12 +21,11 @@ from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver import GraspResult, solve, solve_many
-from graspnet_torch.synthesis.candidates import ContactSet, pad_contact_sets, placeholder_problem
+from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, pad_contact_sets, placeholder_problem
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FRICTION", "SynthesizedGrasp", "rank_sets", "synthesize_grasps"]
 
-FRICTION = 0.6  # the friction coefficient grasp quality is measured with
 
 
 @dataclass

@@ -4,7 +4,7 @@ contacts on the object's surface (:func:`graspnet_torch.synthesis.synthesize_gra
 A problem file::
 
     robot: hand
-    object: {mesh: mug.obj, scale: 1.0, pose: [0, 0, 0.2, 0, 0, 0]}   # or a box / cylinder / sphere
+    object: {shape: mesh, size: [mug.obj], pose: [0, 0, 0.2, 0, 0, 0]}   # or a box, cylinder, sphere
     contacts: auto
     fingers: [thumb, index, middle]   # the fingers that touch; or a number: the first n fingers
                                       # in the robot's order (thumb first); default 3 (or all, if fewer);

@@ -2,7 +2,9 @@
 the object, the obstacles, the contacts (a gripper: the object's points and its own), colliding
 links red, a slider that replays a trial over its iterations when the run kept them
 (``solver.history_postures=true``: ``replay.json``), and one that replays the reach motion when
-the result has one.
+the result has one. A result whose contacts were chosen on the object (``contacts: auto``, or
+one object's result of ``synthesize_grasps.py``) shows its grasps instead of trials, each with its
+contacts and friction cones (:mod:`graspnet_torch.viz.grasp_view`).
 
 ``python scripts/view.py outputs/demo`` (a run folder, or a result JSON) serves the page on
 localhost and runs until stopped. The robot is drawn from the same shapes as ``posture.png``
@@ -34,8 +36,9 @@ from graspnet_torch.settings import clip
 from graspnet_torch.solver.api import as_problem, robot_and_ik
 from graspnet_torch.solver.environments import environment_class
 from graspnet_torch.solver.postures import trial_posture
-from graspnet_torch.solver.result import GraspResult
+from graspnet_torch.solver.result import GraspResult, TrialResult
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz.grasp_view import FRICTION, cone_mesh, grasp_contacts, grasp_problem
 from graspnet_torch.viz.robot import drawable_shapes
 
 if TYPE_CHECKING:
@@ -46,6 +49,7 @@ __all__ = ["ResultView", "load_view", "serve"]
 MAX_RESULT_BYTES = 64 << 20  # a result (or replay) the viewer reads: a reach motion of 50,000 rows of 27 joints
 ROBOT_RGB, RED, OBJECT_RGB, OBSTACLE_RGB, MARK_RGB = (170, 180, 200), (230, 40, 40), (90, 150, 230), (150, 150, 150), \
     (240, 30, 30)
+CONE_RGB = (250, 170, 40)
 
 
 @dataclass
@@ -53,7 +57,9 @@ class ResultView:
     """What the viewer shows: a result (its JSON), its problem, robot, every trial's posture, the
     index of the reported (best) trial and, when the result has one, its reach motion; with a
     ``replay.json`` beside the result (``solver.history_postures=true``), every trial's posture
-    over the iterations (``iterations``, and ``trials``: per iteration, per trial, its fields)."""
+    over the iterations (``iterations``, and ``trials``: per iteration, per trial, its fields).
+    A result of grasps on chosen contacts: its grasps are the trials (``result["trials"]``) and
+    ``cones`` holds each one's contacts (k, 3) and the object's inward normals there (k, 3)."""
 
     path: Path
     result: dict[str, Any]
@@ -63,6 +69,7 @@ class ResultView:
     best: int
     motion: Trajectory | None
     replay: dict[str, Any] | None = None
+    cones: list[tuple[np.ndarray, np.ndarray]] | None = None
 
 
 def load_view(path: str | Path) -> ResultView:
@@ -74,6 +81,8 @@ def load_view(path: str | Path) -> ResultView:
     if not file.is_file():
         raise ProblemError(f"{path}: no result here (a run folder with result.json, or a result JSON file)")
     result = read_document(file, "result", ProblemError, max_bytes=MAX_RESULT_BYTES)
+    if isinstance(result, dict) and isinstance(result.get("grasps"), list) and "trials" not in result:
+        return _grasps_view(file, result)
     if not isinstance(result, dict) or not isinstance(result.get("trials"), list) or not result["trials"]:
         raise ProblemError(f"{file}: not a result of solve_grasp.py (no 'trials')")
     bad = next((k for k, t in enumerate(result["trials"]) if not isinstance(t, dict)), None)
@@ -106,6 +115,25 @@ def load_view(path: str | Path) -> ResultView:
             raise ProblemError(f"{file.parent / 'replay.json'}: not the replay of this result (iterations x "
                                f"{len(postures)} trials)")
     return ResultView(file, result, problem, robot, postures, best, motion, replay)
+
+
+def _grasps_view(file: Path, result: dict[str, Any]) -> ResultView:
+    """The view of a result of grasps on chosen contacts (module docstring); refused in one line
+    when it has none or one does not fit its robot."""
+    grasps = result["grasps"]
+    if not grasps:
+        raise ProblemError(f"{file}: no grasps to show ({clip(str(result.get('reason') or 'none found'), 160)})")
+    bad = next((k for k, g in enumerate(grasps) if not isinstance(g, dict)), None)
+    if bad is not None:
+        raise ProblemError(f"{file}: grasps[{bad}] is not a grasp (a mapping of its result's fields)")
+    problem = grasp_problem(file, result)
+    robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    try:
+        postures = [trial_posture(robot, TrialResult.from_dict(g)) for g in grasps]
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise ProblemError(f"{file}: a grasp does not fit robot '{robot.name}' ({clip(str(exc), 120)})") from None
+    cones = [grasp_contacts(file, problem, g, k) for k, g in enumerate(grasps)]
+    return ResultView(file, {**result, "trials": grasps}, problem, robot, postures, 0, None, None, cones)
 
 
 def _motion(file: Path, data: Any, robot: Robot) -> Trajectory | None:
@@ -169,12 +197,15 @@ class _Scene:
             server.scene.add_mesh_simple(f"/obstacles/{k}", np.asarray(mesh.vertices, dtype=np.float32),
                                          np.asarray(mesh.faces, dtype=np.uint32), color=OBSTACLE_RGB, opacity=0.8)
         self.marks: list = []
+        self.cones: list = []  # a grasp's friction cones
         self.collisions = None
         if has_environment(view.robot, problem):
             self.collisions = CollisionScene(view.robot, problem)
 
-    def show(self, posture: Posture, trial: dict[str, Any] | None) -> list[str]:
-        """Place every link at the posture, its contacts marked; returns the colliding links (red)."""
+    def show(self, posture: Posture, trial: dict[str, Any] | None,
+             cones: tuple[np.ndarray, np.ndarray] | None = None) -> list[str]:
+        """Place every link at the posture, its contacts marked (``cones``: a grasp's contacts and
+        inward normals, with their friction cones); returns the colliding links (red)."""
         frames = self.view.robot.link_frames(posture)
         red: set[str] = set()
         if self.collisions is not None:
@@ -186,11 +217,18 @@ class _Scene:
             handle.position, handle.wxyz = T[:3, 3], _wxyz(T[:3, :3])
             handle.color = RED if shape.link in red else ROBOT_RGB
         if trial is not None:
-            marks = environment_class(self.view.robot).marks(self.view.problem, SimpleNamespace(**trial))
-            for handle in self.marks:
+            marks = environment_class(self.view.robot).marks(self.view.problem, SimpleNamespace(**trial)) \
+                if cones is None else cones[0]
+            for handle in self.marks + self.cones:
                 handle.remove()
             self.marks = [self.server.scene.add_icosphere(f"/marks/{k}", radius=0.004, color=MARK_RGB, position=p)
                           for k, p in enumerate(np.asarray(marks))]
+            self.cones = []
+            for k, (contact, inward) in enumerate(zip(*cones, strict=True) if cones is not None else ()):
+                vertices, faces = cone_mesh(contact, inward, FRICTION)  # in the world: the handle at the origin
+                self.cones.append(self.server.scene.add_mesh_simple(
+                    f"/cones/{k}", vertices.astype(np.float32), faces.astype(np.uint32), color=CONE_RGB,
+                    opacity=0.45))
         return sorted(red)
 
 
@@ -205,10 +243,11 @@ def serve(view: ResultView, host: str = "127.0.0.1", port: int = 8080) -> viser.
     result, trials = view.result, view.result["trials"]
     info = server.gui.add_markdown("")
     labels = [f"{k}{' (reported)' if k == view.best else ''}: {_summary(t)}" for k, t in enumerate(trials)]
-    pick = server.gui.add_dropdown("trial", labels, initial_value=labels[view.best])
+    pick = server.gui.add_dropdown("trial" if view.cones is None else f"grasp (friction cones at mu {FRICTION:g})",
+                                   labels, initial_value=labels[view.best])
 
     def show_trial(k: int) -> None:
-        red = scene.show(view.postures[k], trials[k])
+        red = scene.show(view.postures[k], trials[k], None if view.cones is None else view.cones[k])
         info.content = (f"**{view.robot.name}** on **{result.get('problem')}** - trial {k} of {len(trials)}: "
                         f"{_summary(trials[k])}" + (f"; colliding (red): {', '.join(red)}" if red else ""))
 
@@ -266,5 +305,9 @@ def _summary(trial: dict[str, Any]) -> str:
     error = trial.get("total_error_mm", trial.get("distance_mm"))
     ok = "solved" if trial.get("success") else "not solved"
     text = f"{ok}, error {error:.3g} mm" if isinstance(error, (int, float)) and math.isfinite(error) else ok
-    return text + f", {trial.get('collisions', 0)} collision(s)"
+    text += f", {trial.get('collisions', 0)} collision(s)"
+    quality, holds = trial.get("quality"), trial.get("holds")
+    if isinstance(quality, dict) and isinstance(quality.get("epsilon"), (int, float)):  # a grasp on chosen contacts
+        text += f", epsilon {quality['epsilon']:.4f}"
+    return text + (f", holds {holds}/6" if isinstance(holds, int) else "")
 

@@ -11,6 +11,7 @@ import pytest
 import graspnet_torch as gt
 from graspnet_torch.collision.surface import surface_distance
 from graspnet_torch.jobs.solve_many import prepare_job, run_job
+from graspnet_torch.viz.viewer import load_view, serve
 
 PROBLEM = """robot: hand
 object: {shape: box, size: [0.06, 0.06, 0.06], pose: [0, 0, 0.2, 0, 0, 0]}
@@ -41,6 +42,13 @@ def test_auto_problem_gives_grasps_on_the_objects_surface(tmp_path):
         assert max(g["normal_angle_deg"].values()) <= 30.0 + 1e-6
         if data["physics_checked"]:
             assert g["holds"] == sum(g["physics"]["directions"].values())
+    if data["grasps"]:  # the viewer shows the grasps with their contacts and friction cones
+        view = load_view(out)
+        assert len(view.postures) == len(view.cones) == len(data["grasps"])
+        for (contacts, inward), g in zip(view.cones, data["grasps"], strict=True):
+            np.testing.assert_allclose(contacts, g["contacts_world"])
+            assert np.all(surface_distance(obj, contacts + 0.002 * inward) < 0)  # the normals point in
+        serve(view, port=8141).stop()  # the scene is built (the page itself: tests/viz/test_viewer.py)
 
 
 def test_a_bad_auto_problem_is_refused_before_anything_is_written(tmp_path):

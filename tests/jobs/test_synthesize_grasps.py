@@ -24,6 +24,7 @@ from graspnet_torch.errors import ConfigError
 from graspnet_torch.jobs.synthesize import OBJECT_CENTRE, SynthesizeGraspsJobCfg, prepare_synthesize, synthesize_objects
 from graspnet_torch.paths import repo_root
 from graspnet_torch.robot.shape import Shape
+from graspnet_torch.viz.viewer import load_view
 
 
 def _objects(folder):
@@ -114,6 +115,8 @@ def test_results_summary_and_resume(tmp_path, primitive_synthesis, capsys):
     assert box["object"]["scale"] == 1.0 and box["settings"]["candidates"] == 16
     np.testing.assert_allclose(box["object"]["pose"][:3], np.subtract(OBJECT_CENTRE, 0.03), atol=1e-9)
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary file left
+    view = load_view(out / "box.json")  # one object's grasps in the viewer: its robot, mesh and contacts
+    assert view.robot.name == "hand" and len(view.cones) == len(box["grasps"]) and view.problem.object.kind == "mesh"
     # a second run: every object skipped, no result file rewritten, the same summary
     files = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in out.glob("*.json")}
     summary = (out / "summary.csv").read_text()

@@ -1,0 +1,69 @@
+"""What the viewer shows of a result whose contacts were chosen on the object (a ``contacts: auto``
+result of ``solve_grasp.py``, or one object's result of ``synthesize_grasps.py``): its grasps as
+the trials to pick from, each with its contacts, the object's inward normals there and the
+friction cones around them (the cone of forces a finger can apply without slipping, half-angle
+atan(mu), mu the friction the grasps' quality was measured with)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from graspnet_torch.collision.surface import surface_normals
+from graspnet_torch.errors import ProblemError
+from graspnet_torch.synthesis.synthesize import FRICTION
+from graspnet_torch.tasks.problem import GraspProblem
+
+__all__ = ["CONE_HEIGHT_M", "FRICTION", "cone_mesh", "grasp_contacts", "grasp_problem"]
+
+CONE_HEIGHT_M = 0.015  # how far a drawn friction cone reaches out of the object
+
+
+def grasp_problem(file: Path, result: dict[str, Any]) -> GraspProblem:
+    """The problem of a result with chosen contacts: its problem file (``problem``, beside the
+    result or as named; a ``contacts: auto`` problem), else its ``robot`` and ``object`` (the file,
+    scale and pose a ``synthesize_grasps.py`` result records). Refused in one line otherwise."""
+    source = result.get("problem")
+    if isinstance(source, str) and source:
+        candidate = file.parent / source
+        return GraspProblem.from_file(candidate if not Path(source).is_absolute() and candidate.is_file() else source)
+    obj, robot = result.get("object"), result.get("robot")
+    if not isinstance(obj, dict) or not obj.get("file") or obj.get("pose") is None or not isinstance(robot, str):
+        raise ProblemError(f"{file}: a result of grasps without its problem, robot or object (file, scale, pose)")
+    mesh = Path(str(obj["file"]))  # looked up in its own folder, where the synthesis job read it
+    return GraspProblem.from_mapping({"robot": robot, "contacts": "auto", "object": {
+        "shape": "mesh", "size": [mesh.name], "scale": obj.get("scale", 1.0), "pose": obj["pose"]}}, str(file),
+        folder=mesh.parent)
+
+
+def grasp_contacts(file: Path, problem: GraspProblem, grasp: dict[str, Any], k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Grasp k's contacts (n, 3) in the world and the object's inward normals there (n, 3)."""
+    try:
+        contacts = np.asarray(grasp["contacts_world"], dtype=np.float64).reshape(-1, 3)
+    except (KeyError, TypeError, ValueError):
+        raise ProblemError(f"{file}: grasps[{k}] has no contacts_world (n x 3 numbers)") from None
+    if not np.all(np.isfinite(contacts)):
+        raise ProblemError(f"{file}: grasps[{k}].contacts_world: not finite numbers")
+    return contacts, -surface_normals(problem.object, contacts)
+
+
+def cone_mesh(contact: np.ndarray, inward: np.ndarray, friction: float = FRICTION,
+              height: float = CONE_HEIGHT_M, sections: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """A friction cone drawn at a contact: apex on it, axis along the outward normal (out of the
+    object, where it can be seen), half-angle atan(``friction``), ``height`` long -> vertices
+    (V, 3) and faces (F, 3)."""
+    out = -np.asarray(inward, dtype=np.float64) / np.linalg.norm(inward)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(out[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(out, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(out, u)
+    angles = np.linspace(0.0, 2 * math.pi, sections, endpoint=False)
+    rim = contact + height * out + height * friction * (np.outer(np.cos(angles), u) + np.outer(np.sin(angles), v))
+    vertices = np.vstack([contact, rim, contact + height * out])  # apex, rim, the base's centre
+    ring = np.arange(sections)
+    sides = np.stack([np.zeros(sections, dtype=int), 1 + ring, 1 + (ring + 1) % sections], 1)
+    base = np.stack([np.full(sections, sections + 1), 1 + (ring + 1) % sections, 1 + ring], 1)
+    return vertices, np.vstack([sides, base])
