@@ -26,7 +26,12 @@ often the two verdicts agree.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
+import subprocess
+import sys
+import tempfile
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -42,6 +47,7 @@ __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "piec
 
 VERSION = 5  # of the cached files: bump when the decomposition or its settings change
 COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
+COACD_TIMEOUT_S = 600  # a decomposition that takes longer is given up (the hull stands in)
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
 MAX_PLANES = 64  # planes of a piece: its faces, then bevels; a hull of more faces is bounded by this many
 BEVEL_COS = 0.9  # faces that meet at more than about 26 degrees make a sharp edge or corner (bevelled)
@@ -155,24 +161,53 @@ def _spread(directions: np.ndarray, chosen: list[int], count: int) -> list[int]:
     return chosen
 
 
-def _decompose(mesh) -> tuple[list[np.ndarray], bool]:
+def _decompose(mesh, name: str = "a mesh") -> tuple[list[np.ndarray], bool]:
     """The hull vertices of each piece, and whether the mesh is convex (one exact piece). CoACD
     (collision-aware concavity, tree search; deterministic in its seed) cuts a closed mesh as it
-    is and first makes one that is not closed manifold (its preprocessing)."""
-    import coacd
-
+    is and first makes one that is not closed manifold (its preprocessing); where it fails, the
+    hull is the one piece (warned)."""
     hull = mesh.convex_hull
     volume = abs(mesh.volume) if mesh.is_watertight else 0.0
     if mesh.is_convex or (volume > 0 and hull.volume <= CONVEX_VOLUME_RATIO * volume):
         return [np.asarray(hull.vertices, dtype=np.float64)], True
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)),
-                            preprocess_mode="off" if mesh.is_watertight else "on", **COACD)
-    out = [np.asarray(v, dtype=np.float64) for v, _f in parts]
-    out = [v for v in out if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3]
+    parts = _coacd_apart(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces),
+                         {**COACD, "preprocess_mode": "off" if mesh.is_watertight else "on"})
+    if parts is None:  # CoACD died on this mesh (it aborts on some): the hull stands in for it
+        warnings.warn(f"{name}: the convex decomposition (CoACD) failed on this mesh; its convex hull stands in "
+                      f"for it in the loop's collision proxy (FCL still checks the mesh itself)", stacklevel=2)
+        parts = []
+    out = [v for v in parts if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3]
     if not out:  # nothing usable (a flat or broken mesh): its hull
         return [np.asarray(hull.vertices, dtype=np.float64)], False
     return out, False
+
+
+_COACD_WORKER = """
+import json, sys
+import numpy as np
+import coacd
+mesh = np.load(sys.argv[1])
+coacd.set_log_level("error")
+parts = coacd.run_coacd(coacd.Mesh(mesh["v"], mesh["f"]), **json.loads(sys.argv[3]))
+np.savez(sys.argv[2], n=len(parts), **{f"v{k}": np.asarray(v, dtype=np.float64) for k, (v, _f) in enumerate(parts)})
+"""
+
+
+def _coacd_apart(vertices: np.ndarray, faces: np.ndarray, settings: dict) -> list[np.ndarray] | None:
+    """CoACD's pieces (their vertices) of a mesh, run in a process of its own: on some meshes its
+    C++ aborts or crashes, which would take this process with it. None when it did not finish."""
+    with tempfile.TemporaryDirectory() as folder:
+        given, pieces = Path(folder) / "mesh.npz", Path(folder) / "pieces.npz"
+        np.savez(given, v=vertices, f=faces)
+        try:
+            done = subprocess.run([sys.executable, "-c", _COACD_WORKER, str(given), str(pieces), json.dumps(settings)],
+                                  capture_output=True, timeout=COACD_TIMEOUT_S, check=False)
+        except subprocess.TimeoutExpired:
+            return None
+        if done.returncode != 0 or not pieces.is_file():
+            return None
+        with np.load(pieces) as data:
+            return [data[f"v{k}"] for k in range(int(data["n"]))]
 
 
 def convex_pieces(path: str | Path, scale: float = 1.0) -> ConvexPieces:
@@ -192,7 +227,7 @@ def _convex_pieces(path: Path, scale: float) -> ConvexPieces:
                 return _pieces(vertices, bool(data["exact"]))
         except (OSError, ValueError, KeyError):  # a broken cache file: computed again below
             pass
-    vertices, exact = _decompose(load_mesh(path, scale))
+    vertices, exact = _decompose(load_mesh(path, scale), str(path))
     try:
         with atomic_path(file, ".npz") as tmp:
             np.savez(tmp, n=len(vertices), exact=exact, **{f"v{k}": v for k, v in enumerate(vertices)})
