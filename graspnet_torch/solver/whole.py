@@ -215,7 +215,10 @@ class WholeConfiguration:
         """Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
         on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
         their contacts, within bounds and limits, never into a collision the proxy sees (when
-        there is one); ``prior``: its (centre, weight), see there."""
+        there is one; the point model). The surface model instead adds residuals: the pads'
+        normals (:meth:`whole_pads`) and, where there is an object, each link's depth in it, in
+        the obstacles and in another finger (:meth:`whole_depths`). ``prior``: its (centre,
+        weight), see there."""
         trials = None if rows is None else rows.cpu()
 
         def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
