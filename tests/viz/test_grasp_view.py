@@ -47,3 +47,21 @@ def test_a_result_without_grasps_is_refused_in_one_line(tmp_path):
     with pytest.raises(gt.ProblemError, match=r"no grasps to show \(no grasp found\)") as info:
         load_view(tmp_path)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(("broken", "message"), [
+    ("joints", r"a grasp does not fit robot 'hand'"),
+    ("contacts_world", r"grasps\[0\] has no contacts_world"),
+])
+def test_a_grasp_that_does_not_fit_is_refused_in_one_line(tmp_path, broken, message):
+    """A grasp whose joints do not fit the robot, or without its contacts: one line, naming it."""
+    problem = tmp_path / "cube.yaml"
+    problem.write_text("robot: hand\nobject: {shape: box, size: [0.06, 0.06, 0.06], pose: [0, 0, 0.2, 0, 0, 0]}\n"
+                       "contacts: auto\n")
+    grasp = gt.solve("glass3", trials=1, seed=0, solver={"max_iterations": 2}).best.to_dict()
+    grasp["contacts_world"] = [[0.03, 0.0, 0.2], [-0.03, 0.0, 0.2]]
+    grasp[broken] = {} if broken == "joints" else None
+    (tmp_path / "result.json").write_text(json.dumps({"problem": "cube.yaml", "success": True, "grasps": [grasp]}))
+    with pytest.raises(gt.ProblemError, match=message) as info:
+        load_view(tmp_path)
+    assert "\n" not in str(info.value)
