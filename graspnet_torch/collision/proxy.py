@@ -190,8 +190,8 @@ class CollisionProxy:
                        bases: tuple[Tensor, Tensor] | None = None) -> Tensor:
         """World centres of every cluster's spheres (padding included): (T, C, CLUSTER, 3)
         (arguments as :meth:`count`'s)."""
-        frames = self.frames(palm, fingers, body, None, bases)[self._cluster_frame]  # (C, T, 3, 4)
-        return (frames @ self._cluster_local.unsqueeze(1)).permute(1, 0, 3, 2)
+        T, C = palm[0].shape[0], self._cluster_local.shape[0]
+        return self.centres(self.frames(palm, fingers, body, None, bases)).view(T, C, CLUSTER, 3)
 
     def centres(self, frames: Tensor, spheres: Tensor | None = None) -> Tensor:
         """World centres (T, S, 3) of the spheres ``spheres`` (S,) (indices into the C x ``CLUSTER``
