@@ -147,6 +147,7 @@ def frame_model(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]
 def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
                         lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
                         tol: float = 0.0, min_gain: float = 0.0, active_set: bool = True,
+                        converged: Callable[[Tensor], Tensor] | None = None,
                         count: Callable[[Tensor, Tensor], Tensor] | None = None,
                         done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
                         prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
@@ -165,6 +166,9 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         active_set: joints at a bound that the step pushes outward leave the Jacobian and the step
             is solved again; False: the step is only clamped to the bounds.
         tol: a row stops once |e| < tol.
+        converged: ``converged(e (B, k))`` -> (B,) bool, the rows that have converged, in place of
+            ``|e| < tol`` (a model whose residuals have different scales: some must vanish, others
+            only be small).
         min_gain: a row whose kept step lowered |e| by less than this fraction of it has settled
             (a local minimum above ``tol``) and stops: its last steps gain nothing worth their cost.
         count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
@@ -199,12 +203,12 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
     stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
     settled = torch.zeros(B, dtype=torch.bool, device=x.device)
-    checks = tol > 0 or done is not None  # else only a settled row stops (no row is below tol = 0)
+    checks = tol > 0 or done is not None or converged is not None  # else only a settled row stops
     fixed = lam == lam_min == lam_max  # a fixed damping: lambda never changes
     for it in range(iterations):
         stopped = settled
         if checks:
-            stopped = err < tol
+            stopped = err < tol if converged is None else converged(goal - value)
             if done is not None:
                 stopped = stopped | done(stopped)
             stopped = stopped | settled

@@ -27,3 +27,25 @@ def test_a_back_off_target_is_a_frame_residual_on_the_lm():
     angle = torch.arccos(cos.clamp(-1, 1))
     assert (angle < math.radians(0.5)).all()
     assert (out.x >= lo).all() and (out.x <= hi).all()
+
+
+def test_converged_replaces_the_norm_test_row_by_row():
+    """A model with a residual that must vanish and one that need only be small: with
+    ``converged`` both rows stop once the first is within 1e-9 and the second under 0.1, where
+    ``tol`` on the whole norm (never reached: the second stays 0.05) runs them to the budget."""
+
+    def f(x, rows):  # residuals x0 and 0.3 + x1 (the second cannot reach 0 inside x1 >= 0)
+        return torch.stack([x[:, 0], 0.3 + x[:, 1]], 1), torch.eye(2, dtype=x.dtype).expand(x.shape[0], 2, 2)
+
+    lo, hi = torch.tensor([-10.0, -0.25], dtype=torch.float64), torch.tensor([10.0, 10.0], dtype=torch.float64)
+    x0 = torch.tensor([[1.0, 0.0], [5.0, 3.0]], dtype=torch.float64)
+    goal = torch.zeros(2, dtype=torch.float64)
+    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-9)
+    assert (plain.steps == 50).all()  # |e| >= 0.05 at the bound: never below tol
+
+    def near(e):
+        return (e[:, 0].abs() < 1e-9) & (e[:, 1].abs() < 0.1)
+
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-9, converged=near)
+    assert out.steps[0] < 50 and out.steps[1] < 50
+    assert near(goal - out.value).all()

@@ -219,11 +219,16 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
             outcome = run_loop(env, trials, seed, solver, srv, reward, noise,
                                start=_starts(env, trials, seed, solver, reward, noise))
         done = None
-        if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged
-            pid = None if env.problem_index is None else env.problem_index.cpu()
+        if solver.stop is not None:  # the polish, too, ends a problem once `stop` of its trials converged;
+            pid = None if env.problem_index is None else env.problem_index.cpu()  # in a problem that has
+            idle = None  # `stop` grasps already, only those polish on
+            if solver.stop_rule == "grasp" and noise.sigma == 0:
+                landed = env.grasped(outcome.evaluation, solver.tolerance_mm / 1000).cpu()
+                idle = enough_succeeded(landed, pid, solver.stop) & ~landed
 
             def done(converged: Tensor) -> Tensor:
-                return enough_succeeded(converged, pid, solver.stop)
+                enough = enough_succeeded(converged, pid, solver.stop)
+                return enough if idle is None else enough | idle.to(enough.device)
         outcome.config, outcome.evaluation = env.finish(outcome.config, outcome.evaluation, done)
     outcome.wall_time_s = time.perf_counter() - t0
     return outcome

@@ -107,6 +107,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
             self.proxy = proxy_for(robot, batch, dtype=dtype, device=device,
                                    object_tolerance=rule.object_tolerance, touching=rule.touching)
         self.depth_proxy = None  # the surface model: how deep the links reach, a residual of the whole polish
+        self.depth_allowance = rule.object_tolerance  # how deep a link may reach (the surface model)
         if self.pads is not None and has_environment(robot, self.problem):
             self.depth_proxy = proxy_for(robot, batch, dtype=torch.float64, object_tolerance=rule.object_tolerance,
                                          touching=rule.touching, fingers_apart=True)

@@ -212,3 +212,31 @@ def test_the_depth_residuals_and_their_jacobian_against_central_differences():
                            for e in torch.eye(m, dtype=x.dtype)], -1)  # (B, L, m)
     torch.testing.assert_close(J[inside], central[inside], atol=1e-4, rtol=1e-4)
     assert J[inside].abs().max() > 0.01
+
+
+def test_a_polished_trial_carries_the_collision_count_of_where_it_landed():
+    """The whole polish moves a configuration; in the surface model (no step filter) the count it
+    reports is the proxy's where it landed, not the start's: the loop's stop reads it (a stale
+    count kept a landed grasp searching for 100 more iterations on env1). The starts are given a
+    count of 99 no configuration has; the polished ones report their own, and those that land clear
+    the independent check (FCL, the surface rule) finds clear too."""
+    from dataclasses import replace
+
+    import torch
+
+    from graspnet_torch.fcnn.checkpoint import finger_ik_of
+    from graspnet_torch.solver.contact import contact_rule
+    from graspnet_torch.solver.hand import HandEnvironment
+
+    robot, problem = gt.load_robot("hand"), gt.GraspProblem.from_task("glass3")
+    solver = gt.SolverCfg(contact_model="surface")
+    env = HandEnvironment(robot, problem, solver, finger_ik_of(robot), dtype=torch.float64, collisions=True)
+    x = env.random_whole(12, torch.Generator().manual_seed(3))
+    start = env.evaluate(x[:, : env.n])
+    polished, ev = env.polish(x[:, : env.n], replace(start, collisions=torch.full_like(start.collisions, 99)),
+                              torch.arange(12))
+    assert (ev.collisions < 99).all() and (ev.collisions == 0).any()
+    scene = contact_rule(robot, problem, solver).scene(robot, problem)
+    for k in (ev.collisions == 0).nonzero().squeeze(1).tolist():
+        fields = env.report(polished[k: k + 1], replace(ev, **{n: v[k: k + 1] for n, v in ev.tensors().items()})).fields
+        assert scene.check(trial_posture(robot, fields[0])).count == 0
