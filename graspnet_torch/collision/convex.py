@@ -45,7 +45,7 @@ from graspnet_torch.meshes import load_mesh
 
 __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
 
-VERSION = 5  # of the cached files: bump when the decomposition or its settings change
+VERSION = 6  # of the cached files: bump when the decomposition or its settings change
 COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
 COACD_TIMEOUT_S = 600  # a decomposition that takes longer is given up (the hull stands in)
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
@@ -98,10 +98,14 @@ def _planes(vertices: np.ndarray) -> np.ndarray:
     are added by farthest-point sampling of their directions against those already chosen.
 
     A hull of more faces than ``MAX_PLANES`` (a finely tessellated convex mesh: no sharp edges)
-    is bounded instead by ``MAX_PLANES`` of its face directions, spread by farthest-point sampling
-    from its largest face and pushed out to the support values: a polytope that holds the hull
-    and exceeds it by about r (1 / cos(theta) - 1) on a curved part of radius r, theta the angular
-    spacing of the directions (about 3 % of r for a sphere)."""
+    is bounded instead by ``MAX_PLANES`` of its own faces, chosen greedily: its largest, then the
+    face of the triangle whose centroid stands out farthest from the planes chosen so far. The
+    polytope holds the hull and exceeds it least where it stands out most: on the README's capsule
+    (r = 30 mm, 4096 triangles) its cylinder exactly, 0.25 mm at the median surface point and 1.8
+    mm at the worst (on its caps). (Face directions spread evenly over the sphere and pushed out
+    to the support values, before, bounded its cylinder mostly by planes tilted from it and pushed
+    out along its length: 1.7-3.5 mm at the README's contacts on its side, 0.69 mm at the median
+    surface point, 5.8 mm at the worst; the surface model's pads stopped 1-2 mm off those contacts.)"""
     from scipy.spatial import ConvexHull
 
     hull = ConvexHull(vertices)
@@ -111,13 +115,21 @@ def _planes(vertices: np.ndarray) -> np.ndarray:
     faces = planes[keep]
     normals = faces[:, :3]
     which = which.ravel()
-    if len(faces) > MAX_PLANES:
+    if len(faces) > MAX_PLANES:  # the faces that bound the hull nearest: where it stands out most, its face
         tri = vertices[hull.simplices]
         area = np.bincount(which, np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1),
                            minlength=len(faces))  # each distinct face's area
-        chosen = _spread(normals, [int(np.argmax(area))], MAX_PLANES)
-        n = normals[chosen]
-        return np.concatenate([n, (vertices @ n.T).max(0)[:, None]], axis=1)
+        centroid = tri.mean(1)  # (n, 3): a point on each triangle, its face ``which``
+        chosen = [int(np.argmax(area))]
+        excess = faces[chosen[0], 3] - centroid @ normals[chosen[0]]  # how far each point lies inside the planes
+        while len(chosen) < MAX_PLANES:
+            worst = int(np.argmax(excess))
+            if excess[worst] <= 1e-9:
+                break
+            face = int(which[worst])
+            chosen.append(face)
+            excess = np.minimum(excess, faces[face, 3] - centroid @ normals[face])
+        return faces[chosen]
     # bevels: sharp edges (neighbouring triangles of two distinct faces) and corners
     candidates = []
     for t, neighbours in enumerate(hull.neighbors):

@@ -41,6 +41,7 @@ __all__ = ["CollisionReport", "CollisionScene", "environment_obstacles", "finger
 
 FLOOR_SIZE = (100.0, 100.0, 1.0)  # m: the floor slab (centred under the world origin)
 FLOOR_GAP = 0.001  # m: its top lies this far below the robot's floor height
+BROAD_ROWS = 256  # postures per chunk of the broad phase (its arrays: rows x shape pairs x 4 x 4)
 
 
 def environment_obstacles(robot: Robot, problem: GraspProblem) -> list[Shape]:
@@ -238,12 +239,14 @@ class CollisionScene:
 
     def check_many(self, postures: Sequence[Posture]) -> list[CollisionReport]:
         """:meth:`check` of several postures (their forward kinematics and broad phase in one pass)."""
-        frames = self.robot.link_frames_array(postures)
-        obstacle, near_object, own = self._broad_phase(*frames)
+        links, frames = self.robot.link_frames_array(postures)
         out = []
         for k in range(len(postures)):
+            if k % BROAD_ROWS == 0:  # the broad phase by chunks: (rows, pairs, 4, 4) boxes at a time
+                obstacle, near_object, own = self._broad_phase(links, frames[k: k + BROAD_ROWS])
             pairs, depths, self_pairs = [], {}, []
-            for kind, a, b in self._collisions(frames[1][k], obstacle[k], near_object[k], own[k]):
+            at = k % BROAD_ROWS
+            for kind, a, b in self._collisions(frames[k], obstacle[at], near_object[at], own[at]):
                 if kind == "obstacle":
                     pairs.append((a, b))
                 elif kind == "object":
@@ -262,13 +265,15 @@ class CollisionScene:
         collision. links: the L link names; frames: (B, L, 4, 4) their world poses
         (:meth:`Robot.link_frames_of <graspnet_torch.robot.robot.Robot.link_frames_of>`);
         touching: (B, S) which link shapes (``self.shapes``) may also touch the object in each."""
-        obstacle, near_object, own = self._broad_phase(links, frames)
-        if touching is not None:
-            near_object &= ~touching
         out = np.zeros(len(frames), dtype=bool)
-        maybe = obstacle.any((1, 2)) | near_object.any(1) | own.any(1)
-        for k in np.nonzero(maybe)[0]:
-            out[k] = next(self._collisions(frames[k], obstacle[k], near_object[k], own[k]), None) is not None
+        for a in range(0, len(frames), BROAD_ROWS):  # the broad phase by chunks of placements
+            part = frames[a: a + BROAD_ROWS]
+            obstacle, near_object, own = self._broad_phase(links, part)
+            if touching is not None:
+                near_object &= ~touching[a: a + BROAD_ROWS]
+            maybe = obstacle.any((1, 2)) | near_object.any(1) | own.any(1)
+            for k in np.nonzero(maybe)[0]:
+                out[a + k] = next(self._collisions(part[k], obstacle[k], near_object[k], own[k]), None) is not None
         return out
 
     def _broad_phase(self, links: list[str], frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

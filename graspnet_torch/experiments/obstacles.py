@@ -305,7 +305,7 @@ def run_tables(cfg: ObstaclesCfg, out: Path) -> ExperimentReport:
 def run_fig10(cfg: Fig10Cfg, out: Path) -> ExperimentReport:
     """Fig. 10: the best of ``trials`` learners on task ``fig10`` (a cylinder among three obstacles)."""
     problem = gt.GraspProblem.from_task("fig10")
-    res = gt.solve(problem, trials=cfg.trials, seed=cfg.seed)
+    res = gt.solve(problem, trials=cfg.trials, seed=cfg.seed, solver={"contact_model": "point"})  # the paper's
     robot, _ = robot_and_ik(problem.robot_cfg)
     render_robot(robot, posture_panels(robot, problem, res), out / "fig10_posture.png")
     free = sum(t.success and t.collisions == 0 for t in res.trials)

@@ -16,7 +16,9 @@ from it, the loop from random starts (the paper) and CMA-ES, on the same problem
    iterations they ran;
 6. a third-party hand by config (TriFinger, ``examples/trifinger``), random reachable problems, as 1.
 
-Iterations are loop iterations (CMA-ES: evaluations); wall times are one thread's.
+Iterations are loop iterations (CMA-ES: evaluations); wall times are one thread's. Every solve is in
+the paper's point contact model (``solver.contact_model=point``; the default surface model, pads on the
+object's surface: the experiment ``contact``).
 """
 
 from __future__ import annotations
@@ -61,13 +63,13 @@ def best_proposal_mm(robot: gt.Robot, problem: gt.GraspProblem) -> float:
     """The best of the robot's K proposals for a problem (within bounds, evaluated by its
     environment: a hand's fingers by the FCNN; no iteration), mm."""
     _robot, ik = api.robot_and_ik(problem.robot_cfg or robot.name)
-    env = build_environment(robot, problem, ik, gt.SolverCfg())
+    env = build_environment(robot, problem, ik, gt.SolverCfg(contact_model="point"))
     with torch.inference_mode():
         return float(env.evaluate(proposals(proposal_of(robot), env).config[0]).error.min()) * 1000
 
 
 def _solver(start: str, **changes) -> gt.SolverCfg:
-    return replace(gt.SolverCfg(), start=start, **changes)
+    return replace(gt.SolverCfg(), start=start, **{"contact_model": "point", **changes})  # the paper's tasks, its model
 
 
 def _hand_rows(robot: gt.Robot, problems: list[gt.GraspProblem], label: str) -> tuple[str, dict]:

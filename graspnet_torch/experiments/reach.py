@@ -114,7 +114,7 @@ def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
     figures = []
     first = next((r for r in rows if r.found), None)
     if first is not None:
-        figures = _figure(out, reach, arm)
+        figures = _figure(out, reach, arm, solver)
     body = "\n\n".join([
         " ".join(__doc__.split("\n\n")[0].split()),
         f"Here: {cfg.arm_seeds} grasps per arm environment, {len(problems)} MANUS positions, "
@@ -145,10 +145,10 @@ def run_reach(cfg: ReachExperimentCfg, out: Path) -> ExperimentReport:
                                      "planning s (p95)": float(np.percentile(times, 95))})
 
 
-def _figure(out: Path, reach: gt.ReachCfg, arm: gt.Robot) -> list[Figure]:
+def _figure(out: Path, reach: gt.ReachCfg, arm: gt.Robot, solver: dict) -> list[Figure]:
     """A few frames of env2's motion (the grasp of seed 0)."""
     problem = gt.GraspProblem.from_task("env2")
-    result = gt.solve(problem, trials=16, seed=0)
+    result = gt.solve(problem, trials=16, seed=0, solver=solver)
     motion = gt.plan_reach(problem, replace(result), reach, arm)
     if not motion.found:
         return []

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -22,6 +23,7 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import with_defaults
 from graspnet_torch.solver.cmaes import run_cmaes
 from graspnet_torch.solver.config import DEFAULT_TRIALS, NoiseCfg, RewardCfg, SolverCfg
+from graspnet_torch.solver.contact import off_surface
 from graspnet_torch.solver.defaults import check_solver_defaults
 from graspnet_torch.solver.dls import run_dls
 from graspnet_torch.solver.environment import Environment
@@ -196,6 +198,7 @@ def solve_with(robot: Robot, finger_ik: FingerIK | None, problem: GraspProblem, 
                device: str | torch.device = "cpu") -> GraspResult:
     """:func:`solve` with everything resolved (:func:`settings_of`): the environment, the search,
     the result. ``gt.Solver`` calls this: its settings are resolved once."""
+    say_off_surface(robot, [problem], solver)
     env = build_environment(robot, problem, finger_ik, solver, DTYPES[solver.dtype], device, reward)
     outcome = search(env, trials, seed, solver, srv, reward, noise)
     return result_of(robot, problem, env, outcome, trials, seed, solver, srv, reward, noise)
@@ -235,6 +238,19 @@ def search(env: Environment, trials: int, seed: int, solver: SolverCfg, srv: SRV
 
 
 _SAID_NO_MODEL: set[str] = set()
+_SAID_OFF: set[tuple] = set()
+
+
+def say_off_surface(robot: Robot, problems: Sequence[GraspProblem], solver: SolverCfg) -> None:
+    """Warn, once per problem and contact set, where the surface model is asked to put pads on
+    contacts off the object's surface (:func:`~graspnet_torch.solver.contact.off_surface`)."""
+    for problem in problems:
+        key = (problem.source, solver.contact_model, np.asarray(problem.contacts_world()).round(6).tobytes())
+        if key not in _SAID_OFF:
+            _SAID_OFF.add(key)
+            line = off_surface(robot, problem, solver)
+            if line is not None:
+                warnings.warn(line, stacklevel=4)
 
 
 def starts_from_proposals(robot: Robot, problems: Sequence[GraspProblem], solver: SolverCfg) -> bool:
@@ -322,6 +338,7 @@ def _solve_many(problems: Sequence[GraspProblem | str | Path], trials: int, seed
                       reward=reward, noise=noise, robot=robot, finger_ik=finger_ik, device=device,
                       threads=torch.get_num_threads())]  # the count this call already set
     solver, srv, reward = settings_of(robot, solver, srv, reward, max_iterations)
+    say_off_surface(robot, batch, solver)
     env = build_environment(robot, batch, finger_ik, solver, DTYPES[solver.dtype], device, reward, runs=trials)
     outcome = search(env, trials * len(batch), seed, solver, srv, reward, noise)
     report = env.report(outcome.config, outcome.evaluation)

@@ -165,11 +165,11 @@ class SolverCfg:
             an outward normal on its distal link (:mod:`graspnet_torch.robot.pads`), on the
             contact, the pad facing into the object within ``normal_cone_deg``, no link deeper
             than ``penetration_mm`` in the object), 'point' (the paper's model: the finger's tip
-            frame on the contact; the default for now), or 'auto' ('surface' where the problem has
-            an object, else 'point': without a surface there is nothing to touch). The search
-            sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`) and the whole polish
-            how deep each link reaches (docs/interface.md, "Pads on the surface", which also says
-            why 'point' is still the default).
+            frame on the contact; ``solver=paper`` and the reproduction's experiments), or 'auto'
+            (the default: 'surface' where the problem has an object and its contact fingers have
+            pads, else 'point': without a surface there is nothing to touch; a gripper has no
+            pads). The search sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`) and
+            the whole polish how deep each link reaches (docs/interface.md, "Pads on the surface").
         penetration_mm: in the surface model, how deep a link of the robot (the contact
             fingers' distal links included) may lie inside the object.
         normal_cone_deg: in the surface model, the largest angle between a contact finger's pad
@@ -224,7 +224,7 @@ class SolverCfg:
     max_iterations: int = setting(2000, lo=1, hi=10_000_000)
     threshold: float | None = setting(0.99, lo=-1.0, hi=2.0)
     tolerance_mm: float = setting(1.0, lo=0.0, lo_open=True, hi=1000.0)
-    contact_model: str = setting("point", choices=("auto", "surface", "point"))
+    contact_model: str = setting("auto", choices=("auto", "surface", "point"))
     penetration_mm: float = setting(1.0, lo=0.0, hi=100.0)
     normal_cone_deg: float = setting(30.0, lo=0.0, hi=90.0)
     pregrasp_mm: float = setting(10.0, lo=0.0, hi=200.0)

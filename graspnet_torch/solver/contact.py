@@ -34,15 +34,16 @@ import torch
 
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import OBJECT_TOLERANCE_M, CollisionScene, has_environment
-from graspnet_torch.collision.surface import pad_targets, surface_normals
+from graspnet_torch.collision.surface import pad_targets, surface_distance, surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.ik import refine
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.config import SolverCfg
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["POINT_RULE", "ContactRule", "contact_model", "contact_rule", "describe_pad", "grasp_postures",
-           "penetration_mm", "posture_fields", "surface_fields", "tip_frames", "tip_targets", "within_cone"]
+__all__ = ["OFF_SURFACE_MM", "POINT_RULE", "ContactRule", "contact_model", "contact_rule", "describe_pad",
+           "grasp_postures", "off_surface", "penetration_mm", "posture_fields", "surface_fields", "tip_frames",
+           "tip_targets", "within_cone"]
 
 
 def contact_model(robot: Robot, problem: GraspProblem, solver: SolverCfg) -> str:
@@ -56,6 +57,25 @@ def contact_model(robot: Robot, problem: GraspProblem, solver: SolverCfg) -> str
         raise ProblemError(f"{problem.source}: solver.contact_model=surface needs an object and contact fingers "
                            f"with pads ({why}); use contact_model=point or auto")
     return "surface" if can else "point"
+
+
+OFF_SURFACE_MM = 2.0  # a contact farther than this from the object's surface is said (surface model)
+
+
+def off_surface(robot: Robot, problem: GraspProblem, solver: SolverCfg) -> str | None:
+    """In the surface model, the contacts farther than :data:`OFF_SURFACE_MM` from the object's
+    surface, in one line (a point-model problem's contacts, the fingertip centres, lie a fingertip
+    radius out: the pads would touch nothing); None where every contact is on it, or in the point model."""
+    if contact_model(robot, problem, solver) != "surface":
+        return None
+    contacts = np.asarray(problem.contacts_world(), dtype=np.float64).reshape(-1, 3)
+    far = [(f, d) for f, d in zip(problem.fingers, np.abs(surface_distance(problem.object, contacts)) * 1000,
+                                  strict=True) if d > OFF_SURFACE_MM]
+    if not far:
+        return None
+    return (f"{problem.source}: contact(s) off the object's surface ({', '.join(f'{f} {d:.1f} mm' for f, d in far)}): "
+            f"the surface model puts each finger's pad on its contact (solver.contact_model=point puts the "
+            f"fingertip's centre there)")
 
 
 @dataclass(frozen=True)

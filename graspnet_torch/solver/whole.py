@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 __all__ = ["DEPTH_STEP", "WholeConfiguration"]
 
 DEPTH_STEP = 1e-7  # the forward differences' step of the depth residuals (radians, metres; float64)
+DEPTH_ROWS = 128  # whole_depths' rows per chunk: 128 x (m + 1) configurations' frames at a time
 SURFACE_TIPS_M = 1e-5  # the surface model's polish has converged once its pads are within this of their
 SURFACE_SLACK_M = 5e-5  # contacts (or the polish tolerance, if larger), each pad within this of its hinge
 SURFACE_DEPTH_SHARE = 0.25  # (0.06 degrees) and each link's depth within this share of the allowance:
@@ -177,8 +178,13 @@ class WholeConfiguration:
         (:class:`~graspnet_torch.collision.proxy.CollisionProxy`: ``penetrations``,
         ``overlapping_pairs``; goal 0), and their Jacobian (B, L, m) by forward differences: the
         m + 1 points of every row in one batched call, on the spheres that penetrate or overlap at
-        x only (the others' derivative is zero)."""
+        x only (the others' derivative is zero). In chunks of :data:`DEPTH_ROWS` rows (a batch of
+        thousands of trials would hold (m + 1) times its frames at once)."""
         B, m = x.shape
+        if B > DEPTH_ROWS:
+            parts = [self.whole_depths(x[a: a + DEPTH_ROWS], None if rows is None else rows[a: a + DEPTH_ROWS])
+                     for a in range(0, B, DEPTH_ROWS)]
+            return torch.cat([v for v, _ in parts]), torch.cat([J for _, J in parts])
         X = (x.unsqueeze(1) + torch.cat([x.new_zeros(1, m), DEPTH_STEP * torch.eye(m, dtype=x.dtype)])).reshape(-1, m)
         every = None if rows is None else rows.repeat_interleave(m + 1)
         F, j, proxy = len(self.idx), self.robot.joints_per_finger, self.depth_proxy

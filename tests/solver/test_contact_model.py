@@ -56,7 +56,7 @@ def test_the_pads_rest_on_the_surface_where_the_point_model_sinks_the_tips_in():
     """The point model puts the tip frames (the distal spheres' centres) on the contacts: every
     contact finger a radius inside the object; the surface model's tips lie a pad depth outside."""
     robot, problem = gt.load_robot("hand"), gt.GraspProblem.from_task("glass3")
-    point = gt.solve(problem, trials=4, seed=0).best
+    point = gt.solve(problem, trials=4, seed=0, solver={"contact_model": "point"}).best
     surface = gt.solve(problem, trials=8, seed=0, solver=SURFACE).best
     assert point.contact_model is None and point.penetration_mm is None  # the paper's result, as it was
     deep_point = _independent(robot, problem, point)[0]
@@ -69,7 +69,9 @@ def test_the_model_is_chosen_from_the_setting_and_the_problem():
     cfg = gt.SolverCfg
     with_object = gt.GraspProblem.from_task("glass3")
     without = gt.random_reachable_problem(robot, 0)
-    assert contact_model(robot, with_object, cfg()) == "point"  # the default, for now
+    assert contact_model(robot, with_object, cfg()) == "surface"  # the default (auto): an object to touch
+    assert contact_model(robot, without, cfg()) == "point"
+    assert contact_model(robot, with_object, cfg(contact_model="point")) == "point"
     assert contact_model(robot, with_object, cfg(contact_model="auto")) == "surface"
     assert contact_model(robot, without, cfg(contact_model="auto")) == "point"
     manus, cube = gt.load_robot("manus"), gt.GraspProblem.from_task("cube")
@@ -135,7 +137,8 @@ def test_the_point_model_has_no_pad_term():
     from graspnet_torch.solver.hand import HandEnvironment
 
     robot, problem = gt.load_robot("hand"), gt.GraspProblem.from_task("glass3")
-    assert HandEnvironment(robot, problem, gt.SolverCfg(), finger_ik_of(robot), dtype=torch.float64).pads is None
+    point = gt.SolverCfg(contact_model="point")
+    assert HandEnvironment(robot, problem, point, finger_ik_of(robot), dtype=torch.float64).pads is None
 
 
 @pytest.mark.slow
@@ -240,3 +243,30 @@ def test_a_polished_trial_carries_the_collision_count_of_where_it_landed():
     for k in (ev.collisions == 0).nonzero().squeeze(1).tolist():
         fields = env.report(polished[k: k + 1], replace(ev, **{n: v[k: k + 1] for n, v in ev.tensors().items()})).fields
         assert scene.check(trial_posture(robot, fields[0])).count == 0
+
+
+def test_contacts_off_the_surface_are_said_once_in_the_surface_model():
+    """A point model's contact set (the fingertip centres, a fingertip radius out from a box's
+    faces) solved in the default (surface) model: one warning naming each finger and how far its
+    contact lies from the surface; none a second time, none in the point model, none on it."""
+    import warnings
+
+    def pinch(out: float, name: str) -> gt.GraspProblem:
+        return gt.GraspProblem.from_mapping({
+            "robot": "hand", "object": {"shape": "box", "size": [0.04] * 3, "pose": [0, 0, 0, 0, 0, 0]},
+            "contacts": [{"finger": "thumb", "position": [0.02 + out, 0, 0]},
+                         {"finger": "index", "position": [-0.02 - out, 0, 0]}]}, source=name)
+
+    def said(problem, **solver) -> list[str]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            gt.solve(problem, trials=2, max_iterations=3, solver=solver)
+        return [str(w.message) for w in caught if "off the object's surface" in str(w.message)]
+
+    off = pinch(0.008, "off-surface pinch")
+    first = said(off)
+    assert len(first) == 1 and "thumb 8.0 mm" in first[0] and "index 8.0 mm" in first[0]
+    assert "off-surface pinch" in first[0]
+    assert said(off) == []  # once
+    assert said(pinch(0.008, "point pinch"), contact_model="point") == []
+    assert said(pinch(0.0, "pad pinch")) == []

@@ -48,9 +48,11 @@ def test_same_seed_same_result_and_other_seed_differs(hand):
 
 
 def test_result_errors_are_fk_of_the_reported_configuration(hand):
-    """Recompute the errors from the JSON alone (degrees -> FK in float64 -> distance to contacts)."""
+    """Recompute the errors from the JSON alone (degrees -> FK in float64 -> distance to contacts),
+    in the point model (the surface model's pads: tests/solver/test_contact_model.py)."""
     problem = gt.GraspProblem.from_task("glass4")
-    result = gt.solve(problem, trials=4, seed=1, max_iterations=200, reward=gt.RewardCfg(kind="r1"))
+    result = gt.solve(problem, trials=4, seed=1, max_iterations=200, reward=gt.RewardCfg(kind="r1"),
+                      solver={"contact_model": "point"})
     data = json.loads(result.to_json())
     assert set(data) >= {"robot", "success", "palm_pose", "joints", "fingertip_error_mm", "total_error_mm",
                          "collisions", "iterations", "reinforcement", "wall_time_s", "trials"}

@@ -105,11 +105,11 @@ def test_a_run_that_keeps_its_postures_is_replayed_over_its_iterations(tmp_path)
     from graspnet_torch.jobs.solve_grasp import solve_grasp
 
     base = {"task": "glass3", "trials": 3, "max_iterations": 40, "tensorboard": False, "pictures": False,
-            "threads": 1}
+            "threads": 1, "solver": {"contact_model": "point"}}  # (the surface model lands at iteration 1)
     plain = solve_grasp({**base, "out": str(tmp_path / "plain" / "result.json")}, tmp_path / "plain")
     assert plain.outcome.history is not None and not (tmp_path / "plain" / "replay.json").exists()
     result = solve_grasp({**base, "out": str(tmp_path / "kept" / "result.json"),
-                          "solver": {"history_postures": True}}, tmp_path / "kept")
+                          "solver": {"contact_model": "point", "history_postures": True}}, tmp_path / "kept")
     replay = json.loads((tmp_path / "kept" / "replay.json").read_text())
     total = result.outcome.history["total"].double().numpy() * 1000  # (K, T) mm, the loop's float32 errors
     assert 2 <= len(replay["iterations"]) <= 60 and all(len(row) == 3 for row in replay["trials"])
