@@ -114,8 +114,8 @@ report-manus: $(STAMP)  ## the experiment manus: section 7.2, 64 positions x 30 
 report-reach: $(STAMP)  ## the experiment reach: motions from home to every arm and MANUS grasp, re-checked, checks (~5 min)
 	$(call EXPERIMENT_RUN,reach)
 
-report-contact: $(STAMP)  ## the experiment contact as in reports/contact.md (50 poses per task, 10 arm seeds, cone 60 left out): pads vs points, MuJoCo (~10 min)
-	$(PY) scripts/reproduce.py check=true out=outputs/experiment/contact hydra.run.dir=outputs/experiment/contact +experiment=contact experiments.contact.arm_seeds=10 'experiments.contact.variants=[point,surface,surface_cmaes,surface_dls]'
+report-contact: $(STAMP)  ## the experiment contact as in reports/contact.md (50 poses per task, 30 arm seeds, cone 60 left out): pads vs points, MuJoCo (~10 min)
+	$(PY) scripts/reproduce.py check=true out=outputs/experiment/contact hydra.run.dir=outputs/experiment/contact +experiment=contact experiments.contact.arm_seeds=30 'experiments.contact.variants=[point,surface,surface_cmaes,surface_dls]'
 
 report-synthesis: $(STAMP)  ## the experiment synthesis at its reduced protocol (10 objects, the shipped hand): synthesized grasps vs the baseline, MuJoCo, checks (minutes per object: mesh surface queries)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis experiments.synthesis.objects=10

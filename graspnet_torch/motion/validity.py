@@ -100,9 +100,13 @@ class MotionChecker:
             self._rows = [robot.finger_index(f) for f in problem.fingers]
             self._targets = torch.as_tensor(np.asarray(problem.contacts_world(), dtype=np.float64))
             groups = [(f,) for f in problem.fingers]
+            tips = [robot.cfg.fingers[f] for f in problem.fingers]
+            self._marks = [t.tip for t in tips]  # the links whose frames carry the points that arrive
+            self._offsets = np.array([(0.0, 0.0, 0.0) if t.tip_offset is None else t.tip_offset for t in tips])
         else:
             self._targets = torch.as_tensor(problem.points_world(), dtype=torch.float64)
             groups = [()]  # a gripper: its jaws, together
+            self._marks, self._offsets = list(robot.cfg.gripper_points), np.zeros((2, 3))
         shapes = self.scene.shapes
         self._distal = np.array([[s.link in CollisionScene.distal_links(robot, shapes, g) for s in shapes]
                                  for g in groups], dtype=np.float64)  # (k, S): each finger's touching shapes
@@ -148,8 +152,21 @@ class MotionChecker:
     def clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear (module docstring)."""
         self.checks += len(states)
-        touching = self.arrived_fingers(states).astype(np.float64) @ self._distal > 0
-        return ~self.scene.collides_at(*self.link_frames(states), touching)
+        links, frames = self.link_frames(states)
+        touching = self._arrived_at(links, frames).astype(np.float64) @ self._distal > 0
+        return ~self.scene.collides_at(links, frames, touching)
+
+    def _arrived_at(self, links: list[str], frames: np.ndarray) -> np.ndarray:
+        """:meth:`arrived_fingers` from the states' link frames (B, L, 4, 4): the marked points
+        (fingertips, a gripper's points) read off their links' frames, no second kinematics."""
+        at = frames[:, [links.index(name) for name in self._marks]]  # (B, k, 4, 4)
+        points = np.einsum("bkij,kj->bki", at[..., :3, :3], self._offsets) + at[..., :3, 3]
+        targets = self._targets.numpy()
+        if not self.problem.fingers:  # a gripper's two points, either pairing
+            d = np.minimum(np.linalg.norm(points - targets, axis=-1).max(-1),
+                           np.linalg.norm(points - targets[::-1], axis=-1).max(-1))
+            return (d <= self.touch)[:, None]
+        return np.linalg.norm(points - targets, axis=-1) <= self.touch
 
     def strictly_clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear with no link touching the object (not even the
