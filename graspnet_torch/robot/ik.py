@@ -46,6 +46,7 @@ def refine(
     iterations: int,
     damping: float = 1e-2,
     damping_range: tuple[float, float] = (1e-6, 1e3),
+    tol: float = 0.0,
 ) -> tuple[Tensor, Tensor]:
     """Position IK within the joint limits: the positions' residual handed to the package's one
     Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`: a step kept
@@ -58,6 +59,7 @@ def refine(
         q: (..., n) start postures; targets: (..., 3); lower, upper: (n,) or broadcastable limits.
         iterations: most steps.
         damping: lambda's start (metres); ``damping_range``: its least and largest.
+        tol: a row stops once within this of its target (metres; 0: the whole budget).
     Returns:
         q: (..., n) refined postures within limits; error: (...,) distance to the targets (m).
     """
@@ -75,5 +77,5 @@ def refine(
         return (p, J) if every else (p[rows], J[rows])
 
     solved = levenberg_marquardt(positions, goal, start, lo, hi, iterations, lam=damping,
-                                 lam_min=damping_range[0], lam_max=damping_range[1])
+                                 lam_min=damping_range[0], lam_max=damping_range[1], tol=tol)
     return solved.x.view(shape), solved.err.view(shape[:-1])

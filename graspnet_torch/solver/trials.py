@@ -49,12 +49,13 @@ def trial_results(robot: Robot, problem: GraspProblem, env: Environment, report:
     evaluation = replace(report.evaluation, collisions=collisions)
     r = Reward(reward, solver.max_iterations, env.reward_base)(evaluation, outcome.iterations.cpu())
     touching, counts, all_fields, errors = list(report.landed), [], [], []
+    surface = surface_fields(robot, problem, postures) if rule.surface else None
     for t, f in enumerate(report.fields):
         count = 0 if collisions is None else int(collisions[t])
         fields, error = dict(f), report.error_mm[t]
-        if rule.surface:  # the pads, measured: on their contacts, facing into the object (the search's error
-            # adds a pad's hinge from 0.97 of the cone on, which a grasp within the cone need not meet)
-            fields.update(surface_fields(robot, problem, postures[t]))
+        if surface is not None:  # the pads, measured: on their contacts, facing into the object (the search's
+            # error adds a pad's hinge from 0.97 of the cone on, which a grasp within the cone need not meet)
+            fields.update(surface[t])
             touching[t] = within_cone(fields, rule.cone_deg) and \
                 max(fields["pad_distance_mm"].values()) <= solver.tolerance_mm
         counts.append(count)

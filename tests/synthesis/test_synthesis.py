@@ -86,7 +86,7 @@ def test_synthesize_grasps_box(robot: gt.Robot) -> None:
         assert g.success and g.quality.min_singular_value > 0
         trial = g.result.best
         posture = trial_posture(robot, trial)
-        fields = surface_fields(robot, g.problem, posture)  # re-measured from the reported posture
+        fields = surface_fields(robot, g.problem, [posture])[0]  # re-measured from the reported posture
         assert max(fields["pad_distance_mm"].values()) < 1.0
         assert max(fields["normal_angle_deg"].values()) <= 30.0 + 1e-6
         assert fields["penetration_mm"] <= 1.0 + 1e-6
