@@ -267,6 +267,10 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     errors = np.array([t.error_mm for t in result.trials])
     clear = ", collision-free" if any(t.collisions for t in result.trials) or _has_environment(robot, problem) else ""
     stops = f"{n_ok}/{trials} trials succeeded (within {solver.tolerance_mm:g} mm{clear})"
+    if best.contact_model == "surface":  # the pads: on the contacts, facing in, nothing inside
+        stops = (f"{n_ok}/{trials} trials succeeded (pads within {solver.tolerance_mm:g} mm of their contacts and "
+                 f"{solver.normal_cone_deg:g} degrees of the normals, no link over {solver.penetration_mm:g} mm "
+                 f"inside{clear})")
     if solver.stop_threshold is None:  # noise presets: a noisy signal crosses any threshold by chance
         stops += "; no stopping threshold: the trials ran their whole budget"
     elif solver.stop_rule == "reinforcement" or job.noise.sigma > 0:
@@ -277,6 +281,9 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
         stops += f" (solver.stop={solver.stop}: the problem ends at {solver.stop} success{plural})"
     free = sum(t.collisions == 0 for t in result.trials)
     quality = f"best {environment_class(robot).summary(best, fingers)}"
+    if best.contact_model == "surface":
+        pads = ", ".join(f"{f} {best.pad_distance_mm[f]:.3f} mm / {best.normal_angle_deg[f]:.0f} deg" for f in fingers)
+        quality = f"best pads {pads}, deepest link {best.penetration_mm:.2f} mm"
     print(f"\n{problem.name or problem.source} (solver={solver.method}): {stops}; {quality}, "
           f"{best.collisions} collision(s); median {np.median(errors):.3f} mm; {free}/{trials} trials "
           f"collision-free (FCL); "

@@ -27,7 +27,8 @@ def test_task_run_writes_result_pictures_and_tensorboard(tmp_path):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
     assert list((tmp_path / "tb").glob("events.out.tfevents.*"))
     assert "trial" in res.stdout and "glass3" in res.stdout
-    assert "trials succeeded (within 1 mm, collision-free)" in res.stdout
+    assert "trials succeeded (pads within 1 mm of their contacts and 30 degrees of the normals, no link over 1 mm " \
+           "inside, collision-free)" in res.stdout
 
 
 @pytest.mark.slow
