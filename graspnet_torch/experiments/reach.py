@@ -43,7 +43,7 @@ class ReachExperimentCfg:
     manus_positions: int = setting(64, lo=1, hi=64)  # of the protocol's 64 cube positions
     random_problems: int = setting(20, lo=1, hi=1000)  # random arm problems with 2-3 obstacles
     timeout_s: float = setting(5.0, lo=0.0, lo_open=True, hi=600.0)  # reach.timeout_s
-    contact_model: str = setting("point", choices=("point", "auto"))  # auto: the surface model where there is an object
+    contact_model: str = setting("auto", choices=("point", "auto"))  # auto (default): surface where there is an object
 
 
 @dataclass

@@ -268,6 +268,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
             x = self.whole_start(config, evaluation.joints)
             config, evaluation = self.whole_result(self.local_solve(x, self.polish_iterations, self.polish_tol, done),
                                                    config)
+            config, evaluation = self.align(config, evaluation, self.tolerance_mm / 1000)  # the surface model
         return config, evaluation
 
     @classmethod

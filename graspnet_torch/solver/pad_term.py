@@ -158,16 +158,18 @@ class PadTerm:
         slack = self._rows(weight, rows) * (self.cone - self.margin)
         return torch.where(penalty <= slack * (1 + 1e-6), tip, torch.full_like(tip, float("inf")))
 
-    def residual(self, world: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    def residual(self, world: Tensor, rows: Tensor | None = None, margin: float | None = None
+                 ) -> tuple[Tensor, Tensor]:
         """Pad normals in the world (B, F, 3) -> the residual (B, F, 3) and its derivative with
-        respect to the normals (B, F, 3, 3)."""
+        respect to the normals (B, F, 3, 3); ``margin``: the hinge's chord (None: :attr:`margin`)."""
         outward, weight, _, _ = self._consts(world)
+        c = self.margin if margin is None else margin
         miss = world + self._rows(outward, rows)
         s = miss.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         u = miss / s
-        h = (s - self.margin).clamp_min(0)
+        h = (s - c).clamp_min(0)
         w = self._rows(weight, rows).unsqueeze(-1)
         uu = u.unsqueeze(-1) * u.unsqueeze(-2)
         eye = torch.eye(3, dtype=world.dtype, device=world.device)
-        D = (w * (s > self.margin)).unsqueeze(-1) * uu + (w * h / s).unsqueeze(-1) * (eye - uu)
+        D = (w * (s > c)).unsqueeze(-1) * uu + (w * h / s).unsqueeze(-1) * (eye - uu)
         return w * h * u, D
