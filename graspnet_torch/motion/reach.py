@@ -49,10 +49,13 @@ __all__ = ["OPENINGS_M", "check_motion", "check_start", "colliding_row", "plan_r
 
 PLANNER = "RRTConnect"
 DETOUR_DEG, DETOUR_M = 15.0, 0.05  # a detour searches this far around the stretch it replaces
-COARSE = 6  # the planner checks its motions at 6x the check step; the motion found is then checked at it
+COARSE = 3  # the planner checks its motions at 3x the check step; the motion found is then checked at it
+# (6x before: MANUS motions whose coarse path grazed the table spent 13 s in local detours at the step)
 BACK_OFF_STEPS, BACK_OFF_DAMPING = 40, 1e-2  # the back-off's least squares: most steps, its fixed damping (m)
 BACK_OFF_TOL_M, BACK_OFF_TOL_DEG = 1e-3, 0.5  # a back-off counts when its palm lies this near its target
 DETOUR_FINER = 8  # a detour whose motions are not clear at the check step is planned again at 1/8 of it
+DRIVE_SHARE = 0.3  # a mobile base's drive, planned where the straight one collides, gets this share of the time
+ARM_SHARE = 0.6  # the arm's plan after the drive this share of what is left (base and arm together the rest)
 
 
 def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
@@ -200,9 +203,9 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
                deadline: float, pregrasp: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
     """Corners: start, start with the fingers open, (planned), the grasp's body with the fingers open
     (the result's pre-grasp where it has one and it is clear), the grasp; or None and why. A mobile
-    base first drives (a straight line, the arm as at the start), then the arm is planned with the
-    base where the grasp has it; where that fails, base and arm are planned together (by
-    :func:`_plan`, until ``deadline``)."""
+    base first drives (a straight line, the arm as at the start; where that collides, the base's
+    motion planned alone), then the arm is planned with the base where the grasp has it; where
+    that fails, base and arm are planned together (by :func:`_plan`, until ``deadline``)."""
     m = checker.layout.body
     start = checker.state(start_posture(robot, problem))
     pre = opening(checker, problem, goal, cfg, pregrasp)
@@ -223,19 +226,28 @@ def _body_path(robot: Robot, problem: GraspProblem, checker: MotionChecker, goal
     path, reason = None, ""
     base = len(robot.urdf.chain_spec(robot.cfg.mobile_base.base, robot.cfg.mobile_base.tip).joint_names) \
         if robot.cfg.mobile_base is not None else 0
-    if base:  # drive, then reach
+    if base:  # drive (straight, else planned for the base alone), then reach
         driven = opened.copy()
         driven[:base] = pre[:base]
-        if checker.first_collision(opened, driven, *res) is None:
-            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, coarse, deadline)
+        drive: list[np.ndarray] | None = [opened, driven]
+        if checker.first_collision(opened, driven, *res) is not None:
+            drive, reason = _plan(checker, opened, driven, range(base), cfg, coarse, _share(deadline, DRIVE_SHARE))
+        if drive is not None:
+            arm, reason = _plan(checker, driven, pre, range(base, m), cfg, coarse, _share(deadline, ARM_SHARE))
             if arm is not None:
-                path = [opened, *arm]
+                path = [*drive, *arm[1:]]
     if path is None:
         path, reason = _plan(checker, opened, pre, range(m), cfg, coarse, deadline)
     if path is None:
         return None, reason or "no collision-free path"
     corners = [start, *path, *final] + ([goal] if problem.fingers else [])  # a gripper's pre-grasp is its goal
     return _distinct(np.stack(corners)), ""
+
+
+def _share(deadline: float, share: float) -> float:
+    """A deadline ``share`` of the way from now to ``deadline``."""
+    now = time.perf_counter()
+    return now + share * max(0.0, deadline - now)
 
 
 def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, state: np.ndarray, distance: float
