@@ -87,3 +87,25 @@ def plan_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.
     setup.clear()
     out[0], out[-1] = start, goal  # exact ends (the planner's copies went through the scaling)
     return out, ""
+
+
+ASIDE_TRIES = 20  # waypoints tried beside a grazing straight motion
+ASIDE_STEPS = 2.0  # ... drawn this many check steps (times the try's number) from its middle
+
+
+def step_aside(u: np.ndarray, v: np.ndarray, moving: np.ndarray, step: np.ndarray, lower: np.ndarray,
+               upper: np.ndarray, segment_clear: Callable[[np.ndarray, np.ndarray], bool], seed: int = 0
+               ) -> np.ndarray | None:
+    """A waypoint w beside the middle of the straight motion u -> v (n,), moving only the
+    variables ``moving``, such that u -> w and w -> v are clear (``segment_clear``): a motion
+    that grazes something (clear at one sampling of its line, not at another) goes around it.
+    Drawn from one generator seeded by ``seed`` at ``ASIDE_STEPS`` times the try's number of check
+    steps (``step`` (n,)) from the middle, within [lower, upper]; None after ``ASIDE_TRIES``."""
+    rng = np.random.default_rng(seed)
+    for k in range(ASIDE_TRIES):
+        w = (u + v) / 2
+        w[moving] += rng.normal(size=len(moving)) * step[moving] * ASIDE_STEPS * (1 + k)
+        w = np.minimum(np.maximum(w, lower), upper)
+        if segment_clear(u, w) and segment_clear(w, v):
+            return w
+    return None

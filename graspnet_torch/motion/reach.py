@@ -33,7 +33,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.least_squares import frame_model, levenberg_marquardt
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
-from graspnet_torch.motion.planner import plan_path
+from graspnet_torch.motion.planner import plan_path, step_aside
 from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
 from graspnet_torch.robot.robot import Posture, Robot
@@ -140,6 +140,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     velocity = layout.velocity
     acceleration = np.full_like(velocity, cfg.acceleration)
     res = (cfg.resolution_deg, cfg.resolution_mm)
+    fine = (res[0] / DETOUR_FINER, res[1] / DETOUR_FINER)  # a grazing motion's way around is checked at this
     deadline = t0 + cfg.timeout_s
     if robot.head.anchored:
         corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline, pregrasp)
@@ -171,9 +172,13 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
                 break
         if detour is None:
             break
-        if len(detour) == 2:  # clear at an eighth of the step but not at the step: a grazing contact
-            reason = "the motion grazes an obstacle between its rows at the check step"
-            break
+        if len(detour) == 2:  # clear at an eighth of the step but not at the step: a grazing contact; around it
+            w = step_aside(u, v, moving, layout.scale(*res), layout.lower, layout.upper,
+                           lambda a, b: checker.first_collision(a, b, *fine) is None, cfg.seed)
+            if w is None:
+                reason = "the motion grazes an obstacle between its rows at the check step"
+                break
+            detour = [u, w, v]
         corners = np.concatenate([corners[: j + 1], np.stack(detour[1:-1]), corners[j + 1:]])
     reason = reason or "no collision-free path"
     return Trajectory.missing(list(layout.names), layout.revolute, f"{reason} (reach.timeout_s={cfg.timeout_s:g} s)",
