@@ -119,7 +119,7 @@ def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
     for sigma in progress(levels, desc="solvers: noise levels", unit="level"):
         preset = OmegaConf.load(configs_dir() / "noise" / f"sigma{sigma:g}.yaml")  # the preset noise=sigma...
         a, scale = float(preset.reward.a), float(preset.srv.sigma.scale)
-        solver = {"threshold": None, "polish": {"mode": preset.solver.polish.mode}, "max_iterations": 2000,
+        solver = {**POINT, "threshold": None, "polish": {"mode": preset.solver.polish.mode}, "max_iterations": 2000,
                   "history": False}
         variants = {f"srv, preset (a = {a:g}, scale {scale:g})": (gt.RewardCfg(a=a), gt.SRVNetCfg(
                         sigma=gt.SigmaCfg(scale=scale)), solver),
