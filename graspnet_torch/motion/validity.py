@@ -100,13 +100,9 @@ class MotionChecker:
             self._rows = [robot.finger_index(f) for f in problem.fingers]
             self._targets = torch.as_tensor(np.asarray(problem.contacts_world(), dtype=np.float64))
             groups = [(f,) for f in problem.fingers]
-            tips = [robot.cfg.fingers[f] for f in problem.fingers]
-            self._marks = [t.tip for t in tips]  # the links whose frames carry the points that arrive
-            self._offsets = np.array([(0.0, 0.0, 0.0) if t.tip_offset is None else t.tip_offset for t in tips])
         else:
             self._targets = torch.as_tensor(problem.points_world(), dtype=torch.float64)
             groups = [()]  # a gripper: its jaws, together
-            self._marks, self._offsets = list(robot.cfg.gripper_points), np.zeros((2, 3))
         shapes = self.scene.shapes
         self._distal = np.array([[s.link in CollisionScene.distal_links(robot, shapes, g) for s in shapes]
                                  for g in groups], dtype=np.float64)  # (k, S): each finger's touching shapes
@@ -159,8 +155,10 @@ class MotionChecker:
     def _arrived_at(self, links: list[str], frames: np.ndarray) -> np.ndarray:
         """:meth:`arrived_fingers` from the states' link frames (B, L, 4, 4): the marked points
         (fingertips, a gripper's points) read off their links' frames, no second kinematics."""
-        at = frames[:, [links.index(name) for name in self._marks]]  # (B, k, 4, 4)
-        points = np.einsum("bkij,kj->bki", at[..., :3, :3], self._offsets) + at[..., :3, 3]
+        if self.problem.fingers:
+            _, points = self.robot.tip_frames_at(links, frames, self.problem.fingers)
+        else:
+            _, points = self.robot.points_on_links(links, frames, self.robot.cfg.gripper_points)
         targets = self._targets.numpy()
         if not self.problem.fingers:  # a gripper's two points, either pairing
             d = np.minimum(np.linalg.norm(points - targets, axis=-1).max(-1),

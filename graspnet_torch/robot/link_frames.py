@@ -109,6 +109,23 @@ class LinkFrames:
         return self.link_frames_of(None, fingers, torch.stack([p.palm_pose.to(torch.float64) for p in postures]),
                                    shared)
 
+    def points_on_links(self, links: list[str], frames: np.ndarray, names: Sequence[str],
+                        offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """From link frames (B, L, 4, 4) of ``links`` (:meth:`link_frames_array`): the rotations
+        R (B, k, 3, 3) of the links ``names`` and the points ``offsets`` (k, 3) fixed in them, in
+        the world (B, k, 3) (None: the links' origins)."""
+        at = frames[:, [links.index(name) for name in names]]  # (B, k, 4, 4)
+        R, origin = at[..., :3, :3], at[..., :3, 3]
+        return R, origin if offsets is None else np.einsum("bkij,kj->bki", R, offsets) + origin
+
+    def tip_frames_at(self, links: list[str], frames: np.ndarray, fingers: Sequence[str]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """The tip frames of ``fingers`` from link frames (B, L, 4, 4) of ``links``: R (B, k, 3, 3),
+        t (B, k, 3) (a tip offset moves the origin, not the axes)."""
+        cfgs = [self.cfg.fingers[f] for f in fingers]
+        offsets = np.array([(0.0, 0.0, 0.0) if c.tip_offset is None else c.tip_offset for c in cfgs], dtype=np.float64)
+        return self.points_on_links(links, frames, [c.tip for c in cfgs], offsets)
+
     def link_frames_of(self, body: Tensor | None, fingers: Tensor, palm_pose: Tensor | None = None,
                        shared: Tensor | np.ndarray | None = None) -> tuple[list[str], np.ndarray]:
         """The links' names and world poses (B, L, 4, 4) float64 from joints: body (B, m) (a robot

@@ -125,15 +125,8 @@ def tip_targets(robot: Robot, problem: GraspProblem, model: str) -> np.ndarray:
 def tip_frames(robot: Robot, posture: Posture, fingers: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """The tip frames of ``fingers`` in a posture, from the link frames (the robot's kernel):
     R (k, 3, 3), t (k, 3) (a tip offset moves the origin, not the axes)."""
-    frames = robot.link_frames(posture)
-    R, t = [], []
-    for f in fingers:
-        cfg = robot.cfg.fingers[f]
-        T = frames[cfg.tip]
-        offset = np.zeros(3) if cfg.tip_offset is None else np.asarray(cfg.tip_offset, dtype=np.float64)
-        R.append(T[:3, :3])
-        t.append(T[:3, :3] @ offset + T[:3, 3])
-    return np.stack(R), np.stack(t)
+    R, t = robot.tip_frames_at(*robot.link_frames_array([posture]), fingers)
+    return R[0], t[0]
 
 
 def surface_fields(robot: Robot, problem: GraspProblem, postures: Sequence[Posture]) -> list[dict]:
@@ -146,12 +139,7 @@ def surface_fields(robot: Robot, problem: GraspProblem, postures: Sequence[Postu
         return []
     fingers = problem.fingers
     contacts = np.asarray(problem.contacts_world(), dtype=np.float64).reshape(-1, 3)
-    links, frames = robot.link_frames_array(postures)  # (B, L, 4, 4)
-    cfgs = [robot.cfg.fingers[f] for f in fingers]
-    tips = frames[:, [links.index(c.tip) for c in cfgs]]  # (B, k, 4, 4)
-    offset = np.array([(0.0, 0.0, 0.0) if c.tip_offset is None else c.tip_offset for c in cfgs])
-    R = tips[..., :3, :3]
-    t = np.einsum("bkij,kj->bki", R, offset) + tips[..., :3, 3]
+    R, t = robot.tip_frames_at(*robot.link_frames_array(postures), fingers)  # (B, k, 3, 3), (B, k, 3)
     pads = robot.pads
     depth = np.array([pads[f].depth for f in fingers])
     normal = np.einsum("bkij,kj->bki", R, np.stack([pads[f].normal for f in fingers]))

@@ -138,3 +138,32 @@ def test_attachments_of_the_hand_and_the_riding_base_links():
     zero = frames_at_zero(manus)
     np.testing.assert_allclose(zero[manus.urdf.root_link], np.eye(4), atol=1e-12)
 
+
+
+@pytest.mark.parametrize("name", ["hand", "arm_hand"])
+def test_tip_frames_from_link_frames_are_the_fingertips_kinematics(name):
+    """Robot.tip_frames_at (the tip links' frames and tip offsets read off link_frames_array) puts
+    every fingertip where the fingers' own kinematics (fingertips_world) does, in a batch of random
+    postures; points_on_links without offsets gives the links' origins."""
+    robot = gt.load_robot(name)
+    gen = torch.Generator().manual_seed(4)
+    flo, fhi = (torch.as_tensor(a) for a in robot.finger_limits)
+    postures = []
+    for _ in range(5):
+        q = flo + (fhi - flo) * torch.rand(flo.shape, generator=gen, dtype=torch.float64)
+        if robot.body is not None:
+            lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
+            body = lo + (hi - lo) * torch.rand(lo.shape, generator=gen, dtype=torch.float64)
+            postures.append(gt.Posture(torch.zeros(6, dtype=torch.float64), q, body))
+        else:
+            pose = torch.cat([0.1 * torch.rand(3, generator=gen, dtype=torch.float64),
+                              torch.rand(3, generator=gen, dtype=torch.float64)])
+            postures.append(gt.Posture(pose, q, torch.zeros(0)))
+    links, frames = robot.link_frames_array(postures)
+    _, tips = robot.tip_frames_at(links, frames, robot.finger_names)
+    for p, t in zip(postures, tips, strict=True):
+        expected = robot.fingertips_world_from_body(p.body, p.fingers) if robot.body is not None else \
+            robot.fingertips_world(p.palm_pose, p.fingers)
+        np.testing.assert_allclose(t, expected.numpy(), atol=1e-9)
+    _, origins = robot.points_on_links(links, frames, [robot.cfg.palm_link])
+    np.testing.assert_allclose(origins[:, 0], frames[:, links.index(robot.cfg.palm_link), :3, 3])
