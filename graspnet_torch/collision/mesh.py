@@ -28,7 +28,8 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["MeshQuery", "closest_on_triangles", "mesh_query", "point_triangle_distance", "shape_points"]
+__all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "mesh_query", "point_triangle_distance",
+           "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
@@ -62,10 +63,14 @@ def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.nda
 
 
 def closest_on_triangles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(N, M, 3) the point of each triangle (M, 3, 3) nearest each point (N, 3), by the triangle's
-    Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised."""
-    p = points[:, None, :]
-    a, b, c = (triangles[None, :, k, :] for k in range(3))
+    """(N, M, 3) the point of each triangle (M, 3, 3) nearest each point (N, 3)
+    (:func:`closest_points`, every point with every triangle)."""
+    return closest_points(points[:, None, :], *(triangles[None, :, k, :] for k in range(3)))
+
+
+def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(..., 3) the point of triangle (a, b, c) nearest p, all (..., 3) and broadcast together, by
+    the triangle's Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised."""
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
     bp = p - b

@@ -58,7 +58,8 @@ from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver import GraspResult
 from graspnet_torch.solver.contact import posture_fields
 from graspnet_torch.solver.result import TrialResult
-from graspnet_torch.synthesis.candidates import placeholder_problem, tip_jacobians
+from graspnet_torch.synthesis.candidates import placeholder_problem
+from graspnet_torch.synthesis.closing import tip_jacobians
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_DEG", "TOUCH_M", "BaselineGrasp",

@@ -53,25 +53,19 @@ from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver.contact import tip_frames
+from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["CLOSE", "FORWARD", "FRICTION", "GAP_M", "HOLD", "OPEN", "OPPOSE", "STEPS", "TOUCH_M", "ContactSet",
-           "check_pad_fingers", "opposes", "pad_contact_sets", "placeholder_problem", "tip_jacobians"]
+__all__ = ["FRICTION", "GAP_M", "OPPOSE", "TOUCH_M", "ContactSet", "check_pad_fingers", "opposes", "pad_contact_sets",
+           "placeholder_problem"]
 
-STEPS = 24  # samples of each finger's closing line
-BISECT = 14  # bisection steps after the first sample that touches
-OPEN = (0.0, 0.3)  # a finger's open posture: this fraction of each joint's range above its lower limit
-CLOSE = (0.45, 1.0)  # its closed posture
 GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
 OPPOSE = -0.3  # "opposed": the thumb's inward normal dotted with the others' mean lies below this
 FRICTION = 0.6  # the friction grasp quality and "force_closure" are measured with (the physics check's too)
-FORWARD = 0.3  # a joint turns a pad "forward" when its tip motion's cosine to the pad normal is at least this
-HOLD = (0.35, 0.65)  # a joint that turns its pad sideways: held at this fraction of its range
-STEP_RAD = 1e-6  # the finite-difference step of the tip Jacobian
 
 
 @dataclass(frozen=True)
@@ -132,80 +126,6 @@ def _palm_front(robot: Robot) -> tuple[np.ndarray, float]:
 def _support(vertices: np.ndarray, centre: np.ndarray, d: np.ndarray) -> np.ndarray:
     """How far the object reaches from its centre along directions d (B, 3): (B,)."""
     return ((vertices - centre) @ d.T).max(axis=0)
-
-
-def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray) -> np.ndarray:
-    """Signed gaps (m) of every pad sphere to the surface: head (..., 6), q (..., F, j) -> (..., F)."""
-    tips = robot.fingertips_world(head, q).numpy()
-    return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth
-
-
-def _close(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q_close: torch.Tensor,
-           depth: np.ndarray) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
-    """Each finger closed along its line until its pad touches. head (B, 6), q_open / q_close
-    (B, F, j) -> the touching joints (B, F, j), touched (B, F) bool, the step before (B, F) in [0, 1]."""
-    B = q_open.shape[0]
-    ts = torch.linspace(0, 1, STEPS, dtype=torch.float64)
-    line = q_open[:, None] + ts[None, :, None, None] * (q_close - q_open)[:, None]  # (B, S, F, j)
-    gaps = _tip_gaps(robot, obj, head[:, None].expand(B, STEPS, 6), line, depth)  # (B, S, F)
-    inside = gaps <= 0
-    touched = inside.any(axis=1) & ~inside[:, 0]
-    first = np.where(touched, inside.argmax(axis=1), STEPS - 1)  # (B, F)
-    lo = np.where(touched, (first - 1) / (STEPS - 1), 1.0)
-    hi = first / (STEPS - 1)
-    lo_t, hi_t = torch.as_tensor(lo.copy()), torch.as_tensor(hi.copy())
-    for _ in range(BISECT):  # the pad on the surface: gap(lo) > 0 >= gap(hi)
-        mid = (lo_t + hi_t) / 2
-        g = _tip_gaps(robot, obj, head, q_open + mid[..., None] * (q_close - q_open), depth)
-        lo_t, hi_t = torch.where(torch.as_tensor(g > 0), mid, lo_t), torch.where(torch.as_tensor(g > 0), hi_t, mid)
-    t = torch.where(torch.as_tensor(touched), hi_t, torch.ones_like(hi_t))
-    before = np.where(touched, np.maximum(first - 1, 0) / (STEPS - 1), 1.0)
-    return q_open + t[..., None] * (q_close - q_open), touched, before
-
-
-def _pad_forward(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """(N, F, n) how much each joint's increase moves its finger's pad sphere forward, along the
-    pad normal: the tip's (finite-difference) Jacobian column dotted with the tip-frame pad normal,
-    over the column's length (a cosine; 0 for padding or a joint that does not move the tip); palm
-    frame, q (N, F, n). A finger without a pad: normal +y of its tip frame."""
-    N = q.shape[0]
-    normal = np.stack([robot.pads[f].normal if f in robot.pads else np.array([0.0, 1.0, 0.0]) for f in robot.fingers])
-    names, frames = robot.link_frames_of(None, torch.as_tensor(q), torch.zeros(N, 6, dtype=torch.float64))
-    R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in robot.fingers], :3, :3]  # (N, F, 3, 3)
-    forward = np.einsum("nfij,fj->nfi", R, normal)
-    J = tip_jacobians(robot, q)
-    length = np.linalg.norm(J, axis=-2)
-    return np.einsum("nfi,nfij->nfj", forward, J) / np.maximum(length, 1e-9) * (length > 1e-9)
-
-
-def tip_jacobians(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """(N, F, 3, n) every finger's tip Jacobian in the palm frame at joints q (N, F, n), by finite
-    differences (step ``STEP_RAD``) of :meth:`Robot.fingertips_palm`."""
-    n = q.shape[-1]
-    shifted = np.repeat(q[None], n + 1, axis=0)  # (n + 1, N, F, n): q, then each joint nudged
-    for j in range(n):
-        shifted[j + 1, ..., j] += STEP_RAD
-    tips = robot.fingertips_palm(torch.as_tensor(shifted)).numpy()  # (n + 1, N, F, 3)
-    return np.moveaxis(tips[1:] - tips[0], 0, -1) / STEP_RAD
-
-
-def _lines(robot: Robot, lo: np.ndarray, span: np.ndarray, rng: np.random.Generator, N: int
-           ) -> tuple[torch.Tensor, torch.Tensor]:
-    """N closing lines of every finger (module docstring, step 2): open and closed joints (N, F, n).
-
-    Each joint's direction comes from the pad: at the unturned open posture (``OPEN`` fractions
-    above the lower limits) a joint whose increase moves the pad forward (cosine ``_pad_forward`` at
-    least ``FORWARD``) goes from ``OPEN`` up to ``CLOSE`` (fractions of its range above its lower
-    limit), one whose increase moves it back (at most ``-FORWARD``) the mirror image (the fractions
-    below its upper limit), and one that moves it sideways is held (``HOLD``)."""
-    u_open, u_close = rng.uniform(*OPEN, (N, *lo.shape)), rng.uniform(*CLOSE, (N, *lo.shape))
-    u_hold = rng.uniform(*HOLD, (N, *lo.shape))
-    cos = _pad_forward(robot, lo + u_open * span)
-    up, down = cos >= FORWARD, cos <= -FORWARD
-    hold = lo + u_hold * span
-    q_open = np.where(up, lo + u_open * span, np.where(down, lo + (1 - u_open) * span, hold))
-    q_close = np.where(up, lo + u_close * span, np.where(down, lo + (1 - u_close) * span, hold))
-    return torch.as_tensor(q_open), torch.as_tensor(q_close)
 
 
 def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray]]:
@@ -316,8 +236,8 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
         head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
         heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
-        q_open, q_close = _lines(robot, lo, span, rng, B * LINES)
-        q_touch, touched, before = _close(robot, obj, heads, q_open, q_close, depth)
+        q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
+        q_touch, touched, before = close_lines(robot, obj, heads, q_open, q_close, depth)
         q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
         names, frames = robot.link_frames_of(None, q_touch, heads)
         angles, inward = _pad_angles(robot, obj, heads, q_touch, names, frames, fingers, rows)

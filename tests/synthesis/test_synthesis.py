@@ -13,7 +13,8 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import surface_fields
 from graspnet_torch.solver.postures import trial_posture
-from graspnet_torch.synthesis.candidates import _lines, placeholder_problem
+from graspnet_torch.synthesis.candidates import placeholder_problem
+from graspnet_torch.synthesis.closing import closing_lines
 
 FINGERS = ("thumb", "index", "middle")
 
@@ -97,8 +98,8 @@ def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
     """Every finger's closing line starts by pushing its pad along the pad normal, the thumb's too
     (its pad faces the fingers, off its flexion side); and a seed gives the same lines."""
     lo, hi = robot.finger_limits
-    q0, q1 = _lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
-    again = _lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
+    q0, q1 = closing_lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
+    again = closing_lines(robot, lo, hi - lo, np.random.default_rng(0), 32)
     np.testing.assert_array_equal(q0.numpy(), again[0].numpy())
     np.testing.assert_array_equal(q1.numpy(), again[1].numpy())
     assert np.all(q0.numpy() >= lo - 1e-12) and np.all(q1.numpy() <= hi + 1e-12)

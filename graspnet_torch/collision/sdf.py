@@ -1,0 +1,141 @@
+"""A mesh's signed distance on a regular grid, read by trilinear interpolation: for searches that
+ask millions of times whether a sphere touches or enters an object (a grasp sampler's closing
+lines), which the exact distance (a nearest triangle per point) cannot answer at that rate.
+
+The grid covers the mesh's bounding box and ``MARGIN_M`` around it, ``CELL_M`` apart. A grid point
+within ``BAND_M`` of the surface holds its exact distance (every triangle whose box grown by
+``BAND_M`` holds the point is measured, :func:`~graspnet_torch.collision.mesh.closest_points`); a
+point farther holds an upper bound, the nearest such point's distance plus the way to it (a
+Euclidean distance transform of the band); the sign is the mesh's inside test at the point
+(:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`). Between grid points the value is
+interpolated (exact on a flat face; within ``ERROR_M`` of the exact distance near the surface where
+measured, see :func:`graspnet_torch.collision.surface.surface_distance_near`); a point off the grid
+gets its nearest grid point's value plus the way to it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from graspnet_torch.collision.mesh import closest_points, mesh_query
+from graspnet_torch.robot.shape import Shape
+
+__all__ = ["BAND_M", "CELL_M", "MARGIN_M", "DistanceGrid", "distance_grid"]
+
+CELL_M = 1.5e-3  # m between grid points
+BAND_M = 3e-3  # m: grid points this near the surface hold the exact distance (>= CELL_M sqrt(3))
+MARGIN_M = 0.02  # m of grid around the mesh's bounding box
+PAIRS = 1 << 21  # (grid point, triangle) pairs measured at once
+JITTER_M = 1.234567e-7  # m: the inside test's grid columns are moved this far in x and y
+
+
+@dataclass(frozen=True)
+class DistanceGrid:
+    """A signed distance field on a grid (module docstring), object frame.
+
+    Attributes:
+        origin: (3,) the first grid point (m).
+        cell: the spacing (m).
+        values: (nx, ny, nz) the signed distances (m; positive outside).
+    """
+
+    origin: np.ndarray
+    cell: float
+    values: np.ndarray
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """(k,) the signed distance at points (k, 3), object frame (trilinear)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        top = np.asarray(self.values.shape) - 1
+        u = (p - self.origin) / self.cell
+        inside = np.clip(u, 0.0, top)
+        off = np.linalg.norm(u - inside, axis=1) * self.cell
+        i = np.minimum(np.floor(inside).astype(np.intp), top - 1)
+        f = inside - i
+        v, (x, y, z) = self.values, i.T
+        fx, fy, fz = f.T
+        c00 = v[x, y, z] * (1 - fx) + v[x + 1, y, z] * fx
+        c01 = v[x, y, z + 1] * (1 - fx) + v[x + 1, y, z + 1] * fx
+        c10 = v[x, y + 1, z] * (1 - fx) + v[x + 1, y + 1, z] * fx
+        c11 = v[x, y + 1, z + 1] * (1 - fx) + v[x + 1, y + 1, z + 1] * fx
+        return (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz + off
+
+
+def distance_grid(obj: Shape) -> DistanceGrid:
+    """A mesh object's :class:`DistanceGrid` (its mesh at its scale, object frame; cached per file
+    and scale)."""
+    return _grid(Path(obj.mesh).resolve(), obj.scale)
+
+
+@lru_cache(maxsize=32)
+def _grid(path: Path, scale: float) -> DistanceGrid:
+    query = mesh_query(Shape("mesh", (), np.zeros(6), path, scale))[0]
+    origin = query.bounds[0] - MARGIN_M
+    shape = np.ceil((query.bounds[1] + MARGIN_M - origin) / CELL_M).astype(int) + 1
+    axes = [origin[d] + CELL_M * np.arange(shape[d]) for d in range(3)]
+    exact = _band(query.triangles, origin, shape)
+    known = exact < BAND_M
+    far, nearest = distance_transform_edt(~known.reshape(shape), return_indices=True)
+    bound = exact[np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)] + far.ravel() * CELL_M
+    unsigned = np.where(known, exact, np.minimum(exact, bound))
+    if query.closed:
+        inside = _inside(query.triangles, axes).ravel()
+    else:  # the mesh's own test: its convex pieces
+        inside = query.inside(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
+    return DistanceGrid(origin, CELL_M, np.where(inside, -unsigned, unsigned).reshape(shape))
+
+
+def _inside(triangles: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
+    """(nx, ny, nz) bool: the grid points inside a closed mesh (triangles (M, 3, 3)), by the parity
+    of the surface crossings below each point on its grid column (a line along z, moved off the
+    grid by ``JITTER_M`` so that it meets no edge or vertex of a mesh on the grid)."""
+    x, y, z = axes
+    shape = (len(x), len(y), len(z))
+    a, b, c = (triangles[:, k] for k in range(3))
+    lo = tuple(np.searchsorted(g, triangles[:, :, d].min(1) - JITTER_M) for d, g in enumerate((x, y)))
+    hi = tuple(np.searchsorted(g, triangles[:, :, d].max(1) - JITTER_M, side="right") for d, g in enumerate((x, y)))
+    nx, ny = np.maximum(hi[0] - lo[0], 0), np.maximum(hi[1] - lo[1], 0)
+    count = nx * ny
+    t = np.repeat(np.arange(len(triangles)), count)
+    k = np.arange(len(t)) - np.repeat(np.cumsum(count) - count, count)
+    i, j = lo[0][t] + k // ny[t], lo[1][t] + k % ny[t]
+    px, py = x[i] + JITTER_M, y[j] + JITTER_M
+    e1, e2 = b[t] - a[t], c[t] - a[t]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    dx, dy = px - a[t, 0], py - a[t, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u, v = (dx * e2[:, 1] - dy * e2[:, 0]) / det, (e1[:, 0] * dy - e1[:, 1] * dx) / det
+        hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    zc = a[t, 2][hit] + u[hit] * e1[hit, 2] + v[hit] * e2[hit, 2]  # where the column crosses the triangle
+    first = np.clip(np.searchsorted(z, zc), 0, len(z))  # the first grid point above the crossing
+    flips = np.zeros((shape[0], shape[1], shape[2] + 1), dtype=np.int64)
+    np.add.at(flips, (i[hit], j[hit], first), 1)
+    return (np.cumsum(flips, axis=2)[..., :-1] % 2).astype(bool)
+
+
+def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """(prod(shape),) each grid point's least distance to the triangles (M, 3, 3) whose boxes grown
+    by ``BAND_M`` hold it (inf where none does): exact below ``BAND_M``."""
+    lo = np.clip(np.floor((triangles.min(1) - BAND_M - origin) / CELL_M).astype(int), 0, shape - 1)
+    hi = np.clip(np.ceil((triangles.max(1) + BAND_M - origin) / CELL_M).astype(int), 0, shape - 1)
+    ext = hi - lo + 1  # (M, 3) grid points per axis in each grown box
+    count = ext.prod(1)
+    out = np.full(int(shape.prod()), np.inf)
+    start = 0
+    while start < len(triangles):
+        stop = start + max(1, int(np.searchsorted(np.cumsum(count[start:]), PAIRS)))
+        t = np.repeat(np.arange(start, stop), count[start:stop])
+        k = np.arange(len(t)) - np.repeat(np.cumsum(count[start:stop]) - count[start:stop], count[start:stop])
+        e = ext[t]
+        idx = lo[t] + np.stack([k // (e[:, 1] * e[:, 2]), k // e[:, 2] % e[:, 1], k % e[:, 2]], axis=1)
+        p = origin + idx * CELL_M
+        tri = triangles[t]
+        d = np.linalg.norm(p - closest_points(p, tri[:, 0], tri[:, 1], tri[:, 2]), axis=1)
+        np.minimum.at(out, np.ravel_multi_index(tuple(idx.T), tuple(shape)), d)
+        start = stop
+    return out

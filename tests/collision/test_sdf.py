@@ -1,0 +1,55 @@
+"""A mesh's signed distance grid (graspnet_torch.collision.sdf) against exact answers: a box
+mesh's distance (analytic) and inside (its extents), also where its faces lie on grid lines."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from graspnet_torch.collision.sdf import BAND_M, CELL_M, distance_grid
+from graspnet_torch.robot.shape import Shape
+
+
+def _box(tmp_path, extents) -> Shape:
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=extents).export(path)
+    return Shape("mesh", (), np.zeros(6), path, 1.0)
+
+
+def _box_distance(p: np.ndarray, half: np.ndarray) -> np.ndarray:
+    q = np.abs(p) - half
+    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+
+
+def test_a_box_meshs_grid_is_exact_off_its_faces_and_near_everywhere(tmp_path):
+    half = np.array([0.02, 0.03, 0.015])
+    grid = distance_grid(_box(tmp_path, 2 * half))
+    rng = np.random.default_rng(0)
+    face = rng.uniform(-0.6, 0.6, (300, 3)) * half  # over a face's middle, off it by up to 2 mm
+    axis = rng.integers(0, 3, 300)
+    face[np.arange(300), axis] = rng.choice([-1.0, 1.0], 300) * half[axis] + rng.uniform(-0.002, 0.002, 300)
+    np.testing.assert_allclose(grid(face), _box_distance(face, half), atol=1e-8)  # (an STL: float32)
+    anywhere = rng.uniform(-1.5, 1.5, (2000, 3)) * half
+    exact = _box_distance(anywhere, half)
+    err = np.abs(grid(anywhere) - exact)
+    near = np.abs(exact) < BAND_M  # exact values around: off only at the edges and corners
+    assert err[near].max() < CELL_M / 3 and err.max() < CELL_M
+    clear = np.abs(exact) > CELL_M / 3  # farther from the surface than the error: the right side
+    assert np.all(np.sign(grid(anywhere[clear])) == np.sign(exact[clear]))
+
+
+def test_the_grid_sign_is_right_where_the_faces_lie_on_grid_points(tmp_path):
+    """Extents of whole cells put every face on grid points and every edge on grid lines (the
+    inside test's columns would meet them; they are moved off): every grid point's sign matches
+    the box's, the points near the faces hold the exact distance (on a face: zero)."""
+    half = CELL_M * np.array([10.0, 14.0, 8.0])
+    grid = distance_grid(_box(tmp_path, 2 * half))
+    axes = [grid.origin[d] + grid.cell * np.arange(grid.values.shape[d]) for d in range(3)]
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    exact = _box_distance(points, half)
+    values = grid.values.ravel()
+    off = np.abs(exact) > 1e-8
+    assert np.all(np.sign(values[off]) == np.sign(exact[off]))
+    band = np.abs(exact) < BAND_M  # exact there; farther out an upper bound
+    np.testing.assert_allclose(values[band], exact[band], atol=1e-8)
+    assert np.all(np.abs(values) >= np.abs(exact) - 1e-8)
