@@ -35,6 +35,7 @@ from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import Free, build, clip, setting
 from graspnet_torch.synthesis import synthesize_grasps
 from graspnet_torch.synthesis.candidates import check_pad_fingers
+from graspnet_torch.synthesis.synthesize import START
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
@@ -58,7 +59,8 @@ class SynthesizeGraspsJobCfg:
     fingers: list[str] = setting(factory=lambda: ["thumb", "index", "middle"])
     grasps: int = setting(5, lo=1, hi=1000)  # the N best grasps kept per object
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
-    trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set
+    trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set (start=random)
+    start: str = setting("sampled", choices=START)  # sampled: each set's solve from its sampled posture; random
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo (gt.simulate_grasp)
     out: str | None = None  # the results folder (None: <run dir>/results)
@@ -155,7 +157,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     stats: dict = {}
     data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
                   "settings": {"fingers": list(job.fingers), "grasps": job.grasps, "candidates": job.candidates,
-                               "trials": job.trials, "seed": job.seed, "verify": job.verify},
+                               "trials": job.trials, "start": job.start, "seed": job.seed, "verify": job.verify},
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
     try:
@@ -163,7 +165,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
         data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
         found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=tuple(job.fingers),
                                   candidates=job.candidates, seed=job.seed, trials=job.trials, physics=physics,
-                                  stats=stats)
+                                  stats=stats, start=job.start)
         grasps = [g.to_dict() for g in found]
         if not grasps:
             data["reason"] = (f"no grasp found: {stats.get('solved', 0)} of {job.candidates} contact sets solved, "

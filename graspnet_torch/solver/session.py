@@ -102,18 +102,19 @@ class Solver:
                                f"'{self.robot.name}'")
         return p
 
-    def solve(self, problem: GraspProblem | str | Path, *, start: Start | None = None, seed: int | None = None
-              ) -> GraspResult:
+    def solve(self, problem: GraspProblem | str | Path, *, start: Start | None = None, seed: int | None = None,
+              search: bool = True) -> GraspResult:
         """One problem: the search (``trials`` trials), or first a warm start from ``start`` (see
-        the module's docstring)."""
+        the module's docstring). ``search=False``: a warm start that does not land is the result
+        (one trial, not a success), no search follows (for callers that have other starts to try)."""
         with torch_threads(self.threads):
-            return self._solve(self.problem(problem), start, self.seed if seed is None else int(seed))
+            return self._solve(self.problem(problem), start, self.seed if seed is None else int(seed), search)
 
-    def _solve(self, problem: GraspProblem, start: Start | None, seed: int) -> GraspResult:
+    def _solve(self, problem: GraspProblem, start: Start | None, seed: int, search: bool = True) -> GraspResult:
         warm = None
         if start is not None:
             warm = self._warm(problem, self._posture(start), seed)
-            if warm.success:
+            if warm.success or not search:
                 return warm
         cold = api.solve_with(self.robot, self.finger_ik, problem, self.trials, seed, self.solver_cfg, self.srv,
                               self.reward, self.noise, self.device)

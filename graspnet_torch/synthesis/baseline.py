@@ -18,8 +18,9 @@ whatever the fingers meet is the grasp. One candidate, every candidate of a call
    moves it away (at most ``-FORWARD``) down to its lower limit, one that moves it sideways (an
    abduction) is held where it opened. Every finger moves in lockstep over ``STEPS`` samples of its
    line; a finger stops where any of its links first meets the object's surface
-   (:func:`~graspnet_torch.collision.surface.surface_distance` of its collision shapes as spheres
-   and, around a cylinder's ends, points of its surface: :func:`_finger_spheres`), found by
+   (:func:`~graspnet_torch.collision.surface.surface_distance_near`, the sampler's fast distance,
+   of its collision shapes as spheres and, around a cylinder's ends, points of its surface:
+   :func:`_finger_spheres`), found by
    bisection, or one sample before a link meets another finger's link
    (:func:`~graspnet_torch.collision.spheres.shape_spheres`, the pairs of
    :func:`~graspnet_torch.collision.scene.finger_pairs`), or at the line's end (touching nothing).
@@ -49,7 +50,7 @@ from scipy.spatial.transform import Rotation
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import finger_pairs
 from graspnet_torch.collision.spheres import shape_spheres
-from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
@@ -179,7 +180,7 @@ def _gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, models:
     of ``models[1]``'s spheres: head (B, 6), q (B, F, n)."""
     rows, _, _, radii = models[0]
     _, frames = robot.link_frames_of(None, q, head)
-    gap = surface_distance(obj, _placed(frames, models[0]).reshape(-1, 3)).reshape(len(q), -1) - radii
+    gap = surface_distance_near(obj, _placed(frames, models[0]).reshape(-1, 3)).reshape(len(q), -1) - radii
     out = np.full((len(q), q.shape[1]), np.inf)
     for f in range(q.shape[1]):
         if np.any(rows == f):

@@ -1,33 +1,32 @@
 """Contact sets a hand can touch with its pads: sampled hand postures whose chosen fingers' pads
 rest on the object's surface, facing into it.
 
-One candidate is made in three steps (every candidate of a call in one batch):
+Candidates are made in batches of ``BATCH`` palm poses, in three steps:
 
 1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
    collision box's thinnest axis, on the fingers' side) at a random point of the plane of the
    palm within the fingertips' reach, and at a random gap (``GAP_M``) from the palm's face, i.e.
-   the palm looks at the object from a random direction, at a random roll.
-2. *Fingers*: each finger closes along a random straight line in joint space that moves its pad
-   forward, along the pad normal, whichever side of the finger the pad is on (a thumb's pad facing
-   the fingers, not its flexion side): at the finger's open posture (``OPEN``: a random fraction
-   of each joint's range above its lower limit) the tip's Jacobian column of each joint, dotted
-   with the pad normal (both in the palm frame), says which way that joint pushes the pad. A joint
-   pushing it forward (cosine at least ``FORWARD``) runs from ``OPEN`` up to ``CLOSE`` (fractions
-   above its lower limit), one pushing it back runs the mirror image (fractions below its upper
-   limit: from high to low), and one moving the pad sideways is held at a random fraction
-   (``HOLD``) of its range all along the line. ``STEPS`` samples of the line, then bisection,
-   find where its pad sphere (the tip frame's origin, radius the pad's depth) first touches the
-   surface (distance = depth, by :func:`~graspnet_torch.collision.surface.surface_distance_near`:
-   for a mesh within 0.58 mm of the exact distance, which the check of step 3 uses). A chosen finger
-   stops there; a finger that is not chosen stops one sample short of touching (or closed). Of
-   ``LINES`` lines per finger, a random one that touches within the cone (its touch point on the
-   surface, see step 3) with its links clear of the object is kept, the first chosen finger's (the
-   thumb's) the one whose inward normal best opposes the others' mean (force closure needs
-   opposition).
-3. *Check*: kept where every chosen finger touches (its pad within ``TOUCH_M`` of the surface),
-   every pad normal (the tip rotation times the pad normal) lies within ``cone_deg`` of the inward
-   normal at its touch point, and no link lies deeper than ``penetration_m`` in the object nor two
-   fingers through each other (the surface model's FCL scene).
+   the palm looks at the object from a random direction, at a random roll. Once some palm pose
+   has touched (step 2), ``NEAR_SHARE`` of each batch are instead drawn near those that have
+   (turned by ``NEAR_DEG``, moved by ``NEAR_M``, standard deviations): a palm pose near one that
+   touches often touches too (on the shipped hand and three random objects, 3-10x more sets per
+   palm pose).
+2. *Fingers*: each finger closes along ``LINES`` random straight lines in joint space
+   (:func:`~graspnet_torch.synthesis.closing.closing_lines`) that move its pad forward, along the
+   pad normal, and stops where its pad sphere (the tip frame's origin, radius the pad's depth)
+   first touches the surface (:func:`~graspnet_torch.synthesis.closing.close_lines`, on the
+   object's fast distance :func:`~graspnet_torch.collision.surface.surface_distance_near`). A line
+   is *good* where its pad touches by the exact distance (its touch point on the surface, the tip
+   the pad's depth out from it along the surface normal, as the surface model's target, both within
+   ``TOUCH_M``), its pad normal (the tip rotation times the pad normal) lies within ``cone_deg`` of
+   the inward normal at its touch point, and its finger's links, as spheres, lie no deeper than
+   ``penetration_m`` in the object.
+3. *Sets*: a palm pose whose every chosen finger has a good line gives up to ``COMBOS`` contact
+   sets, one good line per finger each (the first set's thumb line the one whose inward normal best
+   opposes the others' mean: force closure needs opposition; the others at random); a set is kept
+   where the FCL scene of the surface model finds no link deeper than ``penetration_m`` in the
+   object and no two fingers through each other. The fingers not chosen stay at the robot's home
+   posture, as the solver holds them (a palm pose where they enter the object gives no set).
 
 The contact is the touch point: the pad sphere's point nearest the surface. Everything is drawn
 from one ``numpy`` generator seeded by ``seed``: the same call gives the same sets.
@@ -36,7 +35,7 @@ from one ``numpy`` generator seeded by ``seed``: the same call gives the same se
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +44,7 @@ from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.spheres import shape_spheres
-from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals, touch_points
+from graspnet_torch.collision.surface import surface_distance_near, surface_normals, touch_points
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import grasp_quality
 from graspnet_torch.robot.geometry import link_shapes
@@ -57,13 +56,16 @@ from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["FRICTION", "GAP_M", "OPPOSE", "TOUCH_M", "ContactSet", "check_pad_fingers", "opposes", "pad_contact_sets",
-           "placeholder_problem"]
+__all__ = ["COMBOS", "FRICTION", "GAP_M", "OPPOSE", "TOUCH_M", "ContactSet", "check_pad_fingers", "iter_contact_sets",
+           "opposes", "pad_contact_sets", "placeholder_problem"]
 
 GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
+NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
+NEAR_DEG, NEAR_M = 10.0, 0.005  # how near (standard deviations of the turn and the shift)
+COMBOS = 4  # line choices (contact sets) tried per palm pose whose every chosen finger touches
 OPPOSE = -0.3  # "opposed": the thumb's inward normal dotted with the others' mean lies below this
 FRICTION = 0.6  # the friction grasp quality and "force_closure" are measured with (the physics check's too)
 
@@ -157,19 +159,27 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
     return out
 
 
-def _pad_angles(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
-                frames: np.ndarray, fingers: Sequence[str], rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """(N, k) each chosen pad normal's angle (degrees) to the inward normal at its touch point (inf
-    where that point is off the surface, as :func:`_touch` judges), and those normals (N, k, 3):
-    head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``."""
+def _pad_touch(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
+               frames: np.ndarray, fingers: Sequence[str], rows: list[int]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where each chosen pad touches: (N, k) its pad normal's angle (degrees) to the inward normal
+    at its touch point, inf where it does not touch (the touch point off the surface by more than
+    ``TOUCH_M``, e.g. a box's edge; the tip farther than ``TOUCH_M`` from where the surface model
+    puts it for that contact, the pad's depth out along the surface normal, as on a mesh's edge
+    whose faces turn away; the tip inside the object), those normals (N, k, 3) and the touch points (N, k, 3):
+    head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``
+    (:func:`~graspnet_torch.collision.surface.touch_points`: exact)."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
     t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
-    _, outward, off_by = touch_points(obj, t)
-    inward = -outward.reshape(len(q), len(rows), 3)
+    contacts, outward, off_by = touch_points(obj, t)
+    depth = np.tile([robot.pads[f].depth for f in fingers], len(q))
+    target = contacts + depth[:, None] * outward  # the surface model's tip target (pad_targets)
+    miss = (off_by > TOUCH_M) | (np.linalg.norm(target - t, axis=1) > TOUCH_M) | (surface_distance_near(obj, t) <= 0)
+    shape = (len(q), len(rows))
+    inward = -outward.reshape(*shape, 3)
     pad = np.einsum("nkij,kj->nki", R, np.stack([robot.pads[f].normal for f in fingers]))
     angles = np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=-1), -1.0, 1.0)))
-    off = off_by.reshape(angles.shape) > TOUCH_M  # e.g. a box's edge
-    return np.where(off, np.inf, angles), inward
+    return np.where(miss.reshape(shape), np.inf, angles), inward, contacts.reshape(*shape, 3)
 
 
 def check_pad_fingers(robot: Robot, fingers: Sequence[str]) -> None:
@@ -189,26 +199,40 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
                      max_tries: int | None = None, stats: dict | None = None,
                      require: str | None = None) -> list[ContactSet]:
-    """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring).
+    """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring):
+    the first ``n`` of :func:`iter_contact_sets` (same arguments), drawing at most ``max_tries``
+    palm poses (default ``50 n``). Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
+    (world; normals inward). ``stats``, if given, receives ``tried``, ``touching`` (every chosen
+    pad reached the surface), ``facing`` (and within the cone), ``clean`` (and FCL-clean) and
+    ``kept``. Measured on the shipped hand (thumb, index, middle, its thumb pad facing the
+    fingers), 64 sets, seed 0: see ``docs``' synthesis page for the yields."""
+    out: list[ContactSet] = []
+    for batch in iter_contact_sets(robot, obj, fingers, seed, cone_deg, penetration_m,
+                                   50 * n if max_tries is None else max_tries, stats, require):
+        out.extend(batch[: n - len(out)])
+        if len(out) == n:
+            break
+    if stats is not None:
+        stats["kept"] = len(out)
+    return out
 
-    Draws palm poses in batches of ``BATCH`` (``LINES`` closing lines per finger each, a random
-    one of those that touch within the cone kept) until ``n`` are kept or ``max_tries`` palm
-    poses (default ``50 n``) were drawn. Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
-    (world; normals inward). ``stats``, if given, receives ``tried``, ``touching`` (every
-    chosen pad reached the surface), ``facing`` (and within the cone), ``clean`` (and FCL-clean)
-    and ``kept``. ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or
-    "force_closure" ones (None: every set); measured on the shipped hand (thumb, index, middle,
-    its thumb pad facing the fingers), 64 sets, seed 0: a 6 cm cube 64 sets of 3136 palm poses (55
-    force closure), a 4 cm sphere 64 of 1280 (62), glass3 64 of 1728 (53); 2.3-11 s on one thread.
-    """
+
+def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb", "index", "middle"),
+                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3, max_tries: int = 3200,
+                      stats: dict | None = None, require: str | None = None) -> Iterator[list[ContactSet]]:
+    """The contact sets of each batch of ``BATCH`` palm poses (module docstring), batch after batch,
+    until ``max_tries`` palm poses were drawn: from each palm pose whose every chosen finger has a
+    line that touches within the cone with its links clear, up to ``COMBOS`` sets (different lines
+    of its fingers: the first with the thumb's line most opposed to the others, the rest at random)
+    that pass the check. ``stats`` as :func:`pad_contact_sets` (updated after every batch);
+    ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or "force_closure" ones
+    (None: every set)."""
     check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.cfg.name, "fingers"))
+    if require not in (None, "opposed", "force_closure"):
+        raise ProblemError(f"pad_contact_sets: require {require!r}: None, 'opposed' or 'force_closure'")
     rng = np.random.default_rng(seed)
     finger_names = list(robot.fingers)
     rows = [finger_names.index(f) for f in fingers]
-    chosen = np.zeros(len(finger_names), dtype=bool)
-    chosen[rows] = True
-    if require not in (None, "opposed", "force_closure"):
-        raise ProblemError(f"pad_contact_sets: require {require!r}: None, 'opposed' or 'force_closure'")
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     front, face = _palm_front(robot)
@@ -217,14 +241,15 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     spheres = _finger_spheres(robot)
-    problem = placeholder_problem(robot, obj, fingers)
-    scene = scene_for(robot, problem, penetration_m, False, fingers_apart=True)
-    max_tries = 50 * n if max_tries is None else max_tries
-    out: list[ContactSet] = []
-    tried = touching = facing = clean = 0
-    while len(out) < n and tried < max_tries:
-        B = min(BATCH, max_tries - tried)
-        tried += B
+    home = robot.home_posture(torch.float64).fingers
+    others_rows = [i for i in range(len(finger_names)) if i not in rows]
+    scene = scene_for(robot, placeholder_problem(robot, obj, fingers), penetration_m, False, fingers_apart=True)
+    counts = stats if stats is not None else {}
+    counts.update(tried=0, touching=0, facing=0, clean=0)
+    landed: list[np.ndarray] = []  # (4, 4) the palm poses whose every chosen finger touched
+    while counts["tried"] < max_tries:
+        B = min(BATCH, max_tries - counts["tried"])
+        counts["tried"] += B
         R = Rotation.random(B, random_state=rng).as_matrix()  # (B, 3, 3) palm orientations
         lateral = reach.min(axis=0) + rng.random((B, 2)) * np.ptp(reach, axis=0)
         gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
@@ -234,67 +259,76 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
         T = np.tile(np.eye(4), (B, 1, 1))
         T[:, :3, :3] = R
         T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
+        if landed:  # a share of the batch near the palm poses that touched
+            near = int(B * NEAR_SHARE)
+            T[:near] = _near(np.stack(landed)[rng.integers(0, len(landed), near)], rng)
         head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
         heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
         q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
-        q_touch, touched, before = close_lines(robot, obj, heads, q_open, q_close, depth)
-        q_rest = (q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)).view(B, LINES, *lo.shape)[:, 0]
+        q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth)
         names, frames = robot.link_frames_of(None, q_touch, heads)
-        angles, inward = _pad_angles(robot, obj, heads, q_touch, names, frames, fingers, rows)
-        angles, inward = angles.reshape(B, LINES, len(rows)), inward.reshape(B, LINES, len(rows), 3)
+        angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows)
+        k = len(rows)
+        angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
         clear = _clearance(obj, names, frames, spheres).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
         good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg) & clear[:, :, rows]
-        q_rest = q_open + torch.as_tensor(before)[..., None] * (q_close - q_open)
-        rest_clear = _clearance(obj, *robot.link_frames_of(None, q_rest, heads), spheres).reshape(B, LINES, -1)
-        pick = np.argmax(good + rng.random(good.shape), axis=1)  # (B, k): a random good line per finger
-        if len(rows) > 1:  # the first finger (the thumb): its good line most opposed to the others' normals
-            others = inward[np.arange(B)[:, None], pick[:, 1:], np.arange(1, len(rows))].mean(axis=1)  # (B, 3)
+        q = home.expand(B, -1, -1)  # (B, F, n): the fingers not chosen at home, as the solver holds them
+        home_clear = _clearance(obj, *robot.link_frames_of(None, q, head), spheres) >= -penetration_m  # (B, F)
+        picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]  # (B, k): random good lines
+        if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
+            others = inward[np.arange(B)[:, None], picks[0][:, 1:], np.arange(1, len(rows))].mean(axis=1)  # (B, 3)
             oppose = -np.einsum("bmi,bi->bm", inward[:, :, 0], others)
-            pick[:, 0] = np.argmax(np.where(good[:, :, 0], oppose, -np.inf), axis=1)
-        rest = np.argmax((rest_clear >= -penetration_m) + rng.random(rest_clear.shape), axis=1)  # (B, F)
-        q_touch, q_rest = q_touch.view(B, LINES, *lo.shape), q_rest.view(B, LINES, *lo.shape)
-        q = torch.stack([q_rest[torch.arange(B), torch.as_tensor(rest[:, i]), i] for i in range(len(lo))], dim=1)
-        for i, row in enumerate(rows):
-            q[:, row] = q_touch[torch.arange(B), torch.as_tensor(pick[:, i]), row]
-        ok = good.any(axis=1).all(axis=1)
-        touching += int(ok.sum())
+            picks[0][:, 0] = np.argmax(np.where(good[:, :, 0], oppose, -np.inf), axis=1)
+        q_touch = q_touch.view(B, LINES, *lo.shape)
+        ok = good.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1)
+        counts["touching"] += int(ok.sum())
+        landed.extend(T[ok])
+        batch: list[ContactSet] = []
         for b in np.flatnonzero(ok):
-            posture = Posture(palm_pose=head[b], fingers=q[b], body=torch.zeros(0, dtype=torch.float64))
-            found = _touch(robot, obj, posture, fingers, cone_deg)
-            if found is None:
-                continue
-            facing += 1
-            if scene.check(posture).count:
-                continue
-            clean += 1
-            contacts, normals, angles = found
-            if not _required(require, contacts, normals, centre):
-                continue
-            out.append(ContactSet(tuple(fingers), contacts, normals, posture, angles))
-            if len(out) == n:
-                break
-    if stats is not None:
-        stats.update(tried=tried, touching=touching, facing=facing, clean=clean, kept=len(out))
+            for pick in dict.fromkeys(tuple(p[b].tolist()) for p in picks):  # distinct line choices, in order
+                fingers_q = q[b].clone()
+                for i, row in enumerate(rows):
+                    fingers_q[row] = q_touch[b, pick[i], row]
+                posture = Posture(palm_pose=head[b], fingers=fingers_q, body=torch.zeros(0, dtype=torch.float64))
+                contacts = points[b, pick, range(k)]
+                found = _as_solved(robot, obj, posture, fingers, contacts, cone_deg)
+                if found is None:
+                    continue
+                normals, pad_angles = found
+                counts["facing"] += 1
+                if scene.check(posture).count:
+                    continue
+                counts["clean"] += 1
+                if _required(require, contacts, normals, centre):
+                    batch.append(ContactSet(tuple(fingers), contacts, normals, posture, pad_angles))
+        yield batch
+
+
+def _near(T: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Palm poses (N, 4, 4) near the given ones: turned about a random axis by a normal angle (sd
+    ``NEAR_DEG``) about the palm's origin and moved by a normal offset (sd ``NEAR_M`` per axis)."""
+    N = len(T)
+    turn = Rotation.from_rotvec(rng.normal(size=(N, 3)) * math.radians(NEAR_DEG) / math.sqrt(3)).as_matrix()
+    out = T.copy()
+    out[:, :3, :3] = turn @ T[:, :3, :3]
+    out[:, :3, 3] += rng.normal(0.0, NEAR_M, (N, 3))
     return out
 
 
-def _touch(robot: Robot, obj: Shape, posture: Posture, fingers: Sequence[str], cone_deg: float
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The touch points (k, 3), inward normals (k, 3) and pad angles (k,) of a posture, or None
-    where a pad is off the surface or turned beyond the cone."""
+def _as_solved(robot: Robot, obj: Shape, posture: Posture, fingers: Sequence[str], contacts: np.ndarray,
+               cone_deg: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """A set as the surface model's solver sees it: the inward normals (k, 3) at its contacts by
+    :func:`~graspnet_torch.collision.surface.surface_normals` (on a mesh's edge, the face it takes)
+    and the pad angles (k,) to them; None where a tip lies farther than ``TOUCH_M`` from the tip
+    target those normals give (the pad's depth out from the contact) or a pad beyond the cone."""
     R, t = tip_frames(robot, posture, fingers)
-    depth = np.array([robot.pads[f].depth for f in fingers])
-    outward = surface_normals(obj, t)
-    contacts = t - (surface_distance(obj, t))[:, None] * outward
-    if np.any(np.abs(surface_distance(obj, contacts)) > TOUCH_M) or \
-            np.any(np.abs(np.linalg.norm(contacts - t, axis=1) - depth) > TOUCH_M):
-        return None
     inward = -surface_normals(obj, contacts)
+    depth = np.array([robot.pads[f].depth for f in fingers])
     pad = np.einsum("kij,kj->ki", R, np.stack([robot.pads[f].normal for f in fingers]))
     angles = np.degrees(np.arccos(np.clip(np.sum(pad * inward, axis=1), -1.0, 1.0)))
-    if np.any(angles > cone_deg + 1e-9) or not math.isfinite(float(angles.sum())):
+    if np.linalg.norm(t - (contacts - depth[:, None] * inward), axis=1).max() > TOUCH_M or angles.max() > cone_deg:
         return None
-    return contacts, inward, angles
+    return inward, angles
 
 
 def opposes(normals: np.ndarray) -> float:

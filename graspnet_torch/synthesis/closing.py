@@ -32,9 +32,9 @@ def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, dep
 
 
 def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q_close: torch.Tensor,
-           depth: np.ndarray) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+           depth: np.ndarray) -> tuple[torch.Tensor, np.ndarray]:
     """Each finger closed along its line until its pad touches. head (B, 6), q_open / q_close
-    (B, F, j) -> the touching joints (B, F, j), touched (B, F) bool, the step before (B, F) in [0, 1]."""
+    (B, F, j) -> the touching joints (B, F, j) (closed where it touches nothing), touched (B, F) bool."""
     B = q_open.shape[0]
     ts = torch.linspace(0, 1, STEPS, dtype=torch.float64)
     line = q_open[:, None] + ts[None, :, None, None] * (q_close - q_open)[:, None]  # (B, S, F, j)
@@ -50,8 +50,7 @@ def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tens
         g = _tip_gaps(robot, obj, head, q_open + mid[..., None] * (q_close - q_open), depth)
         lo_t, hi_t = torch.where(torch.as_tensor(g > 0), mid, lo_t), torch.where(torch.as_tensor(g > 0), hi_t, mid)
     t = torch.where(torch.as_tensor(touched), hi_t, torch.ones_like(hi_t))
-    before = np.where(touched, np.maximum(first - 1, 0) / (STEPS - 1), 1.0)
-    return q_open + t[..., None] * (q_close - q_open), touched, before
+    return q_open + t[..., None] * (q_close - q_open), touched
 
 
 def pad_forward(robot: Robot, q: np.ndarray) -> np.ndarray:

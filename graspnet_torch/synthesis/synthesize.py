@@ -20,13 +20,19 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.solver import GraspResult, solve, solve_many
-from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, pad_contact_sets, placeholder_problem
+from graspnet_torch.solver import GraspResult, Solver, solve, solve_many
+from graspnet_torch.synthesis.candidates import (
+    FRICTION,
+    ContactSet,
+    iter_contact_sets,
+    pad_contact_sets,
+    placeholder_problem,
+)
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["FRICTION", "SynthesizedGrasp", "rank_sets", "synthesize_grasps"]
+__all__ = ["FRICTION", "START", "SynthesizedGrasp", "rank_sets", "synthesize_grasps"]
 
-
+TRIES_PER_SET = 50  # palm poses drawn at most per contact set asked for (start="sampled")
 
 @dataclass
 class SynthesizedGrasp:
@@ -95,41 +101,119 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
 def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
                       fingers: Sequence[str] = ("thumb", "index", "middle"), candidates: int = 64, seed: int = 0,
                       physics: Callable[..., Any] | None = None, solve_top: int | None = None, trials: int = 8,
-                      solver: dict | None = None, stats: dict | None = None) -> list[SynthesizedGrasp]:
+                      solver: dict | None = None, stats: dict | None = None, start: str = "sampled"
+                      ) -> list[SynthesizedGrasp]:
     """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first.
 
-    ``candidates`` contact sets are drawn (:func:`pad_contact_sets`, ``seed``) and ranked
-    (:func:`rank_sets`); the best ``solve_top`` of them (default ``2 n_grasps``) are solved as one
-    batch (:func:`gt.solve_many`, ``trials`` learners each, ``solver`` settings over
-    ``contact_model: surface``); the successes are checked in MuJoCo where ``physics`` and
-    returned in rank order. ``physics``: a check ``physics(problem, result, robot=robot)`` returning
-    a report with ``directions`` (push -> held), i.e. ``gt.simulate_grasp`` (this layer sits below
-    the physics layer, so the check is passed in); with it, grasps holding more pushes first.
-    ``stats``, if given, receives the generator's counts and the timings (s).
+    Contact sets are drawn (:func:`~graspnet_torch.synthesis.candidates.iter_contact_sets`, ``seed``),
+    at most ``candidates`` of them, and ranked by quality (:func:`rank_sets`); each is solved as a
+    problem of the surface contact model (``solver`` settings over ``contact_model: surface``) and
+    each success is checked in MuJoCo where ``physics`` is given: a check
+    ``physics(problem, result, robot=robot)`` returning a report with ``directions`` (push ->
+    held), i.e. ``gt.simulate_grasp`` (this layer sits below the physics layer, so the check is
+    passed in). Returned: holding more pushes first (with physics), then in rank order.
+
+    ``start``: where each posture's solve starts.
+
+    - ``"sampled"`` (default): at the posture the sampler found touching the set, a warm start
+      (:meth:`gt.Solver.solve <graspnet_torch.solver.session.Solver.solve>` with ``search=False``:
+      Levenberg-Marquardt, one trial; a start that does not land is dropped). The sets are taken
+      batch by batch of the sampler, each batch in rank order, and the search ends once
+      ``n_grasps`` grasps hold every push (without physics: once ``n_grasps`` succeed) or
+      ``candidates`` sets were tried: the first verified grasp comes after the first batch.
+    - ``"random"``: the paper's search from random starts: the ``candidates`` sets are drawn first,
+      the best ``solve_top`` of them (default ``2 n_grasps``) solved as one batch
+      (:func:`gt.solve_many`, ``trials`` learners each).
+
+    ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
+    ``solve_s``, ``physics_s``; ``first_s``: to the first grasp that holds every push, None if
+    none), ``solved``, ``succeeded`` and ``held``.
     """
     if n_grasps < 1 or candidates < 1:
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
+    if start not in START:
+        raise ProblemError(f"synthesize_grasps: start {start!r}: one of {', '.join(START)}")
+    settings = {"contact_model": "surface", **(solver or {})}
+    run = _sampled if start == "sampled" else _random
+    t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
+               "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
+    grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
+    if physics is not None:
+        grasps.sort(key=lambda g: -(g.holds or 0))  # stable: rank order within a count
+    if stats is not None:
+        stats.update({k: v for k, v in t.items() if k != "t0"})
+    return grasps[:n_grasps]
+
+
+START = ("sampled", "random")
+
+
+def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None, t: dict) -> None:
+    """Check a grasp in physics (where asked), timed, counted in ``t["held"]`` where it holds every push."""
+    if physics is None:
+        return
+    t1 = time.perf_counter()
+    g.physics = physics(g.problem, g.result, robot=robot)
+    t["physics_s"] += time.perf_counter() - t1
+    if g.holds == len(g.physics.directions):
+        t["held"] += 1
+        if t["first_s"] is None:
+            t["first_s"] = time.perf_counter() - t["t0"]
+
+
+def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
+             physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict
+             ) -> list[SynthesizedGrasp]:
+    """``start="sampled"`` (:func:`synthesize_grasps`)."""
+    session = Solver(robot, trials=1, seed=seed, solver=settings)
+    grasps: list[SynthesizedGrasp] = []
+    tried = 0
+    sets = iter_contact_sets(robot, obj, fingers, seed, max_tries=TRIES_PER_SET * candidates, stats=t)
+    while tried < candidates:
+        t1 = time.perf_counter()
+        batch = next(sets, None)
+        t2 = time.perf_counter()
+        t["generate_s"] += t2 - t1
+        if batch is None:
+            break
+        ranked = rank_sets(batch, obj)[: candidates - tried]
+        t["rank_s"] += time.perf_counter() - t2
+        for s, q in ranked:
+            tried += 1
+            problem = placeholder_problem(robot, obj, fingers, s.contacts)
+            t3 = time.perf_counter()
+            result = session.solve(problem, start=s.posture, search=False)
+            t["solve_s"] += time.perf_counter() - t3
+            t["solved"] += 1
+            if not result.success:
+                continue
+            t["succeeded"] += 1
+            g = SynthesizedGrasp(problem, s, q, result)
+            grasps.append(g)
+            _check(g, robot, physics, t)
+            if (t["held"] if physics is not None else t["succeeded"]) >= n_grasps:
+                return grasps
+    return grasps
+
+
+def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
+            physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict
+            ) -> list[SynthesizedGrasp]:
+    """``start="random"`` (:func:`synthesize_grasps`)."""
     t0 = time.perf_counter()
-    counts: dict = {}
-    sets = pad_contact_sets(robot, obj, candidates, fingers, seed, stats=counts)
+    sets = pad_contact_sets(robot, obj, candidates, fingers, seed, stats=t)
     t1 = time.perf_counter()
     ranked = rank_sets(sets, obj)[: solve_top or 2 * n_grasps]
     problems = [placeholder_problem(robot, obj, fingers, s.contacts) for s, _ in ranked]
-    settings = {"contact_model": "surface", **(solver or {})}
     t2 = time.perf_counter()
     results = _solve(problems, trials, seed, settings)
-    t3 = time.perf_counter()
+    t.update(generate_s=t1 - t0, rank_s=t2 - t1, solve_s=time.perf_counter() - t2, solved=len(problems))
     grasps = [SynthesizedGrasp(p, s, q, r) for p, (s, q), r in zip(problems, ranked, results, strict=True)
               if r.success]
-    if physics is not None:
-        for g in grasps:
-            g.physics = physics(g.problem, g.result, robot=robot)
-        grasps.sort(key=lambda g: -(g.holds or 0))  # stable: rank order within a count
-    t4 = time.perf_counter()
-    if stats is not None:
-        stats.update(counts, generate_s=t1 - t0, rank_s=t2 - t1, solve_s=t3 - t2, physics_s=t4 - t3,
-                     solved=len(problems), succeeded=len(grasps))
-    return grasps[:n_grasps]
+    t["succeeded"] = len(grasps)
+    for g in grasps:
+        _check(g, robot, physics, t)
+    return grasps
 
 
 def _solve(problems: list[GraspProblem], trials: int, seed: int, settings: dict) -> list[GraspResult]:

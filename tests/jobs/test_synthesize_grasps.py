@@ -85,7 +85,8 @@ def _check_results(out, physics: bool, names=("ball.obj", "box.stl", "broken.stl
             assert g["success"] and g["contact_model"] == "surface" and len(g["contacts_world"]) == 3
             assert [c["finger"] for c in g["contacts"]] == g["fingers"] == ["thumb", "index", "middle"]
             assert {"epsilon", "min_singular_value", "force_closure"} <= set(g["quality"])
-            assert "trials" not in g and g["trials_run"] == 8 and "palm_pose" in g  # every field of a result
+            assert "trials" not in g and g["trials_run"] == 1 and "palm_pose" in g  # every field of a result (one
+            # trial: the warm start from the sampled posture)
             assert (g["physics"] is not None) == physics
             if physics:
                 assert g["physics"]["of"] == 6 and g["holds"] == g["physics"]["holds"]
@@ -141,6 +142,7 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
              ({"fingers": ["thumb"]}, "2 or more different fingers"),
              ({"grasps": 0}, "grasps=0"),
              ({"verify": "mujoco"}, "verify"),
+             ({"start": "proposal"}, "start"),
              ({"scale": -1.0}, "scale=-1"),
              ({"out": str(folder / "box.stl")}, "not a folder")]
     for change, message in cases:

@@ -8,7 +8,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision.scene import CollisionScene
-from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.collision.surface import pad_targets, surface_distance, surface_normals
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import surface_fields
@@ -55,6 +55,60 @@ def test_pad_contact_sets_touch_face_and_stay_out(robot: gt.Robot, obj: Shape) -
             angle = np.degrees(np.arccos(np.clip((T[:3, :3] @ pad.normal) @ inward[k], -1, 1)))
             assert angle <= 30.0 + 1e-6
         assert scene.check(s.posture).count == 0
+
+
+@pytest.mark.parametrize("mesh", ["blob", "glass"])
+def test_sampled_tips_sit_on_the_surface_models_targets(robot: gt.Robot, mesh: str, tmp_path) -> None:
+    """On a mesh (edges where faces turn), every set's tips lie where the surface model's solver
+    puts them for its contacts (pad_targets: the pad's depth out along the surface normal), the
+    fingers not chosen at home: the sampled posture is a start the solver accepts."""
+    import trimesh
+
+    if mesh == "blob":  # a low-poly non-convex blob: sharp edges everywhere
+        blob = trimesh.creation.icosphere(subdivisions=1, radius=0.035)
+        blob.vertices *= np.random.default_rng(1).uniform(0.8, 1.2, (len(blob.vertices), 1))
+        blob.export(tmp_path / "blob.stl")
+        obj = Shape("mesh", (), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]), tmp_path / "blob.stl", 1.0)
+    else:
+        obj = gt.GraspProblem.from_task("glass3").object
+    sets = gt.pad_contact_sets(robot, obj, 6, FINGERS, seed=2)
+    assert sets
+    home = robot.home_posture(torch.float64).fingers.numpy()
+    others = [i for i, f in enumerate(robot.fingers) if f not in FINGERS]
+    for s in sets:
+        problem = placeholder_problem(robot, obj, FINGERS, s.contacts)
+        tips = np.stack([tip_pose(robot, s.posture, f)[:3, 3] for f in FINGERS])
+        assert np.linalg.norm(tips - pad_targets(robot, problem), axis=1).max() <= 1e-3
+        np.testing.assert_array_equal(s.posture.fingers.numpy()[others], home[others])
+
+
+@pytest.mark.slow
+def test_sampled_starts_land_where_random_ones_search(robot: gt.Robot) -> None:
+    """start="sampled" solves each set from its sampled posture (one trial) and stops at n_grasps
+    successes; start="random" searches (``trials`` trials): both give grasps of the same cube."""
+    obj = cube()
+    stats: dict = {}
+    warm = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0, stats=stats)
+    assert len(warm) == 2 and stats["succeeded"] == 2 and stats["solved"] <= 8
+    assert all(len(g.result.trials) == 1 and g.success for g in warm)
+    cold = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0, start="random", trials=4)
+    assert cold and all(len(g.result.trials) == 4 and g.success for g in cold)
+    with pytest.raises(gt.ProblemError, match="start 'proposal'"):
+        gt.synthesize_grasps(robot, obj, start="proposal")
+
+
+def test_a_warm_start_without_search_is_one_trial(robot: gt.Robot) -> None:
+    """Solver.solve(start=..., search=False): a start far from the contacts that does not land is
+    the result (one trial, not a success); with the search it gets the search's trials."""
+    obj = cube()
+    problem = placeholder_problem(robot, obj, FINGERS, np.array([[0.0, 0.0, 0.23], [0.0, 0.03, 0.2],
+                                                                  [0.0, -0.03, 0.2]]))
+    far = gt.Posture(palm_pose=torch.tensor([0.5, 0.5, 0.5, 0.0, 0.0, 0.0], dtype=torch.float64),
+                     fingers=robot.home_posture(torch.float64).fingers, body=torch.zeros(0, dtype=torch.float64))
+    solver = gt.Solver(robot, trials=2, solver={"contact_model": "surface", "max_iterations": 5})
+    alone = solver.solve(problem, start=far, search=False)
+    assert len(alone.trials) == 1 and not alone.success
+    assert len(solver.solve(problem, start=far).trials) == 3  # the warm trial, then the search's two
 
 
 @pytest.mark.slow
