@@ -112,13 +112,20 @@ def _rotation(obj: Shape) -> np.ndarray:
 
 def _palm_front(robot: Robot) -> tuple[np.ndarray, float]:
     """The palm's front axis (palm frame, unit) and its face's offset along it (m): the palm
-    collision box's thinnest axis, on the side of the home fingertips (no box: +y, 0)."""
+    collision box's thinnest axis, on the side of the home fingertips. A palm without a box (a
+    holder the fingers hang from, as TriFinger's): the axis from the palm origin to the home
+    fingertips' mean, the face at the fingertips' median reach along it (over their joints' limits
+    and midpoints): the object hangs among the fingers, not against the holder."""
     home = robot.home_posture()
     tips = robot.fingertips_palm(home.fingers).numpy().mean(axis=0)
     box = next((s.shape for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link and s.shape.kind == "box"),
                None)
     if box is None:
-        return np.array([0.0, 1.0, 0.0]), 0.0
+        front = tips / np.linalg.norm(tips)
+        lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
+        grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
+        q = lo[None] + grid[:, None, :] * (hi - lo)[None]  # (G, F, n): every finger at each grid point
+        return front, float(np.median(robot.fingertips_palm(torch.as_tensor(q)).numpy() @ front))
     R = _rotation(box)
     axis = int(np.argmin(box.size))
     front = R[:, axis] * (1.0 if R[:, axis] @ (tips - box.pose[:3]) >= 0 else -1.0)
@@ -146,10 +153,9 @@ def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray
 
 
 def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
-               spheres: list[tuple[int, str, np.ndarray, np.ndarray]]) -> np.ndarray:
-    """(N, F) each finger's least clearance (m, negative: how deep) from the object, its links as
-    spheres; frames (N, L, 4, 4) of the links ``names``."""
-    F = 1 + max(row for row, *_ in spheres)
+               spheres: list[tuple[int, str, np.ndarray, np.ndarray]], F: int) -> np.ndarray:
+    """(N, F) each of F fingers' least clearance (m, negative: how deep) from the object, its links
+    as ``spheres`` (inf: none given); frames (N, L, 4, 4) of the links ``names``."""
     out = np.full((len(frames), F), np.inf)
     for row, link, centres, radii in spheres:
         T = frames[:, names.index(link)]  # (N, 4, 4)
@@ -241,6 +247,9 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     spheres = _finger_spheres(robot)
+    F = len(finger_names)
+    tips = {robot.cfg.fingers[f].tip for f in fingers}  # a touching pad's link: its spheres may bound it loosely
+    line_spheres = [sp for sp in spheres if sp[0] in rows and sp[1] not in tips]  # (FCL checks them all, step 3)
     home = robot.home_posture(torch.float64).fingers
     others_rows = [i for i in range(len(finger_names)) if i not in rows]
     scene = scene_for(robot, placeholder_problem(robot, obj, fingers), penetration_m, False, fingers_apart=True)
@@ -270,10 +279,10 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
         angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows)
         k = len(rows)
         angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
-        clear = _clearance(obj, names, frames, spheres).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
+        clear = _clearance(obj, names, frames, line_spheres, F).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
         good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg) & clear[:, :, rows]
         q = home.expand(B, -1, -1)  # (B, F, n): the fingers not chosen at home, as the solver holds them
-        home_clear = _clearance(obj, *robot.link_frames_of(None, q, head), spheres) >= -penetration_m  # (B, F)
+        home_clear = _clearance(obj, *robot.link_frames_of(None, q, head), spheres, F) >= -penetration_m  # (B, F)
         picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]  # (B, k): random good lines
         if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
             others = inward[np.arange(B)[:, None], picks[0][:, 1:], np.arange(1, len(rows))].mean(axis=1)  # (B, 3)
