@@ -63,7 +63,7 @@ def test_quick_protocol_on_one_object_agrees_with_a_recomputation(tmp_path, monk
     queries take minutes per object): every number against the returned grasps, checked again."""
     cube = Shape("box", (0.06, 0.06, 0.06), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
     monkeypatch.setattr(synthesis, "pick_objects", lambda n, seed: [("cube", cube)][:n])
-    cfg = SynthesisExperimentCfg(objects=1, seed=3, candidates=8, grasps=2, robots=("hand",))
+    cfg = SynthesisExperimentCfg(objects=1, seed=3, candidates=8, grasps=2, robots=("hand",), jobs=1)
     report = run_synthesis(cfg, tmp_path)
     assert (tmp_path / "synthesis_grasps.png").stat().st_size > 0
     robot = gt.load_robot("hand")
@@ -88,3 +88,20 @@ def test_quick_protocol_on_one_object_agrees_with_a_recomputation(tmp_path, monk
         assert report.numbers["hand/synthesis/median best epsilon"] == pytest.approx(
             max(g.quality.epsilon for g in synthesized))
     assert any("deep" in what for what, _ in report.checks) and "| hand | baseline |" in report.body
+
+
+@pytest.mark.slow
+def test_processes_over_the_objects_give_the_same_grasps(tmp_path, monkeypatch):
+    """jobs=2 (joblib processes over the objects) reports what one process does: each object is
+    synthesized with its own seed."""
+    cube = Shape("box", (0.06, 0.06, 0.06), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+    sphere = Shape("sphere", (0.035,), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+    monkeypatch.setattr(synthesis, "pick_objects", lambda n, seed: [("cube", cube), ("sphere", sphere)][:n])
+    numbers = []
+    for jobs in (1, 2):
+        cfg = SynthesisExperimentCfg(objects=2, seed=3, candidates=6, grasps=2, robots=("hand",), baseline=False,
+                                     jobs=jobs)
+        report = run_synthesis(cfg, tmp_path / str(jobs))
+        rows = report.results["hand", "synthesis"]
+        numbers.append([(r["holds"], r["epsilon"]) for r in rows])
+    assert numbers[0] == numbers[1] and any(h for h, _ in numbers[0])
