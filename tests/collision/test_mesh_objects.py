@@ -180,14 +180,14 @@ def test_the_proxy_agrees_with_fcl_near_real_meshes(hand, tmp_path):
 
 
 def test_a_mesh_the_decomposition_crashes_on_stands_in_as_its_hull():
-    """CoACD's C++ aborts on some meshes (pybullet's random object 374 among them), which would
-    take the whole process: it runs in a process of its own, and there the mesh's hull stands in,
-    warned; the hull holds every vertex of the mesh."""
+    """CoACD's C++ aborts on some meshes (pybullet's random object 360 among them, with its default
+    and its shallower search), which would take the whole process: it runs in a process of its own,
+    and there the mesh's hull stands in, warned; the hull holds every vertex of the mesh."""
     import pybullet_data
 
     from graspnet_torch.meshes import load_mesh
 
-    path = Path(pybullet_data.getDataPath()) / "random_urdfs" / "374" / "374.obj"
+    path = Path(pybullet_data.getDataPath()) / "random_urdfs" / "360" / "360.obj"
     with pytest.warns(UserWarning, match="CoACD\\) failed on this mesh; its convex hull stands in"):
         pieces = convex_pieces(path, 0.015)
     assert pieces.n_pieces == 1 and not pieces.exact
