@@ -157,14 +157,16 @@ def _decompose(obj: Shape) -> float:
     return time.perf_counter() - t0
 
 
-def _prepare(objs: list[tuple[str, Shape]], cfg: SynthesisExperimentCfg) -> list[float]:
-    """Each object's convex decomposition, made (and cached) before the timed runs, ``cfg.jobs``
-    processes: the seconds each took."""
-    if cfg.jobs == 1:
-        return [_decompose(obj) for _, obj in objs]
-    from joblib import Parallel, delayed
+def _map(fn, args: list[tuple], jobs: int, desc: str | None = None) -> list:
+    """``fn(*a)`` for each of ``args``, in order: in this process, or in ``jobs`` joblib processes;
+    with a progress bar where ``desc`` is given."""
+    if jobs == 1:
+        calls = (fn(*a) for a in args)
+    else:
+        from joblib import Parallel, delayed
 
-    return list(Parallel(n_jobs=cfg.jobs)(delayed(_decompose)(obj) for _, obj in objs))
+        calls = Parallel(n_jobs=jobs, return_as="generator")(delayed(fn)(*a) for a in args)
+    return list(calls if desc is None else progress(calls, total=len(args), desc=desc, unit="object"))
 
 
 def _run(name: str, method: str, objs: list[tuple[str, Shape]], cfg: SynthesisExperimentCfg
@@ -172,15 +174,8 @@ def _run(name: str, method: str, objs: list[tuple[str, Shape]], cfg: SynthesisEx
     """One method on every object, ``cfg.jobs`` processes (joblib): the per-object rows in order and
     the wall time of the whole set."""
     args = [(name, obj, method, cfg, cfg.seed + k) for k, (_, obj) in enumerate(objs)]
-    bar = f"synthesis: {name}, {method}"
     t0 = time.perf_counter()
-    if cfg.jobs == 1:
-        rows = [_one(*a) for a in progress(args, desc=bar, unit="object")]
-    else:
-        from joblib import Parallel, delayed
-
-        work = Parallel(n_jobs=cfg.jobs, return_as="generator")(delayed(_one)(*a) for a in args)
-        rows = list(progress(work, total=len(args), desc=bar, unit="object"))
+    rows = _map(_one, args, cfg.jobs, f"synthesis: {name}, {method}")
     return rows, time.perf_counter() - t0
 
 
@@ -208,7 +203,7 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
     """The sections of the module docstring, the issue's targets as ``checks`` and a picture of the
     best synthesized grasp of the first objects."""
     objs = pick_objects(cfg.objects, cfg.seed)
-    prepared = _prepare(objs, cfg)
+    prepared = _map(_decompose, [(obj,) for _, obj in objs], cfg.jobs)  # before the timed runs, cached on disk
     methods = METHODS if cfg.baseline else METHODS[:1]
     results, summaries, rows, numbers, timings, checks = {}, {}, [], {}, {}, []
     for name in cfg.robots:
