@@ -29,6 +29,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.collision.convex import piece_distance
+from graspnet_torch.collision.finger_overlaps import FINGER_GAP_M, FingerOverlaps
 from graspnet_torch.collision.primitives import group_thresholds, primitive_groups
 from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, finger_pairs, self_collision_pairs
 from graspnet_torch.collision.self_collision import SelfCollisionModel
@@ -42,8 +43,6 @@ from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FINGER_GAP_M", "CollisionProxy"]
 
-FINGER_GAP_M = 0.001  # two fingers' spheres overlap from this gap on: the spheres lie inside a link's
-# box and miss its edges, where FCL finds two side-by-side fingers touching
 PENETRATION_CHUNK = 1 << 21  # rows x spheres x elements that :meth:`CollisionProxy.penetrations` takes at once
 DENSE_LIMIT = 1 << 13  # T x clusters x CLUSTER x elements below which every sphere is tested (no broad phase)
 
@@ -89,7 +88,7 @@ class CollisionProxy:
                  touching: bool = True, fingers_apart: bool = False):
         self.robot = robot
         self.fingers_apart = fingers_apart
-        self._finger_spheres: tuple[Tensor, Tensor] | None = None
+        self._finger_overlaps: FingerOverlaps | None = None
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         problem = problems[0]
         self.n_problems = len(problems)
@@ -321,50 +320,35 @@ class CollisionProxy:
     def overlapping_pairs(self, centres: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """Two fingers through each other (where the proxy was built with ``fingers_apart``):
         centres (T, S, 3) of every sphere (flattened C x ``CLUSTER``) -> the (t, i, j) of each
-        pair of spheres i < j of two different fingers' links apart at home
-        (:func:`~graspnet_torch.collision.scene.finger_pairs`) that overlap in row t, each (N,)."""
-        apart, fingers = self._finger_spheres_apart()
-        if fingers.numel() == 0:
-            empty = torch.zeros(0, dtype=torch.long, device=centres.device)
-            return empty, empty, empty
-        r, pairs = self._radii.reshape(-1)[fingers], apart[fingers][:, fingers].triu(1)
-        reach = r[:, None] + r[None, :] + FINGER_GAP_M
-        rows = max(1, PENETRATION_CHUNK // fingers.numel() ** 2)
-        found = []
-        for a in range(0, centres.shape[0], rows):  # in chunks of rows: S_f^2 distances each
-            c = centres[a: a + rows, fingers]
-            gap = torch.cdist(c, c, compute_mode="donot_use_mm_for_euclid_dist")  # exact in float64
-            t, i, j = ((gap < reach) & pairs).nonzero(as_tuple=True)
-            found.append((t + a, i, j))
-        t, i, j = (torch.cat(x) for x in zip(*found, strict=True))
-        return t, fingers[i], fingers[j]
+        pair of spheres of two different fingers' links apart at home
+        (:func:`~graspnet_torch.collision.scene.finger_pairs`) that overlap in row t, each (N,)
+        (:class:`~graspnet_torch.collision.finger_overlaps.FingerOverlaps`: links first)."""
+        return self._overlaps().overlapping(centres)
 
     def overlaps(self, ci: Tensor, cj: Tensor, i: Tensor, j: Tensor) -> Tensor:
         """The overlap r_i + r_j + :data:`FINGER_GAP_M` - |c_i - c_j|, clamped at 0, of spheres i and
         j (N,) at centres ci, cj (N, ..., 3) -> (N, ...)."""
-        r = self._radii.reshape(-1)
-        shape = (-1,) + (1,) * (ci.dim() - 2)
-        return ((r[i] + r[j] + FINGER_GAP_M).view(shape) - (ci - cj).norm(dim=-1)).clamp(min=0)
+        return self._overlaps().overlaps(ci, cj, i, j)
 
     def sphere_links(self) -> Tensor:
         """(S,) each sphere's link (index into ``self.links``), flattened C x ``CLUSTER``."""
         return self._cluster_link.repeat_interleave(CLUSTER)
 
-    def _finger_spheres_apart(self) -> tuple[Tensor, Tensor]:
-        """(S, S) bool, the sphere pairs of :meth:`overlapping_pairs`, and (S_f,) the spheres in
-        some pair; computed once."""
-        if self._finger_spheres is None:
-            link = self.sphere_links()
-            valid = self._radii.reshape(-1) > 0
-            pairs = torch.zeros(len(self.links), len(self.links), dtype=torch.bool, device=link.device)
+    def sphere_radii(self) -> Tensor:
+        """(S,) each sphere's radius, flattened C x ``CLUSTER`` (0: padding, never tested)."""
+        return self._radii.reshape(-1)
+
+    def _overlaps(self) -> FingerOverlaps:
+        """The finger-pair test of :meth:`overlapping_pairs`; built once."""
+        if self._finger_overlaps is None:
+            pairs = []
             if self.fingers_apart:
-                for a, b in finger_pairs(self.robot):
-                    if a in self.links and b in self.links:
-                        i, j = self.links.index(a), self.links.index(b)
-                        pairs[i, j] = pairs[j, i] = True
-            apart = pairs[link][:, link] & valid[:, None] & valid[None, :]
-            self._finger_spheres = (apart, apart.any(1).nonzero().squeeze(1))
-        return self._finger_spheres
+                pairs = [(self.links.index(a), self.links.index(b)) for a, b in finger_pairs(self.robot)
+                         if a in self.links and b in self.links]
+            C = self._cluster_local.shape[0]
+            local = self._cluster_local.transpose(1, 2).reshape(C * CLUSTER, 4)[:, :3]
+            self._finger_overlaps = FingerOverlaps(self.sphere_links(), self._radii.reshape(-1), local, pairs)
+        return self._finger_overlaps
 
     def link_depths(self, penetrations: Tensor, spheres: Tensor | None = None) -> Tensor:
         """(T, S) sphere penetrations (:meth:`penetrations`) -> (T, L) each link's (``self.links``):

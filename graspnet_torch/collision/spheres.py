@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graspnet_torch.collision.mesh_spheres import mesh_key, mesh_spheres
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.frames import Attachment
 from graspnet_torch.robot.geometry import LinkShape
@@ -60,7 +61,9 @@ def mesh_box(shape: LinkShape) -> LinkShape:
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
     """A link shape as spheres in its link's frame: centres (k, 3), radii (k,); a mesh as its box
     (:func:`mesh_box`)."""
-    shape = mesh_box(shape)
+    if shape.kind == "mesh":
+        local, radii = mesh_spheres(shape.mesh, mesh_key(shape.shape.mesh, shape.shape.scale))
+        return local @ shape.origin[:3, :3].T + shape.origin[:3, 3], radii
     if shape.kind == "sphere":
         local, radii = np.zeros((1, 3)), np.array([shape.size[0]])
     elif shape.kind == "cylinder":

@@ -173,9 +173,12 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
         inertial = getattr(ln, "inertial", None)
         if inertial is not None and inertial.mass is not None and inertial.mass > 0:
             i = inertial.inertia
-            full = [i.ixx, i.iyy, i.izz, i.ixy, i.ixz, i.iyz] if i is not None else [1e-9, 1e-9, 1e-9, 0, 0, 0]
-            el = ET.SubElement(body, "inertial", mass=f"{inertial.mass:.9g}", fullinertia=_fmt(full))
-            _place(el, origin_matrix(inertial.origin))
+            T = origin_matrix(inertial.origin)
+            inertia = np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]]) \
+                if i is not None else np.eye(3) * 1e-9
+            inertia = T[:3, :3] @ inertia @ T[:3, :3].T  # in the body's axes: MuJoCo takes fullinertia or a quat
+            full = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+            ET.SubElement(body, "inertial", mass=f"{inertial.mass:.9g}", fullinertia=_fmt(full), pos=_fmt(T[:3, 3]))
         for s in shapes.get(link, []):
             if s.kind == "mesh":
                 name = f"link_mesh_{meshes[0]}"

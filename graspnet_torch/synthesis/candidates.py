@@ -63,6 +63,8 @@ GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
+HOLDER_SPREAD = 0.2  # a palm without a box: how far off the fingers' mean axis the object is drawn (share
+# of the home fingertips' distance from it)
 NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
 NEAR_DEG, NEAR_M = 10.0, 0.005  # how near (standard deviations of the turn and the shift)
 COMBOS = 4  # line choices (contact sets) tried per palm pose whose every chosen finger touches
@@ -110,26 +112,42 @@ def _rotation(obj: Shape) -> np.ndarray:
     return pose_to_matrix_np(obj.pose)[:3, :3]
 
 
-def _palm_front(robot: Robot) -> tuple[np.ndarray, float]:
-    """The palm's front axis (palm frame, unit) and its face's offset along it (m): the palm
-    collision box's thinnest axis, on the side of the home fingertips. A palm without a box (a
-    holder the fingers hang from, as TriFinger's): the axis from the palm origin to the home
-    fingertips' mean, the face at the fingertips' median reach along it (over their joints' limits
-    and midpoints): the object hangs among the fingers, not against the holder."""
+def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray]:
+    """The palm's front axis (palm frame, unit), its face's offset along it (m) and where in the
+    palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates
+    :func:`_palm_plane`), for the fingers ``rows``. A palm with a collision box: the box's thinnest
+    axis, on the side of the home fingertips; the object within the fingertips' reach over their
+    joint limits. A palm without one (a holder the fingers hang from, as TriFinger's): the axis
+    from the palm origin to the home fingertips' mean, the face at the fingertips' median reach
+    along it (over their joints' limits and midpoints), the object within ``HOLDER_SPREAD`` of the
+    home fingertips' distance from their mean axis: it hangs among the fingers, where they close."""
     home = robot.home_posture()
-    tips = robot.fingertips_palm(home.fingers).numpy().mean(axis=0)
+    tips_all = robot.fingertips_palm(home.fingers).numpy()
+    tips = tips_all.mean(axis=0)
+    lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     box = next((s.shape for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link and s.shape.kind == "box"),
                None)
     if box is None:
         front = tips / np.linalg.norm(tips)
-        lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
         grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
         q = lo[None] + grid[:, None, :] * (hi - lo)[None]  # (G, F, n): every finger at each grid point
-        return front, float(np.median(robot.fingertips_palm(torch.as_tensor(q)).numpy() @ front))
+        face = float(np.median(robot.fingertips_palm(torch.as_tensor(q)).numpy() @ front))
+        plane = _palm_plane(front)
+        mid = tips_all[rows].mean(axis=0) @ plane
+        off_axis = (tips_all[rows] - tips_all[rows].mean(axis=0)) @ plane
+        spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
+        return front, face, np.stack([mid - spread, mid + spread])
     R = _rotation(box)
     axis = int(np.argmin(box.size))
     front = R[:, axis] * (1.0 if R[:, axis] @ (tips - box.pose[:3]) >= 0 else -1.0)
-    return front, float(front @ box.pose[:3] + box.size[axis] / 2)
+    tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
+    reach = tips_at @ _palm_plane(front)
+    return front, float(front @ box.pose[:3] + box.size[axis] / 2), np.stack([reach.min(axis=0), reach.max(axis=0)])
+
+
+def _palm_plane(front: np.ndarray) -> np.ndarray:
+    """(3, 2) two unit axes of the plane normal to ``front``."""
+    return np.linalg.svd(np.eye(3) - np.outer(front, front))[0][:, :2]
 
 
 def _support(vertices: np.ndarray, centre: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -243,9 +261,8 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
     rows = [finger_names.index(f) for f in fingers]
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
-    front, face = _palm_front(robot)
-    plane = np.linalg.svd(np.eye(3) - np.outer(front, front))[0][:, :2]  # (3, 2) the palm's plane
-    reach = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)]) @ plane
+    front, face, reach = _palm_front(robot, rows)
+    plane = _palm_plane(front)  # (3, 2) the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     spheres = _finger_spheres(robot)
@@ -262,7 +279,7 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
         B = min(BATCH, max_tries - counts["tried"])
         counts["tried"] += B
         R = Rotation.random(B, random_state=rng).as_matrix()  # (B, 3, 3) palm orientations
-        lateral = reach.min(axis=0) + rng.random((B, 2)) * np.ptp(reach, axis=0)
+        lateral = reach[0] + rng.random((B, 2)) * (reach[1] - reach[0])
         gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
         d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
         c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front  # object centre, palm

@@ -21,6 +21,7 @@ from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver import GraspResult, Solver, solve, solve_many
+from graspnet_torch.solver.api import settings_of
 from graspnet_torch.synthesis.candidates import (
     FRICTION,
     ContactSet,
@@ -168,7 +169,8 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
     session = Solver(robot, trials=1, seed=seed, solver=settings)
     grasps: list[SynthesizedGrasp] = []
     tried = 0
-    sets = iter_contact_sets(robot, obj, fingers, seed, max_tries=TRIES_PER_SET * candidates, stats=t)
+    sets = iter_contact_sets(robot, obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
+                             max_tries=TRIES_PER_SET * candidates, stats=t)
     while tried < candidates:
         t1 = time.perf_counter()
         batch = next(sets, None)
@@ -201,7 +203,8 @@ def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], c
             ) -> list[SynthesizedGrasp]:
     """``start="random"`` (:func:`synthesize_grasps`)."""
     t0 = time.perf_counter()
-    sets = pad_contact_sets(robot, obj, candidates, fingers, seed, stats=t)
+    cone = settings_of(robot, settings, None, None, None)[0].normal_cone_deg
+    sets = pad_contact_sets(robot, obj, candidates, fingers, seed, cone_deg=cone, stats=t)
     t1 = time.perf_counter()
     ranked = rank_sets(sets, obj)[: solve_top or 2 * n_grasps]
     problems = [placeholder_problem(robot, obj, fingers, s.contacts) for s, _ in ranked]

@@ -10,7 +10,8 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
-from graspnet_torch.collision.proxy import CollisionProxy
+from graspnet_torch.collision.proxy import FINGER_GAP_M, CollisionProxy
+from graspnet_torch.collision.scene import finger_pairs
 from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture
@@ -225,3 +226,23 @@ def test_overlapping_finger_pairs_agree_with_fcl_fingers_through_each_other():
             seen += (k, frozenset((x, y))) in found
     assert through > 20  # random postures put fingers through each other
     assert seen / through >= 0.9, (seen, through)
+
+
+def test_overlapping_finger_pairs_are_every_overlapping_sphere_pair():
+    """The links-first test (bounding spheres, then the spheres of the pairs that meet) finds
+    exactly the sphere pairs a test of every pair of two apart links' spheres finds."""
+    hand = gt.load_robot("hand")
+    problem = gt.GraspProblem.from_task("glass3")
+    proxy = CollisionProxy(hand, problem, dtype=torch.float64, touching=False, fingers_apart=True)
+    pose, q = sample_hand_configurations(hand, palm_search_space(hand, problem), 200, torch.Generator().manual_seed(5))
+    centres = proxy.sphere_centres(pose_to_rt(pose), q).flatten(1, 2)
+    t, a, b = proxy.overlapping_pairs(centres)
+    link, r = proxy.sphere_links(), proxy.sphere_radii()
+    apart = {frozenset((proxy.links.index(x), proxy.links.index(y))) for x, y in finger_pairs(hand)}
+    pair = torch.tensor([[frozenset((int(x), int(y))) in apart for y in link] for x in link])
+    pair &= (r[:, None] > 0) & (r[None, :] > 0)
+    gap = (centres[:, :, None] - centres[:, None, :]).norm(dim=-1)  # (T, S, S): every pair
+    k, i, j = ((gap < r[:, None] + r[None, :] + FINGER_GAP_M) & pair.triu(1)).nonzero(as_tuple=True)
+    want = set(zip(k.tolist(), i.tolist(), j.tolist(), strict=True))
+    got = {(int(k), min(int(i), int(j)), max(int(i), int(j))) for k, i, j in zip(t, a, b, strict=True)}
+    assert len(want) > 50 and got == want

@@ -100,7 +100,7 @@ def test_processes_over_the_objects_give_the_same_grasps(tmp_path, monkeypatch):
     monkeypatch.setattr(synthesis, "pick_objects", lambda n, seed: [("cube", cube), ("sphere", sphere)][:n])
     numbers = []
     for jobs in (1, 2):
-        cfg = SynthesisExperimentCfg(objects=2, seed=3, candidates=6, grasps=2, robots=("hand",), baseline=False,
+        cfg = SynthesisExperimentCfg(objects=2, seed=3, candidates=6, grasps=2, robots=("hand",), baseline=(),
                                      jobs=jobs)
         report = run_synthesis(cfg, tmp_path / str(jobs))
         rows = report.results["hand", "synthesis"]

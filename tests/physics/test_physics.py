@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -203,3 +204,46 @@ def test_model_of_mimic_prismatic_and_mesh_links(tmp_path, pinch):
     meshy = gt.load_robot(write_robot(tmp_path / "mesh", mesh_hand_urdf('<mesh filename="palm.obj"/>')))
     model, _ = _frames_agree(meshy, meshy.home_posture(), pinch[0].object)
     assert model.nmesh == 1
+
+
+@needs_mujoco
+@pytest.mark.skipif(importlib.util.find_spec("robot_properties_fingers") is None,
+                    reason="the TriFinger URDF needs the 'robot_properties_fingers' package")
+def test_the_urdfs_inertials_are_the_models_mass_and_inertia(tmp_path, pinch):
+    """TriFinger's links carry inertials (one turned here by rpy 0.3 0.2 0.1): the model compiles,
+    and each body's mass and inertia tensor, in the body's axes, are the URDF's."""
+    import mujoco
+    import yaml
+    from scipy.spatial.transform import Rotation
+
+    from graspnet_torch.paths import repo_root
+
+    example = repo_root() / "examples" / "trifinger" / "trifinger.yaml"
+    urdf = Path(importlib.util.find_spec("robot_properties_fingers").submodule_search_locations[0])
+    text = (urdf / "urdf" / "pro" / "trifingerpro.urdf").read_text()
+    turned = '<origin rpy="0.3 0.2 0.1" xyz="0.006 0.122 0.000"/>'
+    text = text.replace('<origin rpy="0 0 0" xyz="0.006 0.122 0.000"/>', turned, 1)
+    assert turned in text
+    (tmp_path / "trifinger.urdf").write_text(text)
+    cfg = yaml.safe_load(example.read_text())
+    cfg["urdf"] = str(tmp_path / "trifinger.urdf")
+    (tmp_path / "trifinger.yaml").write_text(yaml.safe_dump(cfg))
+    robot = gt.load_robot(tmp_path / "trifinger.yaml")
+    model, _ = _frames_agree(robot, robot.home_posture(), pinch[0].object)
+    checked = 0
+    for link in robot.urdf.robot.links:
+        inertial = link.inertial
+        if inertial is None or not inertial.mass:
+            continue
+        i = inertial.inertia
+        R = Rotation.from_euler("xyz", inertial.origin.rpy).as_matrix()
+        want = R @ np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]]) @ R.T
+        body = model.body(link.name).id
+        Q = np.zeros(9)
+        mujoco.mju_quat2Mat(Q, model.body_iquat[body])
+        Q = Q.reshape(3, 3)
+        assert model.body_mass[body] == pytest.approx(inertial.mass)
+        np.testing.assert_allclose(Q @ np.diag(model.body_inertia[body]) @ Q.T, want, atol=1e-9)
+        np.testing.assert_allclose(model.body_ipos[body], inertial.origin.xyz, atol=1e-9)
+        checked += 1
+    assert checked >= 12

@@ -7,6 +7,7 @@ import importlib.util
 
 import numpy as np
 import pytest
+import torch
 import yaml
 
 import graspnet_torch as gt
@@ -100,26 +101,77 @@ def test_a_gripper_has_no_pads(robots):
     assert robots["manus"].pads == {}
 
 
-@pytest.mark.skipif(not HAS_TRIFINGER, reason="the TriFinger URDF needs the 'robot_properties_fingers' package")
-def test_trifinger_pads_lie_on_its_tip_meshes_along_the_closing_direction():
+def _trifinger(tmp_path, pads: bool) -> gt.Robot:
+    """The TriFinger example, as shipped (its config's pads) or with the pads left to be derived."""
+    data = yaml.safe_load(TRIFINGER.read_text())
+    if not pads:
+        for finger in data["fingers"].values():
+            finger.pop("pad")
+    path = tmp_path / "trifinger.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return gt.load_robot(path)
+
+
+def _surface_distance(robot: gt.Robot, link: str, point: np.ndarray) -> tuple[float, np.ndarray]:
     import trimesh
 
-    robot = gt.load_robot(TRIFINGER)
+    shape = next(s for s in link_shapes(robot.urdf, "collision") if s.link == link and s.kind == "mesh")
+    vertices = np.asarray(shape.mesh.vertices) @ shape.origin[:3, :3].T + shape.origin[:3, 3]
+    surface = trimesh.Trimesh(vertices, np.asarray(shape.mesh.faces), process=False)
+    return float(trimesh.proximity.closest_point(surface, point[None])[1][0]), vertices
+
+
+@pytest.mark.skipif(not HAS_TRIFINGER, reason="the TriFinger URDF needs the 'robot_properties_fingers' package")
+def test_trifinger_derived_pads_lie_on_its_tip_meshes_along_the_closing_direction(tmp_path):
+    robot = _trifinger(tmp_path, pads=False)
     pads = robot.pads
     closing = _closing_directions(robot)
-    meshes = {s.link: s for s in link_shapes(robot.urdf, "collision") if s.kind == "mesh"}
     assert set(pads) == {"f0", "f120", "f240"}
     for finger, pad in pads.items():
         assert pad.link == robot.fingers[finger].chain.tip
         np.testing.assert_allclose(pad.normal, closing[finger], atol=1e-6)
         assert np.linalg.norm(pad.normal) == pytest.approx(1.0)
-        shape = meshes[pad.link]
-        vertices = np.asarray(shape.mesh.vertices) @ shape.origin[:3, :3].T + shape.origin[:3, 3]
-        surface = trimesh.Trimesh(vertices, np.asarray(shape.mesh.faces), process=False)
-        _, dist, _ = trimesh.proximity.closest_point(surface, pad.point[None])
-        assert dist[0] < 1e-6  # on the tip's surface
+        dist, vertices = _surface_distance(robot, pad.link, pad.point)
+        assert dist < 1e-6  # on the tip's surface
         assert pad.depth == pytest.approx(float((vertices @ pad.normal).max()), abs=5e-4)  # the support height
         assert 0.005 < pad.depth < 0.02
+
+
+@pytest.mark.skipif(not HAS_TRIFINGER, reason="the TriFinger URDF needs the 'robot_properties_fingers' package")
+def test_trifinger_config_pads_face_the_holders_axis_where_the_tips_close(tmp_path):
+    """The example's pads lie on the tip spheres, and where the three tips close on an object on
+    the holder's axis (0.22 m below it, 3 cm from the axis: joints by least squares) they face the
+    axis within 10 degrees; the derived pads (the last joint's closing side) face away from it by
+    more than 60."""
+    from scipy.optimize import least_squares
+
+    (tmp_path / "derived").mkdir()
+    robot, other = _trifinger(tmp_path, pads=True), _trifinger(tmp_path / "derived", pads=False)
+    home = robot.home_posture()
+    lo, hi = (np.asarray(a) for a in robot.finger_limits)
+    q = home.fingers.numpy().copy()
+    home_tips = robot.fingertips_palm(home.fingers).numpy()
+    for i in range(3):
+        heading = home_tips[i, :2] / np.linalg.norm(home_tips[i, :2])
+        target = np.array([*(0.03 * heading), -0.22])
+
+        def miss(x, i=i, target=target):
+            moved = q.copy()
+            moved[i] = x
+            return robot.fingertips_palm(torch.as_tensor(moved)).numpy()[i] - target
+
+        q[i] = least_squares(miss, q[i], bounds=(lo[i], hi[i])).x
+        assert np.linalg.norm(miss(q[i])) < 1e-6
+    posture = gt.Posture(home.palm_pose, torch.as_tensor(q), home.body)
+    frames = robot.link_frames(posture)
+    for k, finger in enumerate(robot.finger_names):
+        R = frames[robot.fingers[finger].chain.tip][:3, :3]
+        tip = robot.fingertips_palm(torch.as_tensor(q)).numpy()[k]
+        to_axis = -np.array([tip[0], tip[1], 0.0]) / np.linalg.norm(tip[:2])
+        pad = robot.pads[finger]
+        assert _surface_distance(robot, pad.link, pad.point)[0] < 5e-4  # on the tip sphere (radius 10 mm)
+        assert np.degrees(np.arccos(R @ pad.normal @ to_axis)) < 10
+        assert np.degrees(np.arccos(R @ other.pads[finger].normal @ to_axis)) > 60
 
 
 def _hand_with(tmp_path, finger: str = "index", **chain) -> gt.Robot:
