@@ -9,8 +9,9 @@ Every collision primitive of the URDF becomes a few spheres fixed in its link:
   flat ends by 3r/4 on the axis (the URDF's joint spheres sit there for most links);
 - a box becomes spheres of radius rho (its smallest half-extent) on a grid over the box shrunk
   by rho, at most rho apart: a slab with rounded edges;
-- a mesh becomes the spheres of its oriented bounding box, grown so that they cover the mesh
-  (:func:`mesh_box`).
+- a mesh becomes spheres that hug it, within a slack of it either way
+  (:func:`~graspnet_torch.collision.mesh_spheres.mesh_spheres`; its grown oriented bounding box,
+  :func:`mesh_box`, stays the self-collision model's primitive).
 
 Each sphere hangs from one level frame of the robot's chains
 (:func:`~graspnet_torch.robot.frames.link_attachments`); :func:`sphere_clusters` cuts each link's
@@ -59,8 +60,8 @@ def mesh_box(shape: LinkShape) -> LinkShape:
 
 
 def shape_spheres(shape: LinkShape) -> tuple[np.ndarray, np.ndarray]:
-    """A link shape as spheres in its link's frame: centres (k, 3), radii (k,); a mesh as its box
-    (:func:`mesh_box`)."""
+    """A link shape as spheres in its link's frame: centres (k, 3), radii (k,); a mesh by
+    :func:`~graspnet_torch.collision.mesh_spheres.mesh_spheres` (once per file and scale)."""
     if shape.kind == "mesh":
         local, radii = mesh_spheres(shape.mesh, mesh_key(shape.shape.mesh, shape.shape.scale))
         return local @ shape.origin[:3, :3].T + shape.origin[:3, 3], radii
