@@ -119,7 +119,7 @@ _JOB = ("defaults", "hydra")  # a job file's keys that are Hydra's
 # dataclasses (scripts/sync_defaults.py, `make sync-defaults`; tests/test_defaults_files.py fails when
 # one differs), never by hand. The experiments' files: graspnet_torch.experiments.DEFAULTS_FILES.
 DEFAULTS_FILES = (
-    DefaultsFile("solver/srv.yaml", SolverCfg),
+    DefaultsFile("solver/srv.yaml", SolverCfg, unset=True),
     DefaultsFile("srv/default.yaml", SRVNetCfg, unset=True),
     DefaultsFile("reward/default.yaml", RewardCfg, unset=True),
     DefaultsFile("noise/none.yaml", NoiseCfg),

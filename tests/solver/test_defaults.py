@@ -40,3 +40,20 @@ def test_bad_solver_defaults_are_refused_naming_the_robots_file(tmp_path, defaul
 def test_the_shipped_solver_defaults_pass():
     for name in gt.available_robots():
         check_solver_defaults(gt.load_robot_cfg(name))
+
+
+def test_the_command_lines_solver_group_leaves_the_cone_and_squeeze_to_the_robot(tmp_path):
+    """configs/solver/srv.yaml writes normal_cone_deg and squeeze_mm as null: the robot's
+    solver_defaults where it sets them, else the settings' defaults; a value given wins."""
+    from graspnet_torch.jobs.solve_grasp import job_settings
+    from graspnet_torch.solver.config import SolverCfg
+
+    group = yaml.safe_load((configs_dir() / "solver" / "srv.yaml").read_text())
+    assert group["normal_cone_deg"] is None and group["squeeze_mm"] is None
+    robot = _hand_cfg(tmp_path, {"solver": {"normal_cone_deg": 60, "squeeze_mm": 15}})
+    plain = gt.load_robot_cfg("hand")
+    for given, cfg, want in (({}, robot, (60, 15)), ({}, plain, (SolverCfg.normal_cone_deg, SolverCfg.squeeze_mm)),
+                             ({"normal_cone_deg": 45}, robot, (45, 15))):
+        job, groups, _ = job_settings({"solver": {**group, **given}})
+        _, solver = with_robot_defaults(job, groups, cfg)
+        assert (solver.normal_cone_deg, solver.squeeze_mm) == want
