@@ -13,7 +13,7 @@ import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.paths import repo_root
-from graspnet_torch.settings import build
+from graspnet_torch.settings import build, unset
 from graspnet_torch.solver import SolverCfg
 from graspnet_torch.solver.loop import enough_succeeded
 
@@ -139,7 +139,7 @@ def test_enough_succeeded_counts_per_problem():
 def test_every_solver_config_composes_into_its_settings(name):
     with initialize_config_dir(config_dir=str(repo_root() / "configs"), version_base=None):
         cfg = compose("solve_grasp", overrides=[f"solver={name}"])
-    solver = build(SolverCfg, OmegaConf.to_container(cfg.solver), "solver")
+    solver = build(SolverCfg, unset(SolverCfg, OmegaConf.to_container(cfg.solver)), "solver")  # null: the robot's
     assert solver.method == {"paper": "srv"}.get(name, name)
     if name == "paper":  # the command line's paper protocol is the Python one
         assert solver == SolverCfg.paper()
