@@ -7,7 +7,8 @@ posture) that overlap. Two phases: each link's spheres have a bounding sphere (i
 of the link's sphere centres, which moves rigidly with the link; its radius fixed), and a link
 pair's spheres are compared only in the rows where the two bounding spheres meet. The cost then
 follows the link pairs that come near (a hand's fingertips closing on an object), not the square
-of every finger sphere (about 1400 on TriFinger's meshes).
+of every finger sphere (about 1400 on TriFinger's meshes). Both phases are batched: each link's
+spheres are padded to one width, and the near (row, link pair) entries are measured in one call.
 """
 
 from __future__ import annotations
@@ -36,21 +37,25 @@ class FingerOverlaps:
     def __init__(self, sphere_link: Tensor, radii: Tensor, local: Tensor, pairs: Sequence[tuple[int, int]]):
         self.radii = radii
         valid = radii > 0
-        self.members: dict[int, Tensor] = {}
-        for a, b in pairs:
-            for li in (a, b):
-                if li not in self.members:
-                    self.members[li] = ((sphere_link == li) & valid).nonzero().squeeze(1)
-        self.pairs = [(a, b) for a, b in pairs if self.members[a].numel() and self.members[b].numel()]
-        self.links = sorted({li for p in self.pairs for li in p})
-        slot = {li: k for k, li in enumerate(self.links)}
-        self._slot_pairs = torch.tensor([[slot[a], slot[b]] for a, b in self.pairs], dtype=torch.long).reshape(-1, 2)
-        bound = []
-        for li in self.links:
-            idx = self.members[li]
-            mid = local[idx].mean(0)
-            bound.append(float(((local[idx] - mid).norm(dim=-1) + radii[idx]).max()))
-        self.bound_r = torch.tensor(bound, dtype=radii.dtype, device=radii.device)  # (L',)
+        members = {li: ((sphere_link == li) & valid).nonzero().squeeze(1) for p in pairs for li in p}
+        self.pairs = [(a, b) for a, b in pairs if members[a].numel() and members[b].numel()]
+        links = sorted({li for p in self.pairs for li in p})
+        slot = {li: k for k, li in enumerate(links)}
+        width = max((members[li].numel() for li in links), default=0)
+        # each tested link's spheres, padded to one width: (L', K) indices (padding: sphere 0) and mask
+        self._index = torch.zeros(len(links), width, dtype=torch.long, device=radii.device)
+        self._mask = torch.zeros(len(links), width, dtype=torch.bool, device=radii.device)
+        for k, li in enumerate(links):
+            self._index[k, : members[li].numel()] = members[li]
+            self._mask[k, : members[li].numel()] = True
+        self._a = torch.tensor([slot[a] for a, _ in self.pairs], dtype=torch.long, device=radii.device)
+        self._b = torch.tensor([slot[b] for _, b in self.pairs], dtype=torch.long, device=radii.device)
+        self._r = torch.where(self._mask, radii[self._index], radii.new_zeros(()))  # (L', K)
+        count = self._mask.sum(1, keepdim=True).clamp(min=1)
+        mid = (local[self._index] * self._mask.unsqueeze(-1)).sum(1) / count  # (L', 3)
+        reach = (local[self._index] - mid.unsqueeze(1)).norm(dim=-1) + self._r
+        self.bound_r = torch.where(self._mask, reach, reach.new_zeros(())).amax(1)  # (L',)
+        self._count = count
 
     def __bool__(self) -> bool:
         return bool(self.pairs)
@@ -61,19 +66,19 @@ class FingerOverlaps:
         empty = torch.zeros(0, dtype=torch.long, device=centres.device)
         if not self.pairs:
             return empty, empty, empty
-        mids = torch.stack([centres[:, self.members[li]].mean(1) for li in self.links], 1)  # (T, L', 3)
-        a, b = self._slot_pairs[:, 0], self._slot_pairs[:, 1]
+        grouped = centres[:, self._index]  # (T, L', K, 3)
+        mids = (grouped * self._mask.unsqueeze(-1)).sum(2) / self._count  # (T, L', 3)
+        a, b = self._a, self._b
         gap = (mids[:, a] - mids[:, b]).norm(dim=-1)  # (T, P)
-        near = gap < (self.bound_r[a] + self.bound_r[b] + FINGER_GAP_M)
-        found = [(empty, empty, empty)]
-        for p in near.any(0).nonzero().squeeze(1).tolist():
-            rows = near[:, p].nonzero().squeeze(1)
-            i, j = self.members[self.pairs[p][0]], self.members[self.pairs[p][1]]
-            d = torch.cdist(centres[rows][:, i], centres[rows][:, j], compute_mode="donot_use_mm_for_euclid_dist")
-            t, u, v = (d < self.radii[i][:, None] + self.radii[j][None, :] + FINGER_GAP_M).nonzero(as_tuple=True)
-            found.append((rows[t], i[u], j[v]))
-        t, i, j = (torch.cat(x) for x in zip(*found, strict=True))
-        return t, i, j
+        t, p = (gap < self.bound_r[a] + self.bound_r[b] + FINGER_GAP_M).nonzero(as_tuple=True)
+        if t.numel() == 0:
+            return empty, empty, empty
+        la, lb = a[p], b[p]
+        d = torch.cdist(grouped[t, la], grouped[t, lb], compute_mode="donot_use_mm_for_euclid_dist")  # (N, K, K)
+        hit = d < self._r[la].unsqueeze(2) + self._r[lb].unsqueeze(1) + FINGER_GAP_M
+        hit &= self._mask[la].unsqueeze(2) & self._mask[lb].unsqueeze(1)
+        n, u, v = hit.nonzero(as_tuple=True)
+        return t[n], self._index[la[n], u], self._index[lb[n], v]
 
     def overlaps(self, ci: Tensor, cj: Tensor, i: Tensor, j: Tensor) -> Tensor:
         """The overlap r_i + r_j + :data:`FINGER_GAP_M` - |c_i - c_j|, clamped at 0, of spheres i and

@@ -41,7 +41,8 @@ def test_objects_drawn_by_seed_from_the_unused_ones():
 
 @pytest.mark.parametrize(("data", "key"), [({"objects": 0}, "objects"), ({"robots": ["nope"]}, "robots"),
                                            ({"candidates": 0}, "candidates"), ({"seed": -1}, "seed"),
-                                           ({"baseline": "yes"}, "baseline"), ({"jobs": 0}, "jobs"),
+                                           ({"baseline": "yes"}, "baseline"), ({"baseline": ["nope"]}, "baseline"),
+                                           ({"jobs": 0}, "jobs"),
                                            ({"start": "proposal"}, "start")])
 def test_a_bad_setting_is_refused_with_one_line(data, key):
     with pytest.raises(ConfigError, match=rf"experiments\.synthesis\.{key}") as err:
