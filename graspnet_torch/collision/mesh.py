@@ -12,7 +12,7 @@ engine of record adds two measurements of its own, against the mesh itself:
 - *depth* of a link: the largest depth below the surface of points spread over the link's
   geometry (its surface, at most ``SPACING`` apart, and its vertices), i.e. how far the link
   reaches into the object: for the points inside, their distance to the surface
-  (:meth:`MeshQuery.distance`: a KD-tree of the finely subdivided surface, and exact point-triangle
+  (:meth:`MeshQuery.distance`: a KD-tree of the finely cut surface, and exact point-triangle
   distances where that bound cannot decide against the tolerance).
 """
 
@@ -28,8 +28,8 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "mesh_query", "point_triangle_distance",
-           "shape_points"]
+__all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "lattice_points", "mesh_query",
+           "point_triangle_distance", "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
@@ -55,6 +55,27 @@ def shape_points(kind: str, size: tuple[float, ...], mesh=None) -> np.ndarray:
     count = min(MAX_POINTS, max(64, math.ceil(surface.area / SPACING**2)))
     samples, _ = trimesh.sample.sample_surface_even(surface, count, seed=0)
     return np.concatenate([np.asarray(surface.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
+
+
+def lattice_points(triangles: np.ndarray, s: float) -> np.ndarray:
+    """(N, 3) the vertices of each triangle (M, 3, 3) cut into n^2 copies of itself, n the least
+    with every edge over n at most ``s``: the points ``a + (i (b - a) + j (c - a)) / n``, i, j >= 0,
+    i + j <= n (an edge's points once per triangle sharing it). Every point of the surface lies
+    within s / sqrt(3) of one of them (the circumradius of a triangle of edges at most s, or half its
+    longest edge where obtuse)."""
+    a, b, c = (triangles[:, k] for k in range(3))
+    longest = np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                        np.linalg.norm(a - c, axis=1)]).max(axis=0)
+    n = np.maximum(1, np.ceil(longest / s - 1e-9)).astype(int)
+    out = []
+    for m in np.unique(n):
+        i, j = (v.ravel() for v in np.meshgrid(np.arange(m + 1), np.arange(m + 1), indexing="ij"))
+        keep = i + j <= m
+        u, v = i[keep] / m, j[keep] / m  # (P,) the lattice's barycentric coordinates
+        rows = n == m
+        out.append((a[rows, None] + u[None, :, None] * (b - a)[rows, None] + v[None, :, None] * (c - a)[rows, None])
+                   .reshape(-1, 3))
+    return np.concatenate(out) if out else np.zeros((0, 3))
 
 
 def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -171,21 +192,19 @@ class MeshQuery:
         return out
 
     def _vertices(self):
-        """A KD-tree over the mesh subdivided until every edge is at most ``s``, and ``h``: every
-        surface point lies within h = s / sqrt(3) of one of its vertices (a triangle's
-        circumradius). s = 1 mm, coarser for a large mesh (at most about 200,000 vertices)."""
+        """A KD-tree over the mesh's triangles cut until every edge is at most ``s``
+        (:func:`lattice_points`), and ``h``: every surface point lies within h = s / sqrt(3) of one
+        of its points. s = 1 mm, coarser for a large mesh (at most about 200,000 vertices)."""
         if self._fine is None:
-            import trimesh
             from scipy.spatial import cKDTree
 
             s = max(SPACING / 2, math.sqrt(float(self.mesh.area) / 200_000))
-            vertices, _ = trimesh.remesh.subdivide_to_size(self.mesh.vertices, self.mesh.faces, max_edge=s)
-            self._fine = (cKDTree(vertices), s / math.sqrt(3))
+            self._fine = (cKDTree(lattice_points(self.triangles, s)), s / math.sqrt(3))
         return self._fine
 
     def distance(self, points: np.ndarray, tolerance: float) -> np.ndarray:
         """(N,) distances to the surface, decided exactly against ``tolerance``: the nearest vertex
-        of the subdivided mesh bounds a distance d within [d_v - h, d_v]; points whose bound
+        of the finely cut mesh bounds a distance d within [d_v - h, d_v]; points whose bound
         straddles ``tolerance`` get their exact distance to the triangles near them. Distances
         beyond ``MEASURED`` (or beyond the tolerance plus h, if more) are reported as that."""
         tree, h = self._vertices()

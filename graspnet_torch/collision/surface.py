@@ -139,6 +139,8 @@ def touch_points(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray
     may put the point off it, see :func:`surface_normals`). A mesh's come from trimesh's closest
     point (its R-tree; within 20 micrometres of the exact distance where measured) and that
     triangle's normal, on the surface by construction: one pass, for searches over many points."""
+    if not len(points):
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
     if obj.kind != "mesh":
         n, d = _measure(obj, points)
         contacts = np.asarray(points, dtype=np.float64).reshape(-1, 3) - d[:, None] * n

@@ -241,6 +241,20 @@ class FingerKernel:
         self._selected[key] = sub
         return sub
 
+    def chain_kernel(self, fingers: Sequence[int]) -> ChainKernel:
+        """The :class:`ChainKernel` of the full chains of ``fingers`` (indices of this stacked
+        kernel's chains, in that order, all with the same joint types: joints ``(..., len(fingers),
+        n_all)``), made from this kernel's parts (:meth:`ChainKernel.rows`, the same object for the
+        same rows): FK and Jacobians of a subset of a robot's fingers without tracing them anew."""
+        group_of = {k: (g, row) for g in self._groups for row, k in enumerate(g.idx)}
+        key = [int(k) for k in fingers]
+        if not self.stacked or not key or any(k not in group_of for k in key):
+            raise ValueError(f"chain_kernel: fingers {key} of a stacked kernel of {self.num_chains} finger(s)")
+        groups = {id(group_of[k][0]) for k in key}
+        if len(groups) > 1:
+            raise ValueError(f"chain_kernel: fingers {key} differ in their joint types")
+        return group_of[key[0]][0].kernel.rows([group_of[k][1] for k in key])
+
     @property
     def specs(self) -> tuple[ChainSpec, ...]:
         return tuple(c.spec for c in self.chains)

@@ -75,6 +75,10 @@ class Shape:
     mesh: Path | None = None
     scale: float | tuple[float, float, float] = 1.0
 
+    def __post_init__(self) -> None:  # a pose or size given as a list (Python callers) held as the others are
+        object.__setattr__(self, "pose", np.asarray(self.pose, dtype=np.float64))
+        object.__setattr__(self, "size", tuple(float(v) for v in self.size))
+
     @classmethod
     def from_mapping(cls, data: Any, where: str, folder: Path | None = None,
                      allow_outside_paths: bool = False) -> Shape:

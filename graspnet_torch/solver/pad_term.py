@@ -39,7 +39,6 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.collision.surface import surface_normals
-from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.solver.contact import ContactRule
 from graspnet_torch.tasks.problem import GraspProblem
@@ -108,8 +107,8 @@ class PadTerm:
             for g, k in enumerate(idx):
                 A[g, :, : chains[k].n_joints] = chains[k].coupling
             c = np.stack([chains[k].coupling_offset for k in idx])
-            self.groups.append((idx, ChainKernel([chains[k].spec for k in idx]), torch.as_tensor(A),
-                                torch.as_tensor(c)))
+            kernel = robot.finger_kernel.chain_kernel([robot.finger_index(fingers[k]) for k in idx])
+            self.groups.append((idx, kernel, torch.as_tensor(A), torch.as_tensor(c)))
         self._cast: dict[tuple, tuple[Tensor, ...]] = {}
 
     def _consts(self, like: Tensor) -> tuple[Tensor, Tensor, Tensor, list[tuple[Tensor, Tensor]]]:

@@ -184,21 +184,28 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
 
 
 def _pad_touch(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
-               frames: np.ndarray, fingers: Sequence[str], rows: list[int]
+               frames: np.ndarray, fingers: Sequence[str], rows: list[int], touched: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where each chosen pad touches: (N, k) its pad normal's angle (degrees) to the inward normal
     at its touch point, inf where it does not touch (the touch point off the surface by more than
     ``TOUCH_M``, e.g. a box's edge; the tip farther than ``TOUCH_M`` from where the surface model
     puts it for that contact, the pad's depth out along the surface normal, as on a mesh's edge
-    whose faces turn away; the tip inside the object), those normals (N, k, 3) and the touch points (N, k, 3):
-    head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``
+    whose faces turn away; the tip inside the object; a pad whose closing line touched nothing:
+    ``touched`` (N, k) False, not measured, its normal and point 0), those normals (N, k, 3) and the
+    touch points (N, k, 3): head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``
     (:func:`~graspnet_torch.collision.surface.touch_points`: exact)."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
-    t = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
-    contacts, outward, off_by = touch_points(obj, t)
-    depth = np.tile([robot.pads[f].depth for f in fingers], len(q))
-    target = contacts + depth[:, None] * outward  # the surface model's tip target (pad_targets)
-    miss = (off_by > TOUCH_M) | (np.linalg.norm(target - t, axis=1) > TOUCH_M) | (surface_distance_near(obj, t) <= 0)
+    t_all = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
+    measured = np.flatnonzero(touched.reshape(-1))
+    t = t_all[measured]
+    contacts_at, outward_at, off_by = touch_points(obj, t)
+    depth = np.tile([robot.pads[f].depth for f in fingers], len(q))[measured]
+    target = contacts_at + depth[:, None] * outward_at  # the surface model's tip target (pad_targets)
+    miss = np.ones(len(t_all), dtype=bool)
+    miss[measured] = ((off_by > TOUCH_M) | (np.linalg.norm(target - t, axis=1) > TOUCH_M)
+                      | (surface_distance_near(obj, t) <= 0))
+    contacts, outward = np.zeros_like(t_all), np.zeros_like(t_all)
+    contacts[measured], outward[measured] = contacts_at, outward_at
     shape = (len(q), len(rows))
     inward = -outward.reshape(*shape, 3)
     pad = np.einsum("nkij,kj->nki", R, np.stack([robot.pads[f].normal for f in fingers]))
@@ -295,7 +302,8 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
         q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
         q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth)
         names, frames = robot.link_frames_of(None, q_touch, heads)
-        angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows)
+        angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows,
+                                            touched[:, rows])
         k = len(rows)
         angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
         clear = _clearance(obj, names, frames, line_spheres, F).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)

@@ -15,7 +15,7 @@ import yaml
 import graspnet_torch as gt
 from graspnet_torch.collision import CollisionScene
 from graspnet_torch.collision.convex import convex_pieces, pieces_distance
-from graspnet_torch.collision.mesh import MeshQuery, point_triangle_distance
+from graspnet_torch.collision.mesh import MeshQuery, lattice_points, point_triangle_distance
 from graspnet_torch.collision.problems import closure_problem
 from graspnet_torch.collision.proxy import CollisionProxy
 from graspnet_torch.robot.robot import Posture
@@ -45,6 +45,28 @@ def test_point_triangle_distances_agree_with_a_dense_search():
     got = point_triangle_distance(points, triangles).min(1)
     assert np.all(got <= want + 1e-12)  # the exact distance is at most the grid's
     np.testing.assert_allclose(got, want, atol=5e-4)  # and the grid is fine enough to come within 0.5 mm
+
+
+def test_a_cut_surface_comes_within_its_bound_of_every_surface_point():
+    """Every point of random triangles (acute and obtuse, long and short) lies within s / sqrt(3)
+    of the lattice cut at s (what the depth's KD-tree bound needs), the triangles' corners among
+    its points, and no point off the triangles."""
+    rng = np.random.default_rng(1)
+    triangles = rng.normal(scale=0.01, size=(40, 3, 3))
+    triangles[:5, 2] = triangles[:5, 0] + 0.5 * (triangles[:5, 1] - triangles[:5, 0]) + 1e-4  # nearly flat
+    s = 0.002
+    points = lattice_points(triangles, s)
+    u, v = rng.random((2, 4000))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    k = rng.integers(0, len(triangles), 4000)
+    t = triangles[k]
+    surface = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+    nearest = np.linalg.norm(surface[:, None] - points[None], axis=-1).min(1)
+    assert nearest.max() <= s / np.sqrt(3) + 1e-12
+    corners = triangles.reshape(-1, 3)
+    assert np.linalg.norm(corners[:, None] - points[None], axis=-1).min(1).max() < 1e-12
+    assert point_triangle_distance(points, triangles).min(1).max() < 1e-12
 
 
 def test_inside_and_depth_of_a_closed_mesh():

@@ -112,3 +112,28 @@ def test_nothing_is_shared_between_two_robots(shipped_ik):
             result = solver.solve(gt.random_reachable_problem(robot, 700 + k, 2))
             assert result.robot == robot.name and result.best.total_error_mm < 1.0
     assert a.cache_info()["stacked"] == 1 and b.cache_info() == {"stacked": 0, "subsets": 0}
+
+
+def test_chain_kernels_of_a_subset_equal_ones_built_for_it(hand, gen):
+    """The robot's full-chain kernels of a subset of alike fingers (what the pad term turns its pads
+    with) give the poses and Jacobians of a kernel traced for those chains, bit for bit, the same
+    object each time; fingers of different joint types are refused."""
+    from graspnet_torch.robot.kernel import ChainKernel
+
+    names = hand.finger_names
+    alike = [k for k in range(len(names)) if hand.fingers[names[k]].chain.spec.joint_types
+             == hand.fingers[names[1]].chain.spec.joint_types]
+    assert len(alike) >= 3
+    for rows in (alike[:2], alike[::-1], alike[1:2]):
+        kernel = hand.finger_kernel.chain_kernel(rows)
+        assert kernel is hand.finger_kernel.chain_kernel(list(rows))
+        built = ChainKernel([hand.fingers[names[k]].chain.spec for k in rows])
+        n = built.n_joints
+        q = torch.rand(30, len(rows), n, generator=gen, dtype=torch.float64)
+        for a, b in zip(kernel.pose_jacobian(q), built.pose_jacobian(q), strict=True):
+            assert torch.equal(a, b), rows
+    kinds = {hand.fingers[f].chain.spec.joint_types for f in names}
+    if len(kinds) > 1:
+        other = next(k for k in range(len(names)) if k not in alike)
+        with pytest.raises(ValueError, match="joint types"):
+            hand.finger_kernel.chain_kernel([alike[0], other])

@@ -206,3 +206,13 @@ def test_a_key_of_another_kind_of_robot_is_refused_by_its_schema(robot):
         with pytest.raises(gt.ProblemError, match=rf"'{key}' \(.+\) does not apply to robot '{robot}' "
                                                   rf"\({cfg.kind}\), whose problems give {schema.targets}"):
             gt.GraspProblem.from_mapping(data)
+
+
+def test_a_shape_made_in_python_from_lists_round_trips():
+    """A shape made from plain lists (a Python caller's) holds its pose as an array, as one read from
+    a file does, and writes and reads back the same."""
+    made = gt.Shape("box", [0.05, 0.04, 0.03], [0.0, 0.0, 0.2, 0.0, 0.0, 0.5])
+    assert isinstance(made.pose, np.ndarray) and made.size == (0.05, 0.04, 0.03)
+    again = gt.Shape.from_mapping(made.to_mapping(), "test")
+    assert again.kind == "box" and again.size == made.size
+    np.testing.assert_allclose(again.pose, made.pose, atol=1e-12)
