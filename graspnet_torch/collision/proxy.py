@@ -22,7 +22,8 @@ the touching fingers' distal links excepted, plus colliding pairs of the robot's
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import weakref
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
@@ -33,7 +34,7 @@ from graspnet_torch.collision.finger_overlaps import FINGER_GAP_M, FingerOverlap
 from graspnet_torch.collision.primitives import group_thresholds, primitive_groups
 from graspnet_torch.collision.scene import CollisionScene, environment_obstacles, finger_pairs, self_collision_pairs
 from graspnet_torch.collision.self_collision import SelfCollisionModel
-from graspnet_torch.collision.spheres import CLUSTER, sphere_clusters
+from graspnet_torch.collision.spheres import CLUSTER, SphereClusters, sphere_clusters
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.frames import Attachment, RobotLevels, link_attachments, riding_base_links
 from graspnet_torch.robot.geometry import link_shapes
@@ -45,6 +46,32 @@ __all__ = ["FINGER_GAP_M", "CollisionProxy"]
 
 PENETRATION_CHUNK = 1 << 21  # rows x spheres x elements that :meth:`CollisionProxy.penetrations` takes at once
 DENSE_LIMIT = 1 << 13  # T x clusters x CLUSTER x elements below which every sphere is tested (no broad phase)
+
+
+_ROBOT_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _robot_parts(robot: Robot) -> tuple[list, dict, Callable[[Attachment], int], SphereClusters]:
+    """What every proxy of a robot shares, built once per robot: its links' collision shapes, where
+    each link hangs (its attachment), the frame each attachment's spheres ride (frames stacked in a
+    fixed order: body levels, palm, finger levels finger by finger) and the links as sphere clusters."""
+    parts = _ROBOT_PARTS.get(robot)
+    if parts is None:
+        shapes = link_shapes(robot.urdf, "collision")
+        attach = link_attachments(robot, [shape.link for shape in shapes])
+        body_levels = max((a.level for a in attach.values() if a.kind == "body"), default=0)
+        n_body = body_levels + 1 if robot.body is not None else 0
+        n_f = max((a.level for a in attach.values() if a.kind == "finger"), default=0) + 1
+
+        def frame_id(a: Attachment) -> int:
+            if a.kind == "body":
+                return a.level
+            if a.kind == "palm":
+                return n_body
+            return n_body + 1 + a.finger * n_f + a.level
+
+        parts = _ROBOT_PARTS[robot] = (shapes, attach, frame_id, sphere_clusters(shapes, attach, frame_id))
+    return parts
 
 
 class CollisionProxy:
@@ -92,23 +119,11 @@ class CollisionProxy:
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         problem = problems[0]
         self.n_problems = len(problems)
-        shapes = link_shapes(robot.urdf, "collision")
+        shapes, attach, frame_id, cl = _robot_parts(robot)
         touching_links = CollisionScene.distal_links(robot, shapes, problem.fingers)
-        attach = link_attachments(robot, [shape.link for shape in shapes])
         self.body_levels = max((a.level for a in attach.values() if a.kind == "body"), default=0)
         self.finger_levels = max((a.level for a in attach.values() if a.kind == "finger"), default=0)
-        # frames are stacked in a fixed order: body levels, palm, finger levels finger by finger
-        n_body = self.body_levels + 1 if robot.body is not None else 0
-        n_f = self.finger_levels + 1
-
-        def frame_id(a: Attachment) -> int:
-            if a.kind == "body":
-                return a.level
-            if a.kind == "palm":
-                return n_body
-            return n_body + 1 + a.finger * n_f + a.level
-
-        self.clusters = cl = sphere_clusters(shapes, attach, frame_id)
+        self.clusters = cl
         self.links, self.link_spheres, self.n_spheres = cl.links, cl.link_spheres, cl.n_spheres
         kw = {"dtype": dtype, "device": device}
         self._cluster_frame = torch.tensor(cl.frame, device=device)

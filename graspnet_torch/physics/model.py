@@ -31,6 +31,8 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -238,9 +240,16 @@ def _object(world: ET.Element, asset: ET.Element, obj, cfg: PhysicsCfg) -> None:
     if obj.kind != "mesh":
         _geom(body, obj.kind, _primitive_size(obj.kind, obj.size), None, OBJECT_BITS, mass=f"{cfg.object_mass_kg:.9g}")
         return
-    pieces = convex_pieces(obj.mesh, obj.scale).vertices
-    volumes = [ConvexHull(v).volume for v in pieces]
-    density = cfg.object_mass_kg / max(sum(volumes), 1e-12)  # the pieces overlap little: about the mass asked
-    for k, v in enumerate(pieces):
-        ET.SubElement(asset, "mesh", name=f"object_piece_{k}", vertex=_fmt(v))
+    vertices, volume = _pieces(Path(obj.mesh).resolve(), obj.scale)
+    density = cfg.object_mass_kg / max(volume, 1e-12)  # the pieces overlap little: about the mass asked
+    for k, v in enumerate(vertices):
+        ET.SubElement(asset, "mesh", name=f"object_piece_{k}", vertex=v)
         _geom(body, "mesh", None, None, OBJECT_BITS, mesh=f"object_piece_{k}", density=f"{density:.9g}")
+
+
+@lru_cache(maxsize=32)
+def _pieces(path: Path, scale) -> tuple[tuple[str, ...], float]:
+    """A mesh object's convex pieces as MJCF vertex lists and their volumes' sum (per file and
+    scale: a grasp check per grasp of one object writes them once)."""
+    pieces = convex_pieces(path, scale).vertices
+    return tuple(_fmt(v) for v in pieces), float(sum(ConvexHull(v).volume for v in pieces))
