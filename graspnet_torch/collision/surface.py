@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from graspnet_torch.collision.mesh import closest_on_triangles, mesh_query
+from graspnet_torch.collision.mesh import closest_points, mesh_query
 from graspnet_torch.collision.sdf import distance_grid
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.robot import Robot
@@ -83,16 +83,24 @@ def _mesh(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     query, _ = mesh_query(obj)
     tree, reach = _centres(Path(obj.mesh).resolve(), obj.scale)
     triangles, face_normals = query.triangles, np.asarray(query.mesh.face_normals, dtype=np.float64)
+    if not len(p):
+        return np.zeros((0, 3)), np.zeros(0)
     near, _ = tree.query(p)
     sign = np.where(query.inside(p), -1.0, 1.0)
-    n, dist = np.zeros_like(p), np.zeros(len(p))
-    for i in range(len(p)):
-        idx = np.asarray(tree.query_ball_point(p[i], near[i] + reach + 1e-12), dtype=int)
-        candidates = closest_on_triangles(p[i:i + 1], triangles[idx])[0]  # (m, 3)
-        k = int(np.argmin(np.linalg.norm(candidates - p[i], axis=-1)))
-        j, closest = int(idx[k]), candidates[k]
-        dist[i] = float(np.linalg.norm(p[i] - closest))
-        n[i] = sign[i] * (p[i] - closest) / dist[i] if dist[i] > ON_SURFACE else face_normals[j]
+    lists = tree.query_ball_point(p, near + reach + 1e-12, return_sorted=False)  # each point's candidates
+    counts = np.array([len(c) for c in lists])
+    idx = np.concatenate([np.asarray(c, dtype=int) for c in lists])
+    owner = np.repeat(np.arange(len(p)), counts)
+    candidates = closest_points(p[owner], *(triangles[idx, k] for k in range(3)))  # (pairs, 3)
+    gap = np.linalg.norm(candidates - p[owner], axis=-1)
+    start = np.cumsum(counts) - counts
+    best = np.minimum.reduceat(gap, start)
+    ties = np.flatnonzero(gap == np.repeat(best, counts))
+    first = ties[np.unique(owner[ties], return_index=True)[1]]
+    closest, j = candidates[first], idx[first]  # each point's nearest (the first of equals, in the tree's order)
+    dist = np.linalg.norm(p - closest, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.where((dist > ON_SURFACE)[:, None], sign[:, None] * (p - closest) / dist[:, None], face_normals[j])
     return n, sign * dist
 
 
