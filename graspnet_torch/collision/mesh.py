@@ -90,11 +90,17 @@ def closest_on_triangles(points: np.ndarray, triangles: np.ndarray) -> np.ndarra
     return closest_points(points[:, None, :], *(triangles[None, :, k, :] for k in range(3)))
 
 
+def _tensor(v: np.ndarray) -> torch.Tensor:
+    """A float64 tensor of an array (copied where the array is read-only, e.g. a cached mesh's)."""
+    v = np.asarray(v, dtype=np.float64)
+    return torch.from_numpy(v if v.flags.writeable else v.copy())
+
+
 def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(..., 3) the point of triangle (a, b, c) nearest p, all (..., 3) and broadcast together, by
     the triangle's Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised
     (float64, in torch: a distance grid's millions of pairs in a third of numpy's time)."""
-    p, a, b, c = (torch.as_tensor(np.asarray(v, dtype=np.float64)) for v in (p, a, b, c))
+    p, a, b, c = (_tensor(v) for v in (p, a, b, c))
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
     bp = p - b
