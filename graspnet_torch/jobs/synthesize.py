@@ -59,8 +59,9 @@ class SynthesizeGraspsJobCfg:
     fingers: list[str] = setting(factory=lambda: ["thumb", "index", "middle"])
     grasps: int = setting(5, lo=1, hi=1000)  # the N best grasps kept per object
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
-    trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set (start=random)
-    start: str = setting("sampled", choices=START)  # sampled: each set's solve from its sampled posture; random
+    trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set (start=random, proposal)
+    start: str = setting("sampled", choices=START)  # sampled: each set's solve from its sampled posture; random,
+    # proposal: the search from random starts or the robot's learned posture proposals
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo (gt.simulate_grasp)
     out: str | None = None  # the results folder (None: <run dir>/results)

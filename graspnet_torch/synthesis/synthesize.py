@@ -124,7 +124,12 @@ def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
       ``candidates`` sets were tried: the first verified grasp comes after the first batch.
     - ``"random"``: the paper's search from random starts: the ``candidates`` sets are drawn first,
       the best ``solve_top`` of them (default ``2 n_grasps``) solved as one batch
-      (:func:`gt.solve_many`, ``trials`` learners each).
+      (:func:`gt.solve_many`, ``trials`` learners each, ``solver.start: random``).
+    - ``"proposal"``: that search with its trials started at the robot's learned posture
+      proposals (``solver.start: proposal``; a robot without a proposal model starts at random,
+      said once).
+
+    ``solver`` settings given win over what ``start`` sets.
 
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
     ``solve_s``, ``physics_s``; ``first_s``: to the first grasp that holds every push, None if
@@ -134,7 +139,7 @@ def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
     if start not in START:
         raise ProblemError(f"synthesize_grasps: start {start!r}: one of {', '.join(START)}")
-    settings = {"contact_model": "surface", **(solver or {})}
+    settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
     run = _sampled if start == "sampled" else _random
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
                "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
@@ -146,7 +151,7 @@ def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
     return grasps[:n_grasps]
 
 
-START = ("sampled", "random")
+START = ("sampled", "random", "proposal")
 
 
 def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None, t: dict) -> None:

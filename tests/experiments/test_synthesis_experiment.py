@@ -43,7 +43,7 @@ def test_objects_drawn_by_seed_from_the_unused_ones():
                                            ({"candidates": 0}, "candidates"), ({"seed": -1}, "seed"),
                                            ({"baseline": "yes"}, "baseline"), ({"baseline": ["nope"]}, "baseline"),
                                            ({"jobs": 0}, "jobs"),
-                                           ({"start": "proposal"}, "start")])
+                                           ({"start": "warm"}, "start")])
 def test_a_bad_setting_is_refused_with_one_line(data, key):
     with pytest.raises(ConfigError, match=rf"experiments\.synthesis\.{key}") as err:
         quick_settings(SynthesisExperimentCfg, data, False, "experiments.synthesis")

@@ -142,7 +142,7 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
              ({"fingers": ["thumb"]}, "2 or more different fingers"),
              ({"grasps": 0}, "grasps=0"),
              ({"verify": "mujoco"}, "verify"),
-             ({"start": "proposal"}, "start"),
+             ({"start": "warm"}, "start"),
              ({"scale": -1.0}, "scale=-1"),
              ({"out": str(folder / "box.stl")}, "not a folder")]
     for change, message in cases:

@@ -93,8 +93,22 @@ def test_sampled_starts_land_where_random_ones_search(robot: gt.Robot) -> None:
     assert all(len(g.result.trials) == 1 and g.success for g in warm)
     cold = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0, start="random", trials=4)
     assert cold and all(len(g.result.trials) == 4 and g.success for g in cold)
-    with pytest.raises(gt.ProblemError, match="start 'proposal'"):
-        gt.synthesize_grasps(robot, obj, start="proposal")
+    with pytest.raises(gt.ProblemError, match="start 'warm'"):
+        gt.synthesize_grasps(robot, obj, start="warm")
+
+
+def test_learned_proposals_seed_the_search(robot: gt.Robot) -> None:
+    """start="proposal": the same sets searched with the trials started at the hand's learned
+    posture proposals: grasps of the cube, other postures than the random starts reach."""
+    obj = cube()
+    cold = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0, start="random", trials=4)
+    seeded = gt.synthesize_grasps(robot, obj, n_grasps=2, candidates=8, seed=0, start="proposal", trials=4)
+    assert seeded and all(len(g.result.trials) == 4 and g.success for g in seeded)
+    same = [(a, b) for a in cold for b in seeded if np.array_equal(a.contacts, b.contacts)]
+    assert same  # the same contact sets, ranked alike
+    for a, b in same:
+        for ta, tb in zip(a.result.trials, b.result.trials, strict=True):
+            assert not torch.allclose(trial_posture(robot, ta).fingers, trial_posture(robot, tb).fingers)
 
 
 def test_a_warm_start_without_search_is_one_trial(robot: gt.Robot) -> None:
