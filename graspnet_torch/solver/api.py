@@ -93,6 +93,14 @@ def _stamp(path: Path | None) -> tuple[int, int] | None:
 KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
 
 
+def as_robot(robot: str | Path | RobotCfg | Robot) -> Robot:
+    """A built robot, a shipped robot's name, a robot config or its YAML path -> the robot (built
+    once per process, :func:`robot_and_ik`)."""
+    if isinstance(robot, Robot):
+        return robot
+    return robot_and_ik(str(robot) if isinstance(robot, Path) else robot)[0]
+
+
 def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
     """A problem, a problem file or a shipped task's name -> the problem (a file read once while
     its size and modification time stay the same); one with ``contacts: auto`` is refused (its

@@ -41,6 +41,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,11 +53,13 @@ from graspnet_torch.collision.scene import finger_pairs
 from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
 from graspnet_torch.solver import GraspResult
+from graspnet_torch.solver.api import as_robot
 from graspnet_torch.solver.contact import posture_fields
 from graspnet_torch.solver.result import TrialResult
 from graspnet_torch.synthesis.candidates import placeholder_problem
@@ -239,11 +242,12 @@ def _close(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q
     return q, _gaps(robot, obj, head, q, spheres)[0]
 
 
-def baseline_grasps(robot: Robot, obj: Shape, n_grasps: int = 5, candidates: int = 64, seed: int = 0,
-                    physics: Callable[..., Any] | None = None, check_top: int | None = None,
+def baseline_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: int = 5, candidates: int = 64,
+                    seed: int = 0, physics: Callable[..., Any] | None = None, check_top: int | None = None,
                     stats: dict | None = None) -> list[BaselineGrasp]:
-    """Up to ``n_grasps`` grasps of ``obj`` by ``robot`` from ``candidates`` random palm poses,
-    each closed onto the object with no contact reasoning (module docstring), best first.
+    """Up to ``n_grasps`` grasps of ``obj`` by ``robot`` (a built robot, a shipped robot's name, a
+    robot config or its YAML path) from ``candidates`` random palm poses, each closed onto the
+    object with no contact reasoning (module docstring), best first.
 
     Ranked by how many fingers touch (more first); where ``physics`` (a check
     ``physics(problem, result, robot=robot)`` returning a report with ``directions``, i.e.
@@ -255,6 +259,7 @@ def baseline_grasps(robot: Robot, obj: Shape, n_grasps: int = 5, candidates: int
     hand, 64 candidates, seed 0, one thread, with ``gt.simulate_grasp``: see the report of the
     commit that added this module.
     """
+    robot = as_robot(robot)
     if robot.has_body or robot.shared.n:
         raise ProblemError(f"{robot.cfg.name}: baseline_grasps places a free hand's palm (no arm, no shared joints)")
     if n_grasps < 1 or candidates < 1:

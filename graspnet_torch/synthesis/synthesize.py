@@ -12,16 +12,18 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import GraspQuality, grasp_quality
+from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver import GraspResult, Solver, solve, solve_many
-from graspnet_torch.solver.api import settings_of
+from graspnet_torch.solver.api import as_robot, settings_of
 from graspnet_torch.synthesis.candidates import (
     FRICTION,
     ContactSet,
@@ -99,12 +101,13 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
     return [(sets[i], GraspQuality(float(eps[i]), float(sig[i]), bool(fc[i]))) for i in order]
 
 
-def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
+def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: int = 5,
                       fingers: Sequence[str] = ("thumb", "index", "middle"), candidates: int = 64, seed: int = 0,
                       physics: Callable[..., Any] | None = None, solve_top: int | None = None, trials: int = 8,
                       solver: dict | None = None, stats: dict | None = None, start: str = "sampled"
                       ) -> list[SynthesizedGrasp]:
-    """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first.
+    """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first (``robot``: a
+    built robot, a shipped robot's name, a robot config or its YAML path).
 
     Contact sets are drawn (:func:`~graspnet_torch.synthesis.candidates.iter_contact_sets`, ``seed``),
     at most ``candidates`` of them, and ranked by quality (:func:`rank_sets`); each is solved as a
@@ -139,6 +142,7 @@ def synthesize_grasps(robot: Robot, obj: Shape, n_grasps: int = 5,
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
     if start not in START:
         raise ProblemError(f"synthesize_grasps: start {start!r}: one of {', '.join(START)}")
+    robot = as_robot(robot)
     settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
     run = _sampled if start == "sampled" else _random
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,

@@ -177,3 +177,19 @@ def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
     step = robot.fingertips_palm(q0 + 0.05 * (q1 - q0)).numpy() - robot.fingertips_palm(q0).numpy()
     cos = np.sum(step * normal, axis=-1) / np.linalg.norm(step, axis=-1)
     assert cos.min() > 0.9
+
+
+def test_a_robot_by_name_gives_what_the_built_robot_gives(robot: gt.Robot) -> None:
+    """gt.synthesize_grasps and gt.baseline_grasps take a robot as gt.solve does (a shipped name,
+    a config): the same grasps as from the built robot."""
+    obj = cube()
+    built = gt.synthesize_grasps(robot, obj, n_grasps=1, candidates=4, seed=1)
+    named = gt.synthesize_grasps("hand", obj, n_grasps=1, candidates=4, seed=1)
+    by_cfg = gt.synthesize_grasps(gt.load_robot_cfg("hand"), obj, n_grasps=1, candidates=4, seed=1)
+    assert built and len(named) == len(by_cfg) == len(built)
+    for a, b, c in zip(built, named, by_cfg, strict=True):
+        np.testing.assert_array_equal(a.contacts, b.contacts)
+        np.testing.assert_array_equal(a.contacts, c.contacts)
+    base = gt.baseline_grasps(robot, obj, n_grasps=1, candidates=4, seed=1)
+    base_named = gt.baseline_grasps("hand", obj, n_grasps=1, candidates=4, seed=1)
+    assert base and [g.touching for g in base] == [g.touching for g in base_named]
