@@ -78,6 +78,8 @@ class Shape:
     def __post_init__(self) -> None:  # a pose or size given as a list (Python callers) held as the others are
         object.__setattr__(self, "pose", np.asarray(self.pose, dtype=np.float64))
         object.__setattr__(self, "size", tuple(float(v) for v in self.size))
+        if isinstance(self.mesh, str):
+            object.__setattr__(self, "mesh", Path(self.mesh))
 
     @classmethod
     def from_mapping(cls, data: Any, where: str, folder: Path | None = None,

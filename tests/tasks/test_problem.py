@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -216,3 +217,5 @@ def test_a_shape_made_in_python_from_lists_round_trips():
     again = gt.Shape.from_mapping(made.to_mapping(), "test")
     assert again.kind == "box" and again.size == made.size
     np.testing.assert_allclose(again.pose, made.pose, atol=1e-12)
+    mesh = gt.Shape("mesh", (), [0, 0, 0.2, 0, 0, 0], "cup.obj", 0.001)
+    assert mesh.mesh == Path("cup.obj") and mesh.pose.dtype == np.float64
