@@ -2,8 +2,11 @@
 ask millions of times whether a sphere touches or enters an object (a grasp sampler's closing
 lines), which the exact distance (a nearest triangle per point) cannot answer at that rate.
 
-The grid covers the mesh's bounding box and ``MARGIN_M`` around it, ``CELL_M`` apart. A grid point
-within ``BAND_M`` of the surface holds its exact distance (every triangle whose box grown by
+The grid covers the mesh's bounding box and ``MARGIN_M`` around it, ``CELL_M`` apart; a mesh whose
+grid would hold more than ``MAX_CELLS`` points (over about 38 cm a side, margins included) gets
+coarser cells, as many as that, and a band grown with them (a 1 m cube: 4.1 mm cells; at 1.5 mm it
+would take 333 million points, gigabytes and minutes). A grid point within ``BAND_M`` of the
+surface (times the cell over ``CELL_M``) holds its exact distance (every triangle whose box grown by
 ``BAND_M`` holds the point is measured, :func:`~graspnet_torch.collision.mesh.closest_points`); a
 point farther holds an upper bound, the nearest such point's distance plus the way to it (a
 Euclidean distance transform of the band); the sign is the mesh's inside test at the point
@@ -25,11 +28,12 @@ from scipy.ndimage import distance_transform_edt
 from graspnet_torch.collision.mesh import closest_points, mesh_query
 from graspnet_torch.robot.shape import Shape
 
-__all__ = ["BAND_M", "CELL_M", "MARGIN_M", "DistanceGrid", "distance_grid"]
+__all__ = ["BAND_M", "CELL_M", "MARGIN_M", "MAX_CELLS", "DistanceGrid", "distance_grid"]
 
 CELL_M = 1.5e-3  # m between grid points
 BAND_M = 3e-3  # m: grid points this near the surface hold the exact distance (>= CELL_M sqrt(3))
 MARGIN_M = 0.02  # m of grid around the mesh's bounding box
+MAX_CELLS = 1 << 24  # grid points at most (float64: 134 MB); a larger mesh's cells grow
 PAIRS = 1 << 21  # (grid point, triangle) pairs measured at once
 JITTER_M = 1.234567e-7  # m: the inside test's grid columns are moved this far in x and y
 
@@ -76,18 +80,23 @@ def distance_grid(obj: Shape) -> DistanceGrid:
 def _grid(path: Path, scale: float) -> DistanceGrid:
     query = mesh_query(Shape("mesh", (), np.zeros(6), path, scale))[0]
     origin = query.bounds[0] - MARGIN_M
-    shape = np.ceil((query.bounds[1] + MARGIN_M - origin) / CELL_M).astype(int) + 1
-    axes = [origin[d] + CELL_M * np.arange(shape[d]) for d in range(3)]
-    exact = _band(query.triangles, origin, shape)
-    known = exact < BAND_M
+    extent = query.bounds[1] + MARGIN_M - origin
+    cell = max(CELL_M, float(np.prod(extent + CELL_M) / MAX_CELLS) ** (1 / 3))
+    while np.prod(np.ceil(extent / cell) + 1) > MAX_CELLS:  # rounding up each axis: a little coarser
+        cell *= 1.01
+    band = BAND_M * (cell / CELL_M)
+    shape = np.ceil(extent / cell).astype(int) + 1
+    axes = [origin[d] + cell * np.arange(shape[d]) for d in range(3)]
+    exact = _band(query.triangles, origin, shape, cell, band)
+    known = exact < band
     far, nearest = distance_transform_edt(~known.reshape(shape), return_indices=True)
-    bound = exact[np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)] + far.ravel() * CELL_M
+    bound = exact[np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)] + far.ravel() * cell
     unsigned = np.where(known, exact, np.minimum(exact, bound))
     if query.closed:
         inside = _inside(query.triangles, axes).ravel()
     else:  # the mesh's own test: its convex pieces
         inside = query.inside(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
-    return DistanceGrid(origin, CELL_M, np.where(inside, -unsigned, unsigned).reshape(shape))
+    return DistanceGrid(origin, cell, np.where(inside, -unsigned, unsigned).reshape(shape))
 
 
 def _inside(triangles: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
@@ -118,11 +127,11 @@ def _inside(triangles: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
     return (np.cumsum(flips, axis=2)[..., :-1] % 2).astype(bool)
 
 
-def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray) -> np.ndarray:
-    """(prod(shape),) each grid point's least distance to the triangles (M, 3, 3) whose boxes grown
-    by ``BAND_M`` hold it (inf where none does): exact below ``BAND_M``."""
-    lo = np.clip(np.floor((triangles.min(1) - BAND_M - origin) / CELL_M).astype(int), 0, shape - 1)
-    hi = np.clip(np.ceil((triangles.max(1) + BAND_M - origin) / CELL_M).astype(int), 0, shape - 1)
+def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: float, band: float) -> np.ndarray:
+    """(prod(shape),) each grid point's (``cell`` apart) least distance to the triangles (M, 3, 3)
+    whose boxes grown by ``band`` hold it (inf where none does): exact below ``band``."""
+    lo = np.clip(np.floor((triangles.min(1) - band - origin) / cell).astype(int), 0, shape - 1)
+    hi = np.clip(np.ceil((triangles.max(1) + band - origin) / cell).astype(int), 0, shape - 1)
     ext = hi - lo + 1  # (M, 3) grid points per axis in each grown box
     count = ext.prod(1)
     out = np.full(int(shape.prod()), np.inf)
@@ -133,7 +142,7 @@ def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray) -> np.nd
         k = np.arange(len(t)) - np.repeat(np.cumsum(count[start:stop]) - count[start:stop], count[start:stop])
         e = ext[t]
         idx = lo[t] + np.stack([k // (e[:, 1] * e[:, 2]), k // e[:, 2] % e[:, 1], k % e[:, 2]], axis=1)
-        p = origin + idx * CELL_M
+        p = origin + idx * cell
         tri = triangles[t]
         d = np.linalg.norm(p - closest_points(p, tri[:, 0], tri[:, 1], tri[:, 2]), axis=1)
         np.minimum.at(out, np.ravel_multi_index(tuple(idx.T), tuple(shape)), d)

@@ -35,7 +35,7 @@ from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import Free, build, clip, setting
 from graspnet_torch.synthesis import synthesize_grasps
 from graspnet_torch.synthesis.candidates import check_pad_fingers
-from graspnet_torch.synthesis.synthesize import START
+from graspnet_torch.synthesis.synthesize import START, no_grasp_reason
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
@@ -169,8 +169,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
                                   stats=stats, start=job.start)
         grasps = [g.to_dict() for g in found]
         if not grasps:
-            data["reason"] = (f"no grasp found: {stats.get('solved', 0)} of {job.candidates} contact sets solved, "
-                              f"none succeeded")
+            data["reason"] = no_grasp_reason(stats)
     except GraspnetError as exc:
         data["reason"] = " ".join(str(exc).split())
     except Exception as exc:  # trimesh and the solver on an odd mesh: recorded, the other objects go on
@@ -278,8 +277,7 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
                               candidates=max(CANDIDATES_PER_GRASP * auto.grasps, 64), seed=job.seed,
                               trials=min(job.trials, 8), physics=physics, stats=stats)
     grasps = [g.to_dict() for g in found]
-    best = dict(grasps[0]) if grasps else {"success": False, "reason": "no grasp found: none of the chosen contact "
-                                                                         "sets was solved"}
+    best = dict(grasps[0]) if grasps else {"success": False, "reason": no_grasp_reason(stats)}
     data = {**best, "problem": problem.source, "robot": robot.name,
             "auto": {"fingers": list(auto.fingers), "grasps": auto.grasps}, "object": problem.object.to_mapping(),
             "physics_checked": physics is not None, "grasps": grasps, "stats": stats,

@@ -33,7 +33,7 @@ from graspnet_torch.synthesis.candidates import (
 )
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["FRICTION", "START", "SynthesizedGrasp", "rank_sets", "synthesize_grasps"]
+__all__ = ["FRICTION", "START", "SynthesizedGrasp", "no_grasp_reason", "rank_sets", "synthesize_grasps"]
 
 TRIES_PER_SET = 50  # palm poses drawn at most per contact set asked for (start="sampled")
 
@@ -156,6 +156,20 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
 
 START = ("sampled", "random", "proposal")
+
+
+def no_grasp_reason(stats: dict) -> str:
+    """Why :func:`synthesize_grasps` found no grasp, one line, from its ``stats``: no palm pose
+    touched with every chosen pad, none of those that did faced it with nothing inside the object,
+    or the sets drawn were solved and none landed."""
+    tried, touching, clean = stats.get("tried", 0), stats.get("touching", 0), stats.get("clean", 0)
+    if not touching:
+        return (f"no grasp found: of {tried} palm poses none put every chosen finger's pad on the object's surface "
+                f"(too large, too small or too thin for the hand?)")
+    if not clean:
+        return (f"no grasp found: {touching} of {tried} palm poses touched with every chosen pad, none with every pad "
+                f"within the cone and nothing inside the object")
+    return f"no grasp found: {stats.get('solved', 0)} contact sets solved, none landed on its contacts"
 
 
 def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None, t: dict) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from graspnet_torch.collision.sdf import BAND_M, CELL_M, distance_grid
+from graspnet_torch.collision.sdf import BAND_M, CELL_M, MAX_CELLS, distance_grid
 from graspnet_torch.robot.shape import Shape
 
 
@@ -53,3 +53,20 @@ def test_the_grid_sign_is_right_where_the_faces_lie_on_grid_points(tmp_path):
     band = np.abs(exact) < BAND_M  # exact there; farther out an upper bound
     np.testing.assert_allclose(values[band], exact[band], atol=1e-8)
     assert np.all(np.abs(values) >= np.abs(exact) - 1e-8)
+
+
+def test_a_large_meshs_grid_grows_its_cells_and_stays_exact_near_its_faces(tmp_path):
+    """A 1 m box: at most MAX_CELLS grid points (at 1.5 mm it would be 333 million), cells grown
+    to fit, and still exact near its faces and right in sign away from them."""
+    half = np.array([0.5, 0.5, 0.5])
+    grid = distance_grid(_box(tmp_path, 2 * half))
+    assert grid.values.size <= MAX_CELLS and grid.cell > CELL_M
+    rng = np.random.default_rng(1)
+    face = rng.uniform(-0.6, 0.6, (300, 3)) * half
+    axis = rng.integers(0, 3, 300)
+    face[np.arange(300), axis] = rng.choice([-1.0, 1.0], 300) * half[axis] + rng.uniform(-0.002, 0.002, 300)
+    np.testing.assert_allclose(grid(face), _box_distance(face, half), atol=1e-7)
+    anywhere = rng.uniform(-1.2, 1.2, (2000, 3)) * half
+    exact = _box_distance(anywhere, half)
+    clear = np.abs(exact) > grid.cell
+    assert np.all(np.sign(grid(anywhere[clear])) == np.sign(exact[clear]))

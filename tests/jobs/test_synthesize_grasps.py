@@ -174,3 +174,18 @@ def test_with_physics(tmp_path, primitive_synthesis):
     synthesize_objects(*prepare_synthesize(_settings(folder, out, verify="physics"), tmp_path / "run"))
     rows = _check_results(out, physics=True, names=("box.stl", "broken.stl"))
     assert rows["box.stl"]["best_holds"] != ""
+
+
+def test_an_object_too_large_for_the_hand_is_answered_with_why(tmp_path):
+    """A 1 m box (its distance grid coarsened to fit, not 333 million points): no grasp, and the
+    reason says no palm pose put every pad on it; the summary and its result file say so."""
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(folder / "huge.stl")
+    out = tmp_path / "out"
+    job, robot, meshes, where = prepare_synthesize(_settings(folder, out, candidates=4), tmp_path / "run")
+    (row,) = synthesize_objects(job, robot, meshes, where)
+    data = json.loads((out / "huge.json").read_text())
+    assert not data["grasps"] and row["grasps"] == 0
+    assert "none put every chosen finger's pad on the object's surface" in data["reason"] == row["reason"]
+    assert data["stats"]["tried"] == 200 and data["stats"]["touching"] == 0
