@@ -2,7 +2,8 @@
 
 Every check comes first (:func:`prepare_synthesize`: the settings, the meshes to read, the robot
 and its fingers' pads, the output folder), then each object is placed in front of the hand (its
-bounding box centred at :data:`OBJECT_CENTRE`), handed to :func:`gt.synthesize_grasps` and written
+bounding box centred at ``centre``, default :data:`OBJECT_CENTRE`; a hand on an arm needs it given:
+where the arm reaches), handed to :func:`gt.synthesize_grasps` and written
 to ``<out>/<object stem>.json``; then ``<out>/summary.csv``, one row per object. An object whose
 result file exists is skipped (the run resumes where it stopped); one whose mesh cannot be read,
 or where no grasp is found, is recorded with a one-line reason. Every file is written atomically.
@@ -32,9 +33,10 @@ from graspnet_torch.physics import simulate_grasp
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot, load_robot
 from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
-from graspnet_torch.settings import Free, build, clip, setting
+from graspnet_torch.settings import MAX_LENGTH_M, Free, build, clip, number_list, setting
 from graspnet_torch.synthesis import synthesize_grasps
 from graspnet_torch.synthesis.candidates import check_pad_fingers
+from graspnet_torch.synthesis.reach import carried_hand
 from graspnet_torch.synthesis.synthesize import START, no_grasp_reason
 from graspnet_torch.table import format_table
 from graspnet_torch.tasks.auto_contacts import contact_fingers
@@ -56,6 +58,8 @@ class SynthesizeGraspsJobCfg:
     objects: str | None = None  # a folder of mesh files (.obj, .stl, .ply, ...) or one mesh file
     robot: Free = None  # the robot group as composed (configs/robot/), a name or a YAML path
     scale: float = setting(1.0, lo=0.0, lo_open=True, hi=MAX_SCALE)  # metres per mesh unit (0.001: millimetres)
+    centre: list[float] | None = None  # where each object's bounding box is centred (world, m; None: OBJECT_CENTRE,
+    # in front of a free hand; a hand on an arm needs it: where the arm reaches)
     fingers: list[str] = setting(factory=lambda: ["thumb", "index", "middle"])
     grasps: int = setting(5, lo=1, hi=1000)  # the N best grasps kept per object
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
@@ -101,7 +105,8 @@ def _check_fingers(robot: Robot, fingers: Sequence[str]) -> None:
     :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers` and
     :func:`~graspnet_torch.synthesis.candidates.check_pad_fingers`), as a setting: :class:`ConfigError`."""
     try:
-        check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.name, "fingers"))
+        chosen = contact_fingers(robot.finger_names, list(fingers), robot.name, "fingers")
+        check_pad_fingers(carried_hand(robot), chosen)
     except ProblemError as e:
         raise ConfigError(str(e)) from None
 
@@ -117,7 +122,13 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     job = build(SynthesizeGraspsJobCfg, cfg)
     meshes = find_meshes(job.objects)
     robot_cfg = robot_cfg_from_setting(job.robot if job.robot is not None else "hand")
-    _check_fingers(load_robot(robot_cfg), job.fingers)
+    robot = load_robot(robot_cfg)
+    _check_fingers(robot, job.fingers)
+    if job.centre is not None:
+        number_list(job.centre, 3, "centre", ConfigError, -MAX_LENGTH_M, MAX_LENGTH_M, "number (m)")
+    elif robot.has_body:
+        raise ConfigError(f"centre=[x,y,z] is required for robot {robot.name} (a hand on an arm): where its objects "
+                          f"lie in the world, within the arm's reach")
     out = Path(job.out).expanduser() if job.out else Path(run_dir) / "results"
     if out.exists() and not out.is_dir():
         raise ConfigError(f"out={clip(str(out), 120)}: exists and is not a folder")
@@ -130,12 +141,12 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     return job, robot_cfg, meshes, out
 
 
-def object_shape(path: Path, scale: float) -> Shape:
-    """The mesh as the problem's object, its bounding box centred at :data:`OBJECT_CENTRE`
-    (:func:`~graspnet_torch.tasks.objects.centred_mesh`); a file that is not a solid mesh trimesh
-    reads: a :class:`ProblemError`."""
+def object_shape(path: Path, scale: float, centre: Sequence[float] | None = None) -> Shape:
+    """The mesh as the problem's object, its bounding box centred at ``centre`` (None:
+    :data:`OBJECT_CENTRE`; :func:`~graspnet_torch.tasks.objects.centred_mesh`); a file that is not a
+    solid mesh trimesh reads: a :class:`ProblemError`."""
     check_mesh(path, "objects", scale)
-    return centred_mesh(path, scale)
+    return centred_mesh(path, scale, OBJECT_CENTRE if centre is None else tuple(float(c) for c in centre))
 
 
 def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> dict:
@@ -162,7 +173,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
     try:
-        obj = object_shape(path, job.scale)
+        obj = object_shape(path, job.scale, job.centre)
         data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
         found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=tuple(job.fingers),
                                   candidates=job.candidates, seed=job.seed, trials=job.trials, physics=physics,
@@ -256,7 +267,10 @@ def prepare_auto(cfg: Mapping[str, Any], run_dir: str | Path) -> tuple[Any, Gras
         raise ConfigError(f"{problem.source}: not a contacts: auto problem")
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     robot = load_robot(problem.robot_cfg)
-    check_pad_fingers(robot, problem.auto.fingers)  # its names and count: checked as the file was read
+    try:
+        check_pad_fingers(carried_hand(robot), problem.auto.fingers)  # names and count: checked as the file was read
+    except ProblemError as e:
+        raise ConfigError(str(e)) from None
     return job, problem, robot, out
 
 

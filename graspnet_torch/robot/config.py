@@ -109,6 +109,8 @@ class RobotCfg:
         gripper_points: the two marked point links of a gripper (manus), or ().
         home: joint name -> home value as written in the file (degrees for revolute joints, metres
             for prismatic ones), for pictures; missing joints are 0.
+        hand: the free hand an arm carries (a robot's name or config file): ``contacts: auto``
+            chooses contact sets with it and the arm reaches them (its fingers must be this robot's).
         checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
             (``arm_hand`` reuses the hand's: same finger chains); a config given by path defaults
             to ``<its folder>/<name>.fcnn.pt``.
@@ -137,6 +139,7 @@ class RobotCfg:
     gripper_points: tuple[str, ...] = ()
     home: dict[str, float] = field(default_factory=dict)
     checkpoint: Path | None = None
+    hand: str | None = None
     floor: float | None = None
     self_collision: bool = False
     solver_defaults: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -184,7 +187,7 @@ class RobotCfg:
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
                  "gripper_points", "home", "description", "checkpoint", "solver_defaults",
-                 "floor", "self_collision"}
+                 "floor", "self_collision", "hand"}
         unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
@@ -221,6 +224,11 @@ class RobotCfg:
             checkpoint = Path(raw) if Path(raw).is_absolute() else bases[0] / raw
         elif folder is not None:  # a robot config given by path: its FCNN lives beside it
             checkpoint = Path(folder) / f"{data['name']}.fcnn.pt"
+        hand = data.get("hand")
+        if hand is not None and (not isinstance(hand, str) or not hand or len(hand) > 4096 or data.get("arm") is None):
+            raise ConfigError(f"{source}: 'hand' (a robot with an arm: its free hand, name or file) got {short(hand)}")
+        if hand is not None and hand.endswith((".yaml", ".yml")) and not Path(hand).is_absolute():
+            hand = str(bases[0] / hand)
         floor = data.get("floor")
         if floor is not None:
             floor = number_list([floor], 1, f"{source}: floor", ConfigError, -100.0, 100.0, "number (m)")[0]
@@ -229,7 +237,7 @@ class RobotCfg:
             raise ConfigError(f"{source}: 'self_collision' must be true or false, got {short(self_collision)}")
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
-                   home=home, checkpoint=checkpoint, floor=floor, self_collision=self_collision,
+                   home=home, checkpoint=checkpoint, hand=hand, floor=floor, self_collision=self_collision,
                    solver_defaults=_solver_defaults(data, source), source=source,
                    folder=Path(folder) if folder is not None else None, allow_outside_paths=allow_outside_paths)
 

@@ -15,9 +15,9 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from graspnet_torch.least_squares import damped_pinv_step, levenberg_marquardt
+from graspnet_torch.least_squares import damped_pinv_step, frame_model, levenberg_marquardt
 
-__all__ = ["limited_step", "refine"]
+__all__ = ["frame_ik", "limited_step", "refine"]
 
 def limited_step(J: Tensor, err: Tensor, q: Tensor, lower: Tensor, upper: Tensor, damping: float) -> Tensor:
     """A damped pseudo-inverse step that respects joint limits by re-solving, not just clamping.
@@ -79,3 +79,26 @@ def refine(
     solved = levenberg_marquardt(positions, goal, start, lo, hi, iterations, lam=damping,
                                  lam_min=damping_range[0], lam_max=damping_range[1], tol=tol)
     return solved.x.view(shape), solved.err.view(shape[:-1])
+
+
+def frame_ik(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]], R_goal: Tensor, t_goal: Tensor,
+             starts: Tensor, lower: Tensor, upper: Tensor, iterations: int = 100, tol: float = 1e-5
+             ) -> tuple[Tensor, Tensor, Tensor]:
+    """Full-pose IK of a frame (an arm's palm) within the joint limits: each goal from K starts on
+    the package's one Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.frame_model`'s
+    residual: the position error in metres, the rotation error in radians), the best start kept.
+
+    frame_jacobian: x (b, m) -> R (b, 3, 3), t (b, 3), J (b, 6, m) (e.g. ``Robot.palm_frame_jacobian``);
+    R_goal: (B, 3, 3); t_goal: (B, 3); starts: (B, K, m); lower, upper: (m,).
+    Returns q: (B, m), the position error (B,) (m) and the rotation error (B,) (rad, small angles).
+    """
+    B, K, m = starts.shape
+    R = R_goal.repeat_interleave(K, 0)
+    goal = torch.cat([t_goal.repeat_interleave(K, 0), t_goal.new_zeros(B * K, 3)], 1)
+    solved = levenberg_marquardt(frame_model(frame_jacobian, R), goal, starts.reshape(B * K, m), lower, upper,
+                                 iterations, tol=tol)
+    e = (goal - solved.value).view(B, K, 6)
+    pos, rot = e[..., :3].norm(dim=-1), e[..., 3:].norm(dim=-1)
+    best = (pos + rot * 0.1).argmin(dim=1)  # a tenth of a metre per radian
+    rows = torch.arange(B)
+    return solved.x.view(B, K, m)[rows, best], pos[rows, best], rot[rows, best]

@@ -35,7 +35,7 @@ from one ``numpy`` generator seeded by ``seed``: the same call gives the same se
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -218,8 +218,8 @@ def check_pad_fingers(robot: Robot, fingers: Sequence[str]) -> None:
     placed: no arm, no shared joints) and a pad on each of ``fingers`` (checked by
     :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers`); :class:`ProblemError` otherwise."""
     if robot.has_body or robot.shared.n:
-        raise ProblemError(f"robot {robot.cfg.name}: contacts are chosen for a free hand (no arm, no shared joints); "
-                           f"the shipped one is robot=hand")
+        raise ProblemError(f"robot {robot.cfg.name}: contact sets are drawn with a free hand (no arm, no shared "
+                           f"joints; a hand on an arm: its config's 'hand'); the shipped one is robot=hand")
     for f in fingers:
         if f not in robot.pads:
             raise ProblemError(f"fingers: {f} of robot {robot.cfg.name} has no pad (its config's fingers.{f}.pad), "
@@ -228,8 +228,9 @@ def check_pad_fingers(robot: Robot, fingers: Sequence[str]) -> None:
 
 def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = ("thumb", "index", "middle"),
                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
-                     max_tries: int | None = None, stats: dict | None = None,
-                     require: str | None = None) -> list[ContactSet]:
+                     max_tries: int | None = None, stats: dict | None = None, require: str | None = None,
+                     orientations: Callable[[np.random.Generator, int], np.ndarray] | None = None,
+                     reachable: Callable[[np.ndarray], np.ndarray] | None = None) -> list[ContactSet]:
     """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring):
     the first ``n`` of :func:`iter_contact_sets` (same arguments), drawing at most ``max_tries``
     palm poses (default ``50 n``). Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
@@ -241,7 +242,8 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     384 (2.4 s)."""
     out: list[ContactSet] = []
     for batch in iter_contact_sets(robot, obj, fingers, seed, cone_deg, penetration_m,
-                                   50 * n if max_tries is None else max_tries, stats, require):
+                                   50 * n if max_tries is None else max_tries, stats, require, orientations,
+                                   reachable):
         out.extend(batch[: n - len(out)])
         if len(out) == n:
             break
@@ -252,14 +254,17 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
 
 def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb", "index", "middle"),
                       seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3, max_tries: int = 3200,
-                      stats: dict | None = None, require: str | None = None) -> Iterator[list[ContactSet]]:
+                      stats: dict | None = None, require: str | None = None,
+                      orientations: Callable[[np.random.Generator, int], np.ndarray] | None = None,
+                      reachable: Callable[[np.ndarray], np.ndarray] | None = None) -> Iterator[list[ContactSet]]:
     """The contact sets of each batch of ``BATCH`` palm poses (module docstring), batch after batch,
     until ``max_tries`` palm poses were drawn: from each palm pose whose every chosen finger has a
     line that touches within the cone with its links clear, up to ``COMBOS`` sets (different lines
     of its fingers: the first with the thumb's line most opposed to the others, the rest at random)
     that pass the check. ``stats`` as :func:`pad_contact_sets` (updated after every batch);
     ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or "force_closure" ones
-    (None: every set)."""
+    (None: every set). ``orientations(rng, B)``: (B, 3, 3) palm orientations in place of uniform ones;
+    ``reachable(T)``: which palm poses (B, 4, 4) to keep (a hand on an arm: those the arm reaches)."""
     check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.cfg.name, "fingers"))
     if require not in (None, "opposed", "force_closure"):
         raise ProblemError(f"pad_contact_sets: require {require!r}: None, 'opposed' or 'force_closure'")
@@ -280,12 +285,12 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
     others_rows = [i for i in range(len(finger_names)) if i not in rows]
     scene = scene_for(robot, placeholder_problem(robot, obj, fingers), penetration_m, False, fingers_apart=True)
     counts = stats if stats is not None else {}
-    counts.update(tried=0, touching=0, facing=0, clean=0)
+    counts.update(tried=0, touching=0, facing=0, clean=0, **({} if reachable is None else {"reached": 0}))
     landed: list[np.ndarray] = []  # (4, 4) the palm poses whose every chosen finger touched
     while counts["tried"] < max_tries:
         B = min(BATCH, max_tries - counts["tried"])
         counts["tried"] += B
-        R = Rotation.random(B, random_state=rng).as_matrix()  # (B, 3, 3) palm orientations
+        R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
         lateral = reach[0] + rng.random((B, 2)) * (reach[1] - reach[0])
         gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
         d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
@@ -297,6 +302,13 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
         if landed:  # a share of the batch near the palm poses that touched
             near = int(B * NEAR_SHARE)
             T[:near] = _near(np.stack(landed)[rng.integers(0, len(landed), near)], rng)
+        if reachable is not None:
+            T = T[reachable(T)]
+            B = len(T)
+            counts["reached"] += B
+            if not B:
+                yield []
+                continue
         head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
         heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
         q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)

@@ -31,6 +31,7 @@ from graspnet_torch.synthesis.candidates import (
     pad_contact_sets,
     placeholder_problem,
 )
+from graspnet_torch.synthesis.reach import arm_palms, carried_hand, reach_sets
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FRICTION", "START", "SynthesizedGrasp", "no_grasp_reason", "rank_sets", "synthesize_grasps"]
@@ -160,9 +161,11 @@ START = ("sampled", "random", "proposal")
 
 def no_grasp_reason(stats: dict) -> str:
     """Why :func:`synthesize_grasps` found no grasp, one line, from its ``stats``: no palm pose
-    touched with every chosen pad, none of those that did faced it with nothing inside the object,
-    or the sets drawn were solved and none landed."""
+    touched with every chosen pad (a hand on an arm: or none that the arm reached), none of those
+    that did faced it with nothing inside the object, or the sets drawn were solved and none landed."""
     tried, touching, clean = stats.get("tried", 0), stats.get("touching", 0), stats.get("clean", 0)
+    if stats.get("reached") == 0:
+        return f"no grasp found: the arm reached none of {tried} palm poses around the object (out of its reach?)"
     if not touching:
         return (f"no grasp found: of {tried} palm poses none put every chosen finger's pad on the object's surface "
                 f"(too large, too small or too thin for the hand?)")
@@ -192,8 +195,10 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
     session = Solver(robot, trials=1, seed=seed, solver=settings)
     grasps: list[SynthesizedGrasp] = []
     tried = 0
-    sets = iter_contact_sets(robot, obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
-                             max_tries=TRIES_PER_SET * candidates, stats=t)
+    orientations, reachable = arm_palms(robot, seed)
+    sets = iter_contact_sets(carried_hand(robot), obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
+                             max_tries=TRIES_PER_SET * candidates, stats=t, orientations=orientations,
+                             reachable=reachable)
     while tried < candidates:
         t1 = time.perf_counter()
         batch = next(sets, None)
@@ -201,7 +206,7 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
         t["generate_s"] += t2 - t1
         if batch is None:
             break
-        ranked = rank_sets(batch, obj)[: candidates - tried]
+        ranked = reach_sets(robot, rank_sets(batch, obj), fingers, seed + tried, candidates - tried)
         t["rank_s"] += time.perf_counter() - t2
         for s, q in ranked:
             tried += 1
@@ -227,9 +232,11 @@ def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], c
     """``start="random"`` (:func:`synthesize_grasps`)."""
     t0 = time.perf_counter()
     cone = settings_of(robot, settings, None, None, None)[0].normal_cone_deg
-    sets = pad_contact_sets(robot, obj, candidates, fingers, seed, cone_deg=cone, stats=t)
+    orientations, reachable = arm_palms(robot, seed)
+    sets = pad_contact_sets(carried_hand(robot), obj, candidates, fingers, seed, cone_deg=cone, stats=t,
+                            orientations=orientations, reachable=reachable)
     t1 = time.perf_counter()
-    ranked = rank_sets(sets, obj)[: solve_top or 2 * n_grasps]
+    ranked = reach_sets(robot, rank_sets(sets, obj), fingers, seed, solve_top or 2 * n_grasps)
     problems = [placeholder_problem(robot, obj, fingers, s.contacts) for s, _ in ranked]
     t2 = time.perf_counter()
     results = _solve(problems, trials, seed, settings)

@@ -11,7 +11,8 @@ A problem file::
                                       # or, instead, n_fingers: 3 (the same as fingers: 3)
     grasps: 5                         # how many grasps to return, best first (1-100; default 5)
 
-Only a free hand (a palm with fingers, no arm) is supported so far; ``fingers`` and ``grasps``
+A free hand, or a hand on an arm whose robot config names the free hand (``hand:``: the contact
+sets are drawn with it, then the arm reaches them); not a gripper. ``fingers`` and ``grasps``
 apply only to ``contacts: auto``; obstacles are not supported with it yet.
 """
 
@@ -64,9 +65,9 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
                                f"contacts); this problem lists its contacts")
         return None
     names = list(robot_cfg.fingers)
-    if robot_cfg.kind != "hand":
+    if robot_cfg.kind != "hand" and robot_cfg.hand is None:
         raise ProblemError(f"{source}: contacts: auto: robot '{robot_cfg.name}' ({robot_cfg.kind}): contacts are "
-                           f"chosen for a free hand (a palm with fingers, no arm) so far")
+                           f"chosen for a free hand, or a hand on an arm whose config names it ('hand:'), so far")
     if data.get("object") is None:
         raise ProblemError(f"{source}: contacts: auto needs an object (the contacts are chosen on its surface)")
     if data.get("obstacles"):

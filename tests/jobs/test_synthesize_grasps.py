@@ -144,7 +144,10 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
              ({"verify": "mujoco"}, "verify"),
              ({"start": "warm"}, "start"),
              ({"scale": -1.0}, "scale=-1"),
-             ({"out": str(folder / "box.stl")}, "not a folder")]
+             ({"out": str(folder / "box.stl")}, "not a folder"),
+             ({"robot": "arm_hand"}, r"centre=\[x,y,z\] is required for robot arm_hand \(a hand on an arm\)"),
+             ({"robot": "arm_hand", "centre": [0.4, 0.0]}, "centre"),
+             ({"robot": "manus"}, "manus")]
     for change, message in cases:
         with pytest.raises(ConfigError, match=message):
             prepare_synthesize({**_settings(folder, tmp_path / "out"), **change}, tmp_path / "run")
@@ -189,3 +192,19 @@ def test_an_object_too_large_for_the_hand_is_answered_with_why(tmp_path):
     assert not data["grasps"] and row["grasps"] == 0
     assert "none put every chosen finger's pad on the object's surface" in data["reason"] == row["reason"]
     assert data["stats"]["tried"] == 200 and data["stats"]["touching"] == 0
+
+
+def test_a_hand_on_an_arm_grasps_each_object_where_it_is_put(tmp_path):
+    """robot=arm_hand with centre=: the object placed there, the arm reaching it, the grasp's arm
+    joints in the result."""
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(folder / "box.stl")
+    out = tmp_path / "out"
+    centre = [0.4, -0.15, -0.25]
+    settings = _settings(folder, out, robot="arm_hand", centre=centre, candidates=8, grasps=1)
+    (row,) = synthesize_objects(*prepare_synthesize(settings, tmp_path / "run"))
+    data = json.loads((out / "box.json").read_text())
+    np.testing.assert_allclose(data["object"]["pose"][:3], centre, atol=1e-9)  # a box's bounding box centre: its origin
+    assert row["grasps"] == 1 and data["robot"] == "arm_hand"
+    assert data["grasps"][0]["success"] and len(data["grasps"][0]["arm_joints"]) == 7

@@ -100,6 +100,19 @@ def test_unknown_key_and_missing_key(tmp_path):
         gt.load_robot(_hand_yaml(tmp_path, palm_link=None))
 
 
+def test_hand_names_an_arms_free_hand(tmp_path):
+    """``hand``: only beside an arm, a name or a file (a file relative to the config's folder)."""
+    with pytest.raises(gt.ConfigError, match=r"'hand' \(a robot with an arm: its free hand, name or file\) got 'hand'"):
+        gt.load_robot_cfg(_hand_yaml(tmp_path, hand="hand"))
+    data = yaml.safe_load((configs_dir() / "robot" / "arm_hand.yaml").read_text())
+    for bad in (3, "", ["hand"]):
+        with pytest.raises(gt.ConfigError, match=r"'hand' \(a robot with an arm"):
+            gt.RobotCfg.from_mapping({**data, "hand": bad}, "arm.yaml")
+    folder = tmp_path / "arm"
+    cfg = gt.RobotCfg.from_mapping({**data, "hand": "my_hand.yaml"}, "arm.yaml", folder=folder)
+    assert cfg.hand == str(folder / "my_hand.yaml") and gt.load_robot_cfg("arm_hand").hand == "hand"
+
+
 def test_malformed_yaml_names_the_file(tmp_path):
     path = tmp_path / "broken.yaml"
     path.write_text("name: hand\nfingers: [unclosed\n")

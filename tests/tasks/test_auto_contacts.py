@@ -3,6 +3,8 @@ the solver, which needs contacts."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 import graspnet_torch as gt
@@ -56,9 +58,19 @@ def test_auto_keys_only_with_auto_contacts():
         gt.GraspProblem.from_mapping(data, "p.yaml")
 
 
-def test_auto_contacts_need_a_free_hand():
+def test_auto_contacts_need_a_hand_free_or_named_by_its_arm():
+    """A gripper has no fingers to choose contacts for; an arm whose config names no free hand
+    neither; arm_hand names its hand."""
+    with pytest.raises(gt.ProblemError, match=r"'contacts' \(one point per finger\) does not apply to robot 'manus' "
+                                              r"\(gripper\)"):
+        gt.GraspProblem.from_mapping({"robot": "manus", "object": CUBE, "contacts": "auto"}, "p.yaml")
+    cfg = gt.load_robot_cfg("arm_hand")
+    assert cfg.hand == "hand"
+    assert gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml").auto
+    nameless = dataclasses.replace(cfg, hand=None)
     with pytest.raises(gt.ProblemError, match=r"robot 'arm_hand' \(arm_hand\): contacts are chosen for a free hand"):
-        gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml")
+        gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml",
+                                     robot_cfg=nameless)
 
 
 def test_the_solver_refuses_auto_contacts(tmp_path):
