@@ -288,11 +288,13 @@ def run_job(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path, over
 
 
 def _auto(cfg: Mapping[str, Any] | SolveGraspJobCfg) -> bool:
-    """Whether the job's one problem file says ``contacts: auto`` (its refusals come later, from the job)."""
+    """Whether the job's one problem file says ``contacts: auto`` (a gripper's: ``points: auto``; its
+    refusals come later, from the job)."""
     path = _problem_setting(cfg)
     if not path:
         return False
     try:
-        return read_document(path, "problem file", ProblemError).get("contacts") == "auto"
+        data = read_document(path, "problem file", ProblemError)
+        return "auto" in (data.get("contacts"), data.get("points"))
     except (ProblemError, AttributeError):
         return False

@@ -31,6 +31,7 @@ from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem
 from graspnet_torch.meshes import MESH_FORMATS
 from graspnet_torch.physics import simulate_grasp
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Robot, load_robot
 from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import MAX_LENGTH_M, Free, build, clip, number_list, setting
@@ -123,7 +124,12 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     meshes = find_meshes(job.objects)
     robot_cfg = robot_cfg_from_setting(job.robot if job.robot is not None else "hand")
     robot = load_robot(robot_cfg)
-    _check_fingers(robot, job.fingers)
+    jaws = robot_kind(robot).schema.targets == "points"  # a gripper: its two marked points, no fingers
+    if not jaws:
+        _check_fingers(robot, job.fingers)
+    elif job.verify == "physics":
+        raise ConfigError(f"verify=physics: robot {robot.name}'s jaws do not move (fixed marked points): nothing to "
+                          f"check in physics; verify=none")
     if job.centre is not None:
         number_list(job.centre, 3, "centre", ConfigError, -MAX_LENGTH_M, MAX_LENGTH_M, "number (m)")
     elif robot.has_body:
@@ -267,10 +273,11 @@ def prepare_auto(cfg: Mapping[str, Any], run_dir: str | Path) -> tuple[Any, Gras
         raise ConfigError(f"{problem.source}: not a contacts: auto problem")
     out = check_output_path(job.out or str(Path(run_dir) / "result.json"), "out", ConfigError)
     robot = load_robot(problem.robot_cfg)
-    try:
-        check_pad_fingers(carried_hand(robot), problem.auto.fingers)  # names and count: checked as the file was read
-    except ProblemError as e:
-        raise ConfigError(str(e)) from None
+    if problem.auto.fingers:  # a hand (a gripper's points: auto has none)
+        try:
+            check_pad_fingers(carried_hand(robot), problem.auto.fingers)  # names, count: checked as the file was read
+        except ProblemError as e:
+            raise ConfigError(str(e)) from None
     return job, problem, robot, out
 
 
@@ -278,18 +285,20 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
     """``scripts/solve_grasp.py problem=P`` where P says ``contacts: auto``: the contacts chosen on
     its object (:func:`gt.synthesize_grasps`, its ``fingers`` and ``grasps``; ``seed``, ``trials``
     (at most 8) and ``threads`` from the command line), each grasp checked in MuJoCo where
-    ``mujoco`` is installed, and ``out`` (default ``<run dir>/result.json``) written atomically: the
+    ``mujoco`` is installed (not a gripper's: its jaws do not move), and ``out`` (default
+    ``<run dir>/result.json``) written atomically: the
     best grasp's fields at the top level (a result's, with its ``contacts``), the problem, ``auto``
     (the fingers and grasps asked for) and ``grasps``, best first (as in a ``synthesize_grasps.py``
     result); ``success``: a grasp found."""
     job, problem, robot, out = prepare_auto(cfg, run_dir)
     auto = problem.auto
-    physics = simulate_grasp if importlib.util.find_spec("mujoco") is not None else None
+    jaws = not auto.fingers  # a gripper: its jaws do not move, nothing to squeeze in physics
+    physics = simulate_grasp if importlib.util.find_spec("mujoco") is not None and not jaws else None
     torch.set_num_threads(job.threads)
     t0, stats = time.perf_counter(), {}
     found = synthesize_grasps(robot, problem.object, n_grasps=auto.grasps, fingers=auto.fingers,
                               candidates=max(CANDIDATES_PER_GRASP * auto.grasps, 64), seed=job.seed,
-                              trials=min(job.trials, 8), physics=physics, stats=stats)
+                              trials=min(job.trials, 8), physics=physics, stats=stats, obstacles=problem.obstacles)
     grasps = [g.to_dict() for g in found]
     best = dict(grasps[0]) if grasps else {"success": False, "reason": no_grasp_reason(stats)}
     data = {**best, "problem": problem.source, "robot": robot.name,
@@ -298,8 +307,9 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
             "seconds": round(time.perf_counter() - t0, 3)}
     atomic_write_text(out, json.dumps(data, indent=1, allow_nan=False))
     checked = f", holding {[g['holds'] for g in grasps]} of 6 pushes in MuJoCo" if physics is not None else \
+        " (a gripper whose jaws do not move: nothing to check in physics)" if jaws else \
         " (mujoco is not installed: not checked in physics)"
-    print(f"{problem.name or problem.source}: {len(grasps)} grasp(s) on contacts chosen on the object{checked}; "
-          f"{data['seconds']:.1f} s")
+    print(f"{problem.name or problem.source}: {len(grasps)} grasp(s) on {'points' if jaws else 'contacts'} chosen on "
+          f"the object{checked}; {data['seconds']:.1f} s")
     print(f"result: {out}")
     return data

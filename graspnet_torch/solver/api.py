@@ -107,7 +107,8 @@ def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:
     contacts are chosen by :func:`graspnet_torch.synthesis.synthesize_grasps`)."""
     out = _given_problem(problem)
     if out.auto is not None:
-        raise ProblemError(f"{out.source}: contacts: auto: the solver needs contacts; choose them on the object "
+        key = "points" if out.robot_cfg is not None and out.robot_cfg.gripper_points else "contacts"
+        raise ProblemError(f"{out.source}: {key}: auto: the solver needs {key}; choose them on the object "
                            f"with gt.synthesize_grasps or scripts/solve_grasp.py")
     return out
 

@@ -9,6 +9,7 @@ object's centre as the centre of mass), then by the grasp matrix's least singula
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -20,10 +21,13 @@ import numpy as np
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.config import RobotCfg
+from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver import GraspResult, Solver, solve, solve_many
 from graspnet_torch.solver.api import as_robot, settings_of
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.candidates import (
     FRICTION,
     ContactSet,
@@ -31,6 +35,8 @@ from graspnet_torch.synthesis.candidates import (
     pad_contact_sets,
     placeholder_problem,
 )
+from graspnet_torch.synthesis.pairs import SAMPLES as SAMPLES_OF_PAIRS
+from graspnet_torch.synthesis.pairs import WIDTH_TOL_M, PointPair, antipodal_pairs, jaw_width
 from graspnet_torch.synthesis.reach import arm_palms, carried_hand, reach_sets
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -76,12 +82,17 @@ class SynthesizedGrasp:
         squeeze included; ``trials_run``: how many trials the solve ran), then its ``fingers``, its
         ``contacts`` (object frame, as a problem file lists them) and ``contacts_world`` (m), its
         ``quality``, ``holds`` and the physics check's ``report.to_dict()["physics"]`` (None: not
-        checked)."""
+        checked); a gripper's: its ``fingers`` the marked points, ``points`` (object frame) in place of
+        ``contacts``; ``normal_angles_deg``: each pad's (a gripper: the line between its points')
+        angle to the inward normal."""
         data = {k: v for k, v in self.result.to_dict().items() if k != "trials"}
         physics = None if self.physics is None else self.physics.to_dict().get("physics")
-        data.update({"trials_run": len(self.result.trials), "fingers": [c.finger for c in self.problem.contacts],
+        points = self.problem.points
+        data.update({"trials_run": len(self.result.trials), "fingers": list(self.candidate.fingers),
                      "contacts": [{"finger": c.finger, "position": np.asarray(c.position, dtype=np.float64).tolist()}
                                   for c in self.problem.contacts],
+                     **({} if points is None else {"points": np.asarray(points, dtype=np.float64).tolist()}),
+                     "normal_angles_deg": np.asarray(self.candidate.angles_deg, dtype=np.float64).tolist(),
                      "contacts_world": np.asarray(self.contacts, dtype=np.float64).tolist(),
                      "quality": {"epsilon": float(self.quality.epsilon),
                                  "min_singular_value": float(self.quality.min_singular_value),
@@ -105,8 +116,8 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
 def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: int = 5,
                       fingers: Sequence[str] = ("thumb", "index", "middle"), candidates: int = 64, seed: int = 0,
                       physics: Callable[..., Any] | None = None, solve_top: int | None = None, trials: int = 8,
-                      solver: dict | None = None, stats: dict | None = None, start: str = "sampled"
-                      ) -> list[SynthesizedGrasp]:
+                      solver: dict | None = None, stats: dict | None = None, start: str = "sampled",
+                      obstacles: Sequence[Shape] = ()) -> list[SynthesizedGrasp]:
     """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first (``robot``: a
     built robot, a shipped robot's name, a robot config or its YAML path).
 
@@ -135,6 +146,14 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
     ``solver`` settings given win over what ``start`` sets.
 
+    A hand on an arm (its config names its free ``hand``) draws its sets with that hand and keeps
+    those the arm reaches (:mod:`~graspnet_torch.synthesis.reach`). A gripper with two marked points
+    (MANUS) grasps antipodal point pairs as wide as its jaws (:mod:`~graspnet_torch.synthesis.pairs`,
+    at most ``candidates``), the best ``solve_top`` (default ``2 n_grasps``) solved by the search
+    (``trials`` learners each, whatever ``start``) among ``obstacles`` (a table); its jaws do not
+    move, so there is nothing to squeeze in physics: ``physics`` is refused. ``obstacles`` are for a
+    gripper only, so far.
+
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
     ``solve_s``, ``physics_s``; ``first_s``: to the first grasp that holds every push, None if
     none), ``solved``, ``succeeded`` and ``held``.
@@ -144,8 +163,17 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     if start not in START:
         raise ProblemError(f"synthesize_grasps: start {start!r}: one of {', '.join(START)}")
     robot = as_robot(robot)
+    gripper = robot_kind(robot).schema.targets == "points"
+    if gripper and physics is not None:
+        raise ProblemError(f"synthesize_grasps: robot {robot.name}: its jaws do not move (fixed marked points): "
+                           f"there is no squeeze to check in physics; pass physics=None")
+    if obstacles and not gripper:
+        raise ProblemError(f"synthesize_grasps: obstacles are for a gripper only, so far (robot {robot.name})")
     settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
     run = _sampled if start == "sampled" else _random
+    if gripper:
+        settings = dict(solver or {})
+        run = functools.partial(_pairs, obstacles=tuple(obstacles))
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
                "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
@@ -164,6 +192,10 @@ def no_grasp_reason(stats: dict) -> str:
     touched with every chosen pad (a hand on an arm: or none that the arm reached), none of those
     that did faced it with nothing inside the object, or the sets drawn were solved and none landed."""
     tried, touching, clean = stats.get("tried", 0), stats.get("touching", 0), stats.get("clean", 0)
+    if stats.get("pairs") == 0:
+        return (f"no grasp found: no antipodal pair {stats['width_mm']:.1f} mm apart (within "
+                f"{WIDTH_TOL_M * 1000:g} mm) among {tried} surface points: the gripper's jaws are that far apart and "
+                f"do not move")
     if stats.get("reached") == 0:
         return f"no grasp found: the arm reached none of {tried} palm poses around the object (out of its reach?)"
     if not touching:
@@ -257,3 +289,37 @@ def _solve(problems: list[GraspProblem], trials: int, seed: int, settings: dict)
         return solve_many(problems, trials=trials, seed=seed, solver=settings)
     except ProblemError:
         return [solve(p, trials=trials, seed=seed, solver=settings) for p in problems]
+
+
+def _pairs(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
+           physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict,
+           obstacles: tuple[Shape, ...] = ()) -> list[SynthesizedGrasp]:
+    """A gripper's grasps (:func:`synthesize_grasps`): antipodal pairs, the best solved by the search."""
+    t0 = time.perf_counter()
+    width = jaw_width(robot)
+    pairs = antipodal_pairs(obj, width, candidates, seed)
+    t1 = time.perf_counter()
+    t.update(tried=SAMPLES_OF_PAIRS, pairs=len(pairs), width_mm=width * 1000)
+    chosen = pairs[: solve_top or 2 * n_grasps]
+    problems = [_pair_problem(robot, obj, p, obstacles) for p in chosen]
+    results = _solve(problems, trials, seed, settings)
+    t.update(generate_s=t1 - t0, solve_s=time.perf_counter() - t1, solved=len(problems))
+    grasps = []
+    for problem, pair, result in zip(problems, chosen, results, strict=True):
+        if result.success:
+            q = grasp_quality(pair.points, pair.normals, np.asarray(obj.pose[:3], dtype=np.float64), FRICTION)
+            candidate = ContactSet(tuple(robot.cfg.gripper_points), pair.points, pair.normals,
+                                   trial_posture(robot, result.best), pair.angles_deg)
+            grasps.append(SynthesizedGrasp(problem, candidate, GraspQuality(float(q.epsilon), float(
+                q.min_singular_value), bool(q.force_closure)), result))
+    t["succeeded"] = len(grasps)
+    return grasps
+
+
+def _pair_problem(robot: Robot, obj: Shape, pair: PointPair, obstacles: tuple[Shape, ...]) -> GraspProblem:
+    """The gripper's problem of a pair: its points in the object frame, the obstacles."""
+    T = pose_to_matrix_np(obj.pose)
+    local = (pair.points - T[:3, 3]) @ T[:3, :3]
+    data = {"robot": robot.cfg.name, "object": obj.to_mapping(), "points": local.tolist(),
+            "obstacles": [o.to_mapping() for o in obstacles]}
+    return GraspProblem.from_mapping(data, robot_cfg=robot.cfg, allow_outside_paths=True)

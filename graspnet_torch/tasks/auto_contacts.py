@@ -12,8 +12,10 @@ A problem file::
     grasps: 5                         # how many grasps to return, best first (1-100; default 5)
 
 A free hand, or a hand on an arm whose robot config names the free hand (``hand:``: the contact
-sets are drawn with it, then the arm reaches them); not a gripper. ``fingers`` and ``grasps``
-apply only to ``contacts: auto``; obstacles are not supported with it yet.
+sets are drawn with it, then the arm reaches them). A gripper with two marked points (MANUS)
+says ``points: auto`` instead (its ``points`` chosen: two antipodal points as far apart as its
+jaws), with ``grasps`` and its ``obstacles`` (a table). ``fingers`` and ``grasps`` apply only to
+``contacts: auto`` (``grasps`` to ``points: auto``); a hand's obstacles are not supported with it yet.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ class AutoContacts:
     """What a ``contacts: auto`` problem asks for.
 
     Attributes:
-        fingers: the fingers that touch the object, in the robot's finger order.
+        fingers: the fingers that touch the object, in the robot's finger order (a gripper: none).
         grasps: how many grasps to return, best first.
     """
 
@@ -58,18 +60,24 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
     that gives its contacts (where ``fingers`` / ``grasps`` are refused). Checks the robot's kind,
     the object, the fingers (names of the robot's fingers, each once, at least 2; or a count) and
     the number of grasps: :class:`ProblemError`, one line naming the key."""
-    if data.get("contacts") != "auto":
+    key = robot_cfg.problem_schema.targets  # contacts (fingers) or points (a gripper's two)
+    if data.get(key) != "auto":
         given = [k for k in AUTO_KEYS if data.get(k) is not None]
         if given:
-            raise ProblemError(f"{source}: {', '.join(given)}: only with 'contacts: auto' (the project chooses the "
-                               f"contacts); this problem lists its contacts")
+            raise ProblemError(f"{source}: {', '.join(given)}: only with '{key}: auto' (the project chooses the "
+                               f"{key}); this problem lists its {key}")
         return None
+    if data.get("object") is None:
+        raise ProblemError(f"{source}: {key}: auto needs an object (the {key} are chosen on its surface)")
+    if key == "points":  # a gripper: its two marked points; obstacles (a table) allowed
+        given = [k for k in ("fingers", "n_fingers") if data.get(k) is not None]
+        if given:
+            raise ProblemError(f"{source}: {given[0]}: robot '{robot_cfg.name}' grasps with its two marked points")
+        return AutoContacts((), _count(data.get("grasps", DEFAULT_GRASPS), f"{source}: grasps", 1, MAX_GRASPS))
     names = list(robot_cfg.fingers)
     if robot_cfg.kind != "hand" and robot_cfg.hand is None:
         raise ProblemError(f"{source}: contacts: auto: robot '{robot_cfg.name}' ({robot_cfg.kind}): contacts are "
                            f"chosen for a free hand, or a hand on an arm whose config names it ('hand:'), so far")
-    if data.get("object") is None:
-        raise ProblemError(f"{source}: contacts: auto needs an object (the contacts are chosen on its surface)")
     if data.get("obstacles"):
         raise ProblemError(f"{source}: contacts: auto: obstacles are not supported with chosen contacts yet")
     if data.get("fingers") is not None and data.get("n_fingers") is not None:

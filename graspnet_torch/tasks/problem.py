@@ -179,8 +179,9 @@ class GraspProblem:
             obj = Shape.from_mapping(data["object"], f"{source}: object", folder=folder,
                                      allow_outside_paths=allow_outside_paths)
             _check_texts(data, source)
+            obstacles = obstacles_of(data, source, {"folder": folder, "allow_outside_paths": allow_outside_paths})
             return cls(robot=robot, contacts=(), object=obj, name=data.get("name"), description=data.get("description"),
-                       source=source, robot_cfg=robot_cfg, auto=auto)
+                       source=source, robot_cfg=robot_cfg, auto=auto, obstacles=obstacles)
         if schema.targets == "points":  # a gripper with two marked points (MANUS): points instead of contacts
             return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)
         fingers = list(robot_cfg.fingers)

@@ -147,7 +147,8 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
              ({"out": str(folder / "box.stl")}, "not a folder"),
              ({"robot": "arm_hand"}, r"centre=\[x,y,z\] is required for robot arm_hand \(a hand on an arm\)"),
              ({"robot": "arm_hand", "centre": [0.4, 0.0]}, "centre"),
-             ({"robot": "manus"}, "manus")]
+             ({"robot": "manus"}, r"centre=\[x,y,z\] is required for robot manus"),
+             ({"robot": "manus", "verify": "physics"}, r"robot manus's jaws do not move")]
     for change, message in cases:
         with pytest.raises(ConfigError, match=message):
             prepare_synthesize({**_settings(folder, tmp_path / "out"), **change}, tmp_path / "run")

@@ -55,8 +55,8 @@ def test_the_carried_hand_has_the_arms_fingers(arm: gt.Robot) -> None:
     assert carried_hand(hand) is hand
     trifinger = str(repo_root() / "examples" / "trifinger" / "trifinger.yaml")
     other = gt.load_robot(dataclasses.replace(arm.cfg, hand=trifinger))
-    with pytest.raises(gt.ProblemError, match=r"robot arm_hand: its hand '.*trifinger.yaml' must be a free hand with the "
-                                              r"robot's fingers"):
+    with pytest.raises(gt.ProblemError, match=r"robot arm_hand: its hand '.*trifinger.yaml' must be a free hand "
+                                              r"with the robot's fingers"):
         carried_hand(other)
     with pytest.raises(gt.ProblemError, match=r"robot manus: contacts are chosen for a free hand, or a hand on an arm"):
         carried_hand(gt.load_robot("manus"))
