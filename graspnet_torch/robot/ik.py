@@ -82,21 +82,23 @@ def refine(
 
 
 def frame_ik(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]], R_goal: Tensor, t_goal: Tensor,
-             starts: Tensor, lower: Tensor, upper: Tensor, iterations: int = 100, tol: float = 1e-5
-             ) -> tuple[Tensor, Tensor, Tensor]:
+             starts: Tensor, lower: Tensor, upper: Tensor, iterations: int = 100, tol: float = 1e-5,
+             min_gain: float = 0.0) -> tuple[Tensor, Tensor, Tensor]:
     """Full-pose IK of a frame (an arm's palm) within the joint limits: each goal from K starts on
     the package's one Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.frame_model`'s
     residual: the position error in metres, the rotation error in radians), the best start kept.
 
     frame_jacobian: x (b, m) -> R (b, 3, 3), t (b, 3), J (b, 6, m) (e.g. ``Robot.palm_frame_jacobian``);
-    R_goal: (B, 3, 3); t_goal: (B, 3); starts: (B, K, m); lower, upper: (m,).
+    R_goal: (B, 3, 3); t_goal: (B, 3); starts: (B, K, m); lower, upper: (m,); ``min_gain``: a start
+    whose step gains less than this share of its error has settled and stops (the least squares'
+    ``min_gain``: an unreachable goal stops early).
     Returns q: (B, m), the position error (B,) (m) and the rotation error (B,) (rad, small angles).
     """
     B, K, m = starts.shape
     R = R_goal.repeat_interleave(K, 0)
     goal = torch.cat([t_goal.repeat_interleave(K, 0), t_goal.new_zeros(B * K, 3)], 1)
     solved = levenberg_marquardt(frame_model(frame_jacobian, R), goal, starts.reshape(B * K, m), lower, upper,
-                                 iterations, tol=tol)
+                                 iterations, tol=tol, min_gain=min_gain)
     e = (goal - solved.value).view(B, K, 6)
     pos, rot = e[..., :3].norm(dim=-1), e[..., 3:].norm(dim=-1)
     best = (pos + rot * 0.1).argmin(dim=1)  # a tenth of a metre per radian

@@ -4,7 +4,7 @@ A robot whose config names its ``hand`` (``configs/robot/arm_hand.yaml``: ``hand
 contact sets drawn with that free hand (:func:`~graspnet_torch.synthesis.candidates.iter_contact_sets`:
 the palm anywhere around the object); each set's palm pose is then solved for the arm's joints
 (:func:`~graspnet_torch.robot.ik.frame_ik`: full-pose IK within the joint limits, from the arm's
-home and ``STARTS - 1`` random postures) and kept where the arm reaches it (within ``REACH_MM`` and
+home and random postures, ``STARTS`` in all) and kept where the arm reaches it (within ``REACH_MM`` and
 ``REACH_DEG``): the set's posture becomes the whole robot's (the arm's joints, the set's fingers,
 the fingers not chosen at the robot's home), the warm start of its solve.
 """
@@ -30,7 +30,7 @@ __all__ = ["REACH_DEG", "REACH_MM", "STARTS", "arm_palms", "carried_hand", "reac
 
 STARTS = 8  # IK starts per palm pose: the arm's home and random postures within its limits
 REACH_MM, REACH_DEG = 1.0, 1.0  # a palm pose the arm's IK ends farther from is out of reach
-IK_ITERATIONS = 100
+IK_ITERATIONS, IK_MIN_GAIN = 40, 1e-3  # steps at most; a start gaining less than this share has settled
 CHUNK = 32  # sets solved for the arm at once
 _HANDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -68,29 +68,35 @@ def arm_palms(robot: Robot, seed: int) -> tuple[Callable[[np.random.Generator, i
     """What :func:`~graspnet_torch.synthesis.candidates.iter_contact_sets` draws palm poses with for
     ``robot``: (orientations, reachable), both None for a free hand. A hand on an arm: the palm
     orientations of uniformly random arm postures (rng, B -> (B, 3, 3)), and a palm pose kept where
-    the arm's IK reaches it (T (B, 4, 4) -> (B,) bool; as :func:`reach_sets`)."""
+    the arm's IK reaches it (T (B, 4, 4) -> (B,) bool; as :func:`reach_sets`, the arm posture each
+    orientation came from its first start)."""
     if not robot.has_body:
         return None, None
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.body_limits)
+    drawn: list[torch.Tensor] = []  # the last batch's arm postures
 
     def orientations(rng: np.random.Generator, B: int) -> np.ndarray:
-        body = torch.as_tensor(lo + rng.random((B, lo.shape[0])) * (hi - lo))
-        return robot.palm_frame(body)[0].numpy()
+        drawn[:] = [torch.as_tensor(lo + rng.random((B, lo.shape[0])) * (hi - lo))]
+        return robot.palm_frame(drawn[0])[0].numpy()
 
     def reachable(T: np.ndarray) -> np.ndarray:
-        return _ik(robot, T, seed)[1].numpy()
+        return _ik(robot, T, seed, drawn[0] if drawn and len(drawn[0]) == len(T) else None)[1].numpy()
 
     return orientations, reachable
 
 
-def _ik(robot: Robot, T: np.ndarray, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The arm's joints (B, m) that put the palm at T (B, 4, 4), and whether they do (B,) bool."""
+def _ik(robot: Robot, T: np.ndarray, seed: int, first: torch.Tensor | None = None
+        ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The arm's joints (B, m) that put the palm at T (B, 4, 4), and whether they do (B,) bool:
+    from the home posture, ``first`` (B, m) where given, and random postures."""
     lo, hi = (torch.as_tensor(np.asarray(a, dtype=np.float64)) for a in robot.body_limits)
     gen = torch.Generator().manual_seed(seed)
     starts = lo + (hi - lo) * torch.rand(len(T), STARTS, lo.shape[0], generator=gen, dtype=torch.float64)
     starts[:, 0] = robot.home_posture().body
+    if first is not None:
+        starts[:, 1] = first
     R, t = torch.as_tensor(T[:, :3, :3]), torch.as_tensor(T[:, :3, 3])
-    body, pos, rot = frame_ik(robot.palm_frame_jacobian, R, t, starts, lo, hi, IK_ITERATIONS)
+    body, pos, rot = frame_ik(robot.palm_frame_jacobian, R, t, starts, lo, hi, IK_ITERATIONS, min_gain=IK_MIN_GAIN)
     return body, (pos <= REACH_MM / 1000.0) & (rot <= math.radians(REACH_DEG))
 
 
