@@ -13,8 +13,8 @@ A problem file::
 
 A free hand, or a hand on an arm whose robot config names the free hand (``hand:``: the contact
 sets are drawn with it, then the arm reaches them). A gripper with two marked points (MANUS)
-says ``points: auto`` instead (its ``points`` chosen: two antipodal points as far apart as its
-jaws), with ``grasps`` and its ``obstacles`` (a table). ``fingers`` and ``grasps`` apply only to
+says ``points: auto`` (or ``contacts: auto``; its ``points`` chosen: two antipodal points as far
+apart as its jaws), with ``grasps`` and its ``obstacles`` (a table). ``fingers`` and ``grasps`` apply only to
 ``contacts: auto`` (``grasps`` to ``points: auto``); a hand's obstacles are not supported with it yet.
 """
 
@@ -61,6 +61,8 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
     the object, the fingers (names of the robot's fingers, each once, at least 2; or a count) and
     the number of grasps: :class:`ProblemError`, one line naming the key."""
     key = robot_cfg.problem_schema.targets  # contacts (fingers) or points (a gripper's two)
+    if data.get(key) != "auto" and data.get("contacts") == "auto":  # a gripper's contacts: auto is its points: auto
+        key = "contacts"
     if data.get(key) != "auto":
         given = [k for k in AUTO_KEYS if data.get(k) is not None]
         if given:
@@ -69,7 +71,7 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
         return None
     if data.get("object") is None:
         raise ProblemError(f"{source}: {key}: auto needs an object (the {key} are chosen on its surface)")
-    if key == "points":  # a gripper: its two marked points; obstacles (a table) allowed
+    if robot_cfg.problem_schema.targets == "points":  # a gripper: its two marked points; obstacles (a table) allowed
         given = [k for k in ("fingers", "n_fingers") if data.get(k) is not None]
         if given:
             raise ProblemError(f"{source}: {given[0]}: robot '{robot_cfg.name}' grasps with its two marked points")

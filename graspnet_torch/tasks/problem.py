@@ -171,7 +171,8 @@ class GraspProblem:
             raise ProblemError(f"{source}: the problem is for robot '{robot}', but robot={robot_cfg.name} was given")
         schema = robot_cfg.problem_schema
         for key in KIND_KEYS:  # the keys of another kind of robot
-            if data.get(key) is not None and key not in schema.keys:
+            chosen = key == "contacts" and data.get(key) == "auto"  # contacts: auto: any kind of robot
+            if data.get(key) is not None and key not in schema.keys and not chosen:
                 raise ProblemError(f"{source}: '{key}' ({KIND_KEYS[key]}) does not apply to robot '{robot}' "
                                    f"({robot_cfg.kind}), whose problems give {', '.join(schema.keys)}")
         auto = auto_contacts(data, source, robot_cfg)  # contacts: auto (tasks/auto_contacts.py)

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from graspnet_torch.collision.surface import surface_normals
-from graspnet_torch.errors import ProblemError
+from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.robot.config import load_robot_cfg
 from graspnet_torch.synthesis.synthesize import FRICTION
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -34,7 +35,11 @@ def grasp_problem(file: Path, result: dict[str, Any]) -> GraspProblem:
     if not isinstance(obj, dict) or not obj.get("file") or obj.get("pose") is None or not isinstance(robot, str):
         raise ProblemError(f"{file}: a result of grasps without its problem, robot or object (file, scale, pose)")
     mesh = Path(str(obj["file"]))  # looked up in its own folder, where the synthesis job read it
-    return GraspProblem.from_mapping({"robot": robot, "contacts": "auto", "object": {
+    try:
+        targets = load_robot_cfg(robot).problem_schema.targets  # contacts, or a gripper's points
+    except ConfigError as exc:
+        raise ProblemError(f"{file}: robot: {exc}") from None
+    return GraspProblem.from_mapping({"robot": robot, targets: "auto", "object": {
         "shape": "mesh", "size": [mesh.name], "scale": obj.get("scale", 1.0), "pose": obj["pose"]}}, str(file),
         folder=mesh.parent)
 

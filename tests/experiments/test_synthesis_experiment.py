@@ -23,7 +23,7 @@ def test_registered_and_quick_is_smaller():
     assert EXPERIMENTS["synthesis"].run is run_synthesis
     full = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], False)
     quick = quick_settings(SynthesisExperimentCfg, shipped_experiments()["synthesis"], True)
-    assert full == SynthesisExperimentCfg() and full.objects >= 100 and full.robots == ("hand", "trifinger")
+    assert full == SynthesisExperimentCfg() and full.objects >= 100 and full.robots == ("hand", "trifinger", "arm_hand")
     assert full.baseline == ("hand",)  # experiments/synthesis.py NO_BASELINE
     assert quick.robots == full.robots and quick.objects < full.objects and quick.candidates < full.candidates
 

@@ -8,15 +8,18 @@ import math
 
 import numpy as np
 import pytest
+import trimesh
 
 import graspnet_torch as gt
 from graspnet_torch.collision.surface import surface_distance, surface_normals
 from graspnet_torch.jobs.solve_many import run_job
+from graspnet_torch.jobs.synthesize import prepare_synthesize, synthesize_objects
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.candidates import FRICTION
 from graspnet_torch.synthesis.pairs import WIDTH_TOL_M, antipodal_pairs, jaw_width
 from graspnet_torch.synthesis.synthesize import no_grasp_reason
+from graspnet_torch.viz.viewer import load_view
 
 TABLE = Shape("box", (0.6, 1.2, 0.72), np.array([1.15, 0.2, 0.36, 0.0, 0.0, 0.0]))  # task cube's
 CUBE = Shape("box", (0.07, 0.07, 0.07), np.array([0.95, 0.2, 0.755, 0.0, 0.0, 0.0]))
@@ -95,3 +98,20 @@ def test_points_auto_problem_file(tmp_path) -> None:
                                       "fingers": 2}, "p.yaml")
     with pytest.raises(gt.ProblemError, match=r"points: auto: the solver needs points"):
         gt.solve(problem, trials=1)
+
+
+def test_folder_job_and_viewer_for_the_gripper(tmp_path) -> None:
+    """scripts/synthesize_grasps.py robot=manus centre=...: a 70 x 50 x 40 mm bar's result file, and
+    the viewer shows its grasps with their two points."""
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    trimesh.creation.box(extents=(0.07, 0.05, 0.04)).export(folder / "bar.stl")
+    out = tmp_path / "out"
+    settings = {"objects": str(folder), "out": str(out), "robot": "manus", "centre": [0.95, 0.2, 0.8], "grasps": 1,
+                "candidates": 8, "verify": "none", "progress": False}
+    (row,) = synthesize_objects(*prepare_synthesize(settings, tmp_path / "run"))
+    assert row["grasps"] == 1
+    view = load_view(out / "bar.json")
+    contacts, inward = view.cones[0]
+    assert contacts.shape == (2, 3) and abs(np.linalg.norm(contacts[0] - contacts[1]) - 0.07) <= WIDTH_TOL_M
+    np.testing.assert_allclose(inward[0], -inward[1], atol=1e-9)  # the bar's opposite faces

@@ -59,11 +59,14 @@ def test_auto_keys_only_with_auto_contacts():
 
 
 def test_auto_contacts_need_a_hand_free_or_named_by_its_arm():
-    """A gripper has no fingers to choose contacts for; an arm whose config names no free hand
-    neither; arm_hand names its hand."""
+    """A gripper lists no contacts (its contacts: auto chooses its two points); an arm whose config
+    names no free hand cannot choose contacts; arm_hand names its hand."""
     with pytest.raises(gt.ProblemError, match=r"'contacts' \(one point per finger\) does not apply to robot 'manus' "
                                               r"\(gripper\)"):
-        gt.GraspProblem.from_mapping({"robot": "manus", "object": CUBE, "contacts": "auto"}, "p.yaml")
+        gt.GraspProblem.from_mapping({"robot": "manus", "object": CUBE, "contacts": [
+            {"finger": "thumb", "position": [0.0, 0.0, 0.0]}]}, "p.yaml")
+    gripper = gt.GraspProblem.from_mapping({"robot": "manus", "object": CUBE, "contacts": "auto"}, "p.yaml")
+    assert gripper.auto == AutoContacts((), 5)  # a gripper's contacts: auto is its points: auto
     cfg = gt.load_robot_cfg("arm_hand")
     assert cfg.hand == "hand"
     assert gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml").auto
