@@ -46,7 +46,8 @@ from graspnet_torch.viz.motion import write_reach_gif
 from graspnet_torch.viz.result import posture_panels
 
 __all__ = ["check_problem", "hparams_of", "job_settings", "log_hparams", "log_tensorboard", "posture_of",
-           "prepare_solve", "resolve_problem", "solve_grasp", "with_robot_defaults", "write_pictures"]
+           "prepare_solve", "resolve_problem", "solve_grasp", "warn_on_failure", "with_robot_defaults",
+           "write_pictures"]
 
 
 def resolve_problem(problem: str | None, task: Mapping[str, Any] | str | None, robot: str | RobotCfg | None,
@@ -303,13 +304,13 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
     if job.tensorboard:
-        _warn_on_failure("TensorBoard logs", log_tensorboard, run_dir / "tb", result, fingers, every=job.log_every)
-        _warn_on_failure("TensorBoard hparams", log_hparams, run_dir / "tb", result, overrides)
+        warn_on_failure("TensorBoard logs", log_tensorboard, run_dir / "tb", result, fingers, every=job.log_every)
+        warn_on_failure("TensorBoard hparams", log_hparams, run_dir / "tb", result, overrides)
     if job.pictures:
-        _warn_on_failure("pictures", write_pictures, robot, problem, result, run_dir)
+        warn_on_failure("pictures", write_pictures, robot, problem, result, run_dir)
     history = result.outcome.history if result.outcome is not None else None
     if history is not None and "config" in history:
-        _warn_on_failure("replay.json", write_replay, robot, problem, result,
+        warn_on_failure("replay.json", write_replay, robot, problem, result,
                          build_environment(robot, problem, ik, solver, DTYPES[solver.dtype], device, job.reward),
                          run_dir / "replay.json")
     return result
@@ -349,7 +350,7 @@ def _has_environment(robot, problem: GraspProblem) -> bool:
     return has_environment(robot, problem)
 
 
-def _warn_on_failure(what: str, fn, *args, **kwargs) -> None:
+def warn_on_failure(what: str, fn, *args, **kwargs) -> None:
     """Run an output step that comes after the result is written: a failure is a one-line warning
     on stderr, never a changed exit status."""
     try:

@@ -27,7 +27,7 @@ from graspnet_torch.errors import ConfigError, GraspnetError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import MAX_SEED
-from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem
+from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem, warn_on_failure
 from graspnet_torch.meshes import MESH_FORMATS
 from graspnet_torch.physics import simulate_grasp
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
@@ -43,6 +43,7 @@ from graspnet_torch.table import format_table
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz.grasp_view import render_grasps
 
 __all__ = ["COLUMNS", "OBJECT_CENTRE", "SynthesizeGraspsJobCfg", "find_meshes", "object_shape",
            "prepare_auto", "prepare_synthesize", "solve_auto_problem", "synthesize_objects"]
@@ -72,6 +73,7 @@ class SynthesizeGraspsJobCfg:
     out: str | None = None  # the results folder (None: <run dir>/results)
     threads: int = setting(1, lo=1, hi=1024)
     progress: bool = True
+    pictures: bool = True  # <out>/<stem>.png: the object's best grasps side by side
 
 
 def find_meshes(objects: str | None) -> list[Path]:
@@ -169,8 +171,9 @@ def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> d
             "deepest_penetration_mm": max(pen) if pen else None, "seconds": round(seconds, 2), "reason": reason}
 
 
-def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physics) -> dict:
-    """The result file's content for one object (a mesh that fails, or no grasp: with its reason)."""
+def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physics) -> tuple[dict, list]:
+    """The result file's content for one object (a mesh that fails, or no grasp: with its reason)
+    and its grasps."""
     t0 = time.perf_counter()
     stats: dict = {}
     data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
@@ -178,6 +181,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
                                "trials": job.trials, "start": job.start, "seed": job.seed, "verify": job.verify},
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
+    found: list = []
     try:
         obj = object_shape(path, job.scale, job.centre)
         data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
@@ -196,7 +200,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     data["grasps"] = grasps
     data["seconds"] = round(time.perf_counter() - t0, 3)
     data["summary"] = _row(path.name, grasps, data["seconds"], data["reason"])
-    return data
+    return data, found
 
 
 def _existing_row(path: Path, result: Path) -> dict:
@@ -252,8 +256,10 @@ def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, m
             rows.append(_existing_row(path, result))
             print(f"{path.name}: skipped, {result} exists", flush=True)
             continue
-        data = _synthesize_one(robot, path, job, physics)
+        data, found = _synthesize_one(robot, path, job, physics)
         atomic_write_text(result, json.dumps(data, indent=1))
+        if job.pictures and found:  # after the result: a failure is a warning
+            warn_on_failure("picture", render_grasps, robot, found, out / f"{path.stem}.png", path.stem)
         rows.append(data["summary"])
         print(_line(data["summary"]), flush=True)
     atomic_write_text(out / "summary.csv", _csv(rows))
@@ -306,6 +312,8 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
             "physics_checked": physics is not None, "grasps": grasps, "stats": stats,
             "seconds": round(time.perf_counter() - t0, 3)}
     atomic_write_text(out, json.dumps(data, indent=1, allow_nan=False))
+    if job.pictures and found:
+        warn_on_failure("picture", render_grasps, robot, found, Path(run_dir) / "grasps.png", problem.name or "")
     checked = f", holding {[g['holds'] for g in grasps]} of 6 pushes in MuJoCo" if physics is not None else \
         " (a gripper whose jaws do not move: nothing to check in physics)" if jaws else \
         " (mujoco is not installed: not checked in physics)"

@@ -7,6 +7,8 @@ atan(mu), mu the friction the grasps' quality was measured with)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -15,12 +17,17 @@ import numpy as np
 from graspnet_torch.collision.surface import surface_normals
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.robot.config import load_robot_cfg
-from graspnet_torch.synthesis.synthesize import FRICTION
+from graspnet_torch.robot.robot import Robot
+from graspnet_torch.synthesis.synthesize import FRICTION, SynthesizedGrasp
 from graspnet_torch.tasks.problem import GraspProblem
+from graspnet_torch.viz.result import posture_panels
+from graspnet_torch.viz.robot import Panel, render_robot
 
-__all__ = ["CONE_HEIGHT_M", "FRICTION", "cone_mesh", "grasp_contacts", "grasp_problem"]
+__all__ = ["CONE_HEIGHT_M", "FRICTION", "SHOWN", "cone_mesh", "grasp_contacts", "grasp_panels", "grasp_problem",
+           "render_grasps"]
 
 CONE_HEIGHT_M = 0.015  # how far a drawn friction cone reaches out of the object
+SHOWN = 4  # grasps side by side in a picture of an object's grasps
 
 
 def grasp_problem(file: Path, result: dict[str, Any]) -> GraspProblem:
@@ -72,3 +79,38 @@ def cone_mesh(contact: np.ndarray, inward: np.ndarray, friction: float = FRICTIO
     sides = np.stack([np.zeros(sections, dtype=int), 1 + ring, 1 + (ring + 1) % sections], 1)
     base = np.stack([np.full(sections, sections + 1), 1 + (ring + 1) % sections, 1 + ring], 1)
     return vertices, np.vstack([sides, base])
+
+
+def grasp_panels(robot: Robot, grasps: Sequence[SynthesizedGrasp], label: str = "", most: int = SHOWN) -> list[Panel]:
+    """One panel per grasp (the first ``most``, best first): its posture with the object, its
+    contacts red (a gripper: the points), colliding links red, captioned with its rank, epsilon (a
+    gripper: its line's largest angle to the inward normals) and holds; a robot with a body drawn
+    from its palm down (the hand and the object, not the arm)."""
+    focus = _below_palm(robot) if robot.has_body else frozenset()
+    panels = []
+    for k, g in enumerate(grasps[:most]):
+        panel = posture_panels(robot, g.problem, g.result)[0]
+        holds = "" if g.holds is None else f", holds {g.holds}/6"
+        quality = f"epsilon {g.quality.epsilon:.4f}" if g.problem.points is None else \
+            f"{float(np.max(g.candidate.angles_deg)):.1f} deg off the normals"  # a gripper's two points
+        caption = f"{label + ' ' if label else ''}#{k + 1}: {quality}{holds}"
+        panels.append(replace(panel, caption=caption, focus=focus))
+    return panels
+
+
+def render_grasps(robot: Robot, grasps: Sequence[SynthesizedGrasp], path: str | Path, label: str = "") -> Path:
+    """The best grasps of an object side by side (:func:`grasp_panels`), a PNG written atomically."""
+    return render_robot(robot, grasp_panels(robot, grasps, label), path)
+
+
+def _below_palm(robot: Robot) -> frozenset[str]:
+    """The palm link and every link it carries."""
+    children: dict[str, list[str]] = {}
+    for j in robot.urdf.robot.joints:
+        children.setdefault(j.parent, []).append(j.child)
+    out, todo = set(), [robot.cfg.palm_link]
+    while todo:
+        link = todo.pop()
+        out.add(link)
+        todo.extend(children.get(link, []))
+    return frozenset(out)

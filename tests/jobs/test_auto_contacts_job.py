@@ -42,6 +42,7 @@ def test_auto_problem_gives_grasps_on_the_objects_surface(tmp_path):
         assert max(g["normal_angle_deg"].values()) <= 30.0 + 1e-6
         if data["physics_checked"]:
             assert g["holds"] == sum(g["physics"]["directions"].values())
+    assert (tmp_path / "run" / "grasps.png").is_file() == bool(data["grasps"])  # the grasps side by side
     if data["grasps"]:  # the viewer shows the grasps with their contacts and friction cones
         view = load_view(out)
         assert len(view.postures) == len(view.cones) == len(data["grasps"])

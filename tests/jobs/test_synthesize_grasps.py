@@ -60,7 +60,7 @@ def primitive_synthesis(monkeypatch):
 
 def _settings(folder, out, **kw):
     return {"objects": str(folder), "out": str(out), "candidates": 16, "grasps": 2, "verify": "none",
-            "progress": False, "scale": 1.0, **kw}
+            "progress": False, "scale": 1.0, "pictures": False, **kw}
 
 
 def _summary(out):
@@ -209,3 +209,28 @@ def test_a_hand_on_an_arm_grasps_each_object_where_it_is_put(tmp_path):
     np.testing.assert_allclose(data["object"]["pose"][:3], centre, atol=1e-9)  # a box's bounding box centre: its origin
     assert row["grasps"] == 1 and data["robot"] == "arm_hand"
     assert data["grasps"][0]["success"] and len(data["grasps"][0]["arm_joints"]) == 7
+
+
+def test_each_objects_grasps_side_by_side_and_a_failed_picture_is_a_warning(tmp_path, monkeypatch, capsys):
+    """pictures=true: <stem>.png beside <stem>.json, one panel per grasp; where drawing fails, the
+    result stands and one warning says so."""
+    from PIL import Image
+
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(folder / "box.stl")
+    out = tmp_path / "out"
+    settings = _settings(folder, out, robot="arm_hand", centre=[0.4, -0.15, -0.25], candidates=8, pictures=True)
+    (row,) = synthesize_objects(*prepare_synthesize(settings, tmp_path / "run"))
+    assert row["grasps"] == 2
+    with Image.open(out / "box.png") as picture:
+        assert picture.width > 1.5 * picture.height  # two panels side by side
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no display")
+
+    monkeypatch.setattr(job_module, "render_grasps", broken)
+    again = tmp_path / "again"
+    synthesize_objects(*prepare_synthesize({**settings, "out": str(again)}, tmp_path / "run"))
+    assert (again / "box.json").is_file() and not (again / "box.png").exists()
+    assert "warning: picture not written: RuntimeError: no display" in capsys.readouterr().err

@@ -110,7 +110,7 @@ def test_folder_job_and_viewer_for_the_gripper(tmp_path) -> None:
     settings = {"objects": str(folder), "out": str(out), "robot": "manus", "centre": [0.95, 0.2, 0.8], "grasps": 1,
                 "candidates": 8, "verify": "none", "progress": False}
     (row,) = synthesize_objects(*prepare_synthesize(settings, tmp_path / "run"))
-    assert row["grasps"] == 1
+    assert row["grasps"] == 1 and (out / "bar.png").is_file()  # its grasps side by side
     view = load_view(out / "bar.json")
     contacts, inward = view.cones[0]
     assert contacts.shape == (2, 3) and abs(np.linalg.norm(contacts[0] - contacts[1]) - 0.07) <= WIDTH_TOL_M
