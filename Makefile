@@ -120,8 +120,8 @@ report-reach: $(STAMP)  ## the experiment reach: motions from home to every arm 
 report-contact: $(STAMP)  ## the experiment contact as in reports/contact.md (50 poses per task, 30 arm seeds, cone 60 left out): pads vs points, MuJoCo (~10 min)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/contact hydra.run.dir=outputs/experiment/contact +experiment=contact experiments.contact.arm_seeds=30 'experiments.contact.variants=[point,surface,surface_cmaes,surface_dls]'
 
-report-synthesis: $(STAMP)  ## the experiment synthesis at its reduced protocol (10 objects, the shipped hand): synthesized grasps vs the baseline, MuJoCo, checks (minutes per object: mesh surface queries)
-	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis experiments.synthesis.objects=10
+report-synthesis: $(STAMP)  ## the experiment synthesis as in reports/synthesis.md (100 objects; hand, TriFinger, arm + hand; the baseline): MuJoCo, checks (~20 min)
+	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis
 
 report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)
 	$(call EXPERIMENT_RUN,table3)
