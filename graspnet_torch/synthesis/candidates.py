@@ -94,16 +94,17 @@ class ContactSet:
         return iter((self.contacts, self.normals, self.posture))
 
 
-def placeholder_problem(robot: Robot, obj: Shape, fingers: Sequence[str], contacts: np.ndarray | None = None
-                        ) -> GraspProblem:
-    """A problem of ``robot`` holding ``obj`` (contacts: (k, 3) world, default the object's centre)."""
+def placeholder_problem(robot: Robot, obj: Shape, fingers: Sequence[str], contacts: np.ndarray | None = None,
+                        obstacles: Sequence[Shape] = ()) -> GraspProblem:
+    """A problem of ``robot`` holding ``obj`` among ``obstacles`` (contacts (k, 3), world; None: its centre)."""
     T = np.eye(4)
     T[:3, :3] = _rotation(obj)
     T[:3, 3] = obj.pose[:3]
     pts = np.tile(obj.pose[:3], (len(fingers), 1)) if contacts is None else np.asarray(contacts).reshape(-1, 3)
     local = (pts - T[:3, 3]) @ T[:3, :3]
     data = {"robot": robot.cfg.name, "object": obj.to_mapping(),
-            "contacts": [{"finger": f, "position": p.tolist()} for f, p in zip(fingers, local, strict=True)]}
+            "contacts": [{"finger": f, "position": p.tolist()} for f, p in zip(fingers, local, strict=True)],
+            "obstacles": [o.to_mapping() for o in obstacles]}
     return GraspProblem.from_mapping(data, robot_cfg=robot.cfg, allow_outside_paths=True)
 
 
@@ -230,7 +231,8 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
                      seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3,
                      max_tries: int | None = None, stats: dict | None = None, require: str | None = None,
                      orientations: Callable[[np.random.Generator, int], np.ndarray] | None = None,
-                     reachable: Callable[[np.ndarray], np.ndarray] | None = None) -> list[ContactSet]:
+                     reachable: Callable[[np.ndarray], np.ndarray] | None = None, obstacles: Sequence[Shape] = ()
+                     ) -> list[ContactSet]:
     """Up to ``n`` contact sets the hand touches with the pads of ``fingers`` (module docstring):
     the first ``n`` of :func:`iter_contact_sets` (same arguments), drawing at most ``max_tries``
     palm poses (default ``50 n``). Each set unpacks as ``(contacts (k, 3), normals (k, 3), posture)``
@@ -243,7 +245,7 @@ def pad_contact_sets(robot: Robot, obj: Shape, n: int, fingers: Sequence[str] = 
     out: list[ContactSet] = []
     for batch in iter_contact_sets(robot, obj, fingers, seed, cone_deg, penetration_m,
                                    50 * n if max_tries is None else max_tries, stats, require, orientations,
-                                   reachable):
+                                   reachable, obstacles):
         out.extend(batch[: n - len(out)])
         if len(out) == n:
             break
@@ -256,7 +258,8 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
                       seed: int = 0, cone_deg: float = 30.0, penetration_m: float = 1e-3, max_tries: int = 3200,
                       stats: dict | None = None, require: str | None = None,
                       orientations: Callable[[np.random.Generator, int], np.ndarray] | None = None,
-                      reachable: Callable[[np.ndarray], np.ndarray] | None = None) -> Iterator[list[ContactSet]]:
+                      reachable: Callable[[np.ndarray], np.ndarray] | None = None, obstacles: Sequence[Shape] = ()
+                      ) -> Iterator[list[ContactSet]]:
     """The contact sets of each batch of ``BATCH`` palm poses (module docstring), batch after batch,
     until ``max_tries`` palm poses were drawn: from each palm pose whose every chosen finger has a
     line that touches within the cone with its links clear, up to ``COMBOS`` sets (different lines
@@ -264,7 +267,8 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
     that pass the check. ``stats`` as :func:`pad_contact_sets` (updated after every batch);
     ``require``: keep only "opposed" sets (:func:`opposes` below ``OPPOSE``) or "force_closure" ones
     (None: every set). ``orientations(rng, B)``: (B, 3, 3) palm orientations in place of uniform ones;
-    ``reachable(T)``: which palm poses (B, 4, 4) to keep (a hand on an arm: those the arm reaches)."""
+    ``reachable(T)``: which palm poses (B, 4, 4) to keep (a hand on an arm: those the arm reaches);
+    ``obstacles``: the FCL check of step 3 drops a set where a link meets one (a table)."""
     check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.cfg.name, "fingers"))
     if require not in (None, "opposed", "force_closure"):
         raise ProblemError(f"pad_contact_sets: require {require!r}: None, 'opposed' or 'force_closure'")
@@ -283,7 +287,8 @@ def iter_contact_sets(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thumb
     line_spheres = [sp for sp in spheres if sp[0] in rows and sp[1] not in tips]  # (FCL checks them all, step 3)
     home = robot.home_posture(torch.float64).fingers
     others_rows = [i for i in range(len(finger_names)) if i not in rows]
-    scene = scene_for(robot, placeholder_problem(robot, obj, fingers), penetration_m, False, fingers_apart=True)
+    scene = scene_for(robot, placeholder_problem(robot, obj, fingers, None, obstacles), penetration_m, False,
+                      fingers_apart=True)
     counts = stats if stats is not None else {}
     counts.update(tried=0, touching=0, facing=0, clean=0, **({} if reachable is None else {"reached": 0}))
     landed: list[np.ndarray] = []  # (4, 4) the palm poses whose every chosen finger touched

@@ -151,8 +151,9 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     (MANUS) grasps antipodal point pairs as wide as its jaws (:mod:`~graspnet_torch.synthesis.pairs`,
     at most ``candidates``), the best ``solve_top`` (default ``2 n_grasps``) solved by the search
     (``trials`` learners each, whatever ``start``) among ``obstacles`` (a table); its jaws do not
-    move, so there is nothing to squeeze in physics: ``physics`` is refused. ``obstacles`` are for a
-    gripper only, so far.
+    move, so there is nothing to squeeze in physics: ``physics`` is refused. ``obstacles`` (a table
+    under the object): a set whose links meet one is dropped as it is drawn, and each solve counts
+    them as collisions (the physics check leaves them out, as DexGraspBench's has no table).
 
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
     ``solve_s``, ``physics_s``; ``first_s``: to the first grasp that holds every push, None if
@@ -167,10 +168,8 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     if gripper and physics is not None:
         raise ProblemError(f"synthesize_grasps: robot {robot.name}: its jaws do not move (fixed marked points): "
                            f"there is no squeeze to check in physics; pass physics=None")
-    if obstacles and not gripper:
-        raise ProblemError(f"synthesize_grasps: obstacles are for a gripper only, so far (robot {robot.name})")
     settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
-    run = _sampled if start == "sampled" else _random
+    run = functools.partial(_sampled if start == "sampled" else _random, obstacles=tuple(obstacles))
     if gripper:
         settings = dict(solver or {})
         run = functools.partial(_pairs, obstacles=tuple(obstacles))
@@ -221,8 +220,8 @@ def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None
 
 
 def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
-             physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict
-             ) -> list[SynthesizedGrasp]:
+             physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict,
+             obstacles: tuple[Shape, ...] = ()) -> list[SynthesizedGrasp]:
     """``start="sampled"`` (:func:`synthesize_grasps`)."""
     session = Solver(robot, trials=1, seed=seed, solver=settings)
     grasps: list[SynthesizedGrasp] = []
@@ -230,7 +229,7 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
     orientations, reachable = arm_palms(robot, seed)
     sets = iter_contact_sets(carried_hand(robot), obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
                              max_tries=TRIES_PER_SET * candidates, stats=t, orientations=orientations,
-                             reachable=reachable)
+                             reachable=reachable, obstacles=obstacles)
     while tried < candidates:
         t1 = time.perf_counter()
         batch = next(sets, None)
@@ -242,7 +241,7 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
         t["rank_s"] += time.perf_counter() - t2
         for s, q in ranked:
             tried += 1
-            problem = placeholder_problem(robot, obj, fingers, s.contacts)
+            problem = placeholder_problem(robot, obj, fingers, s.contacts, obstacles)
             t3 = time.perf_counter()
             result = session.solve(problem, start=s.posture, search=False)
             t["solve_s"] += time.perf_counter() - t3
@@ -259,17 +258,17 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
 
 
 def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
-            physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict
-            ) -> list[SynthesizedGrasp]:
+            physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict,
+            obstacles: tuple[Shape, ...] = ()) -> list[SynthesizedGrasp]:
     """``start="random"`` (:func:`synthesize_grasps`)."""
     t0 = time.perf_counter()
     cone = settings_of(robot, settings, None, None, None)[0].normal_cone_deg
     orientations, reachable = arm_palms(robot, seed)
     sets = pad_contact_sets(carried_hand(robot), obj, candidates, fingers, seed, cone_deg=cone, stats=t,
-                            orientations=orientations, reachable=reachable)
+                            orientations=orientations, reachable=reachable, obstacles=obstacles)
     t1 = time.perf_counter()
     ranked = reach_sets(robot, rank_sets(sets, obj), fingers, seed, solve_top or 2 * n_grasps)
-    problems = [placeholder_problem(robot, obj, fingers, s.contacts) for s, _ in ranked]
+    problems = [placeholder_problem(robot, obj, fingers, s.contacts, obstacles) for s, _ in ranked]
     t2 = time.perf_counter()
     results = _solve(problems, trials, seed, settings)
     t.update(generate_s=t1 - t0, rank_s=t2 - t1, solve_s=time.perf_counter() - t2, solved=len(problems))

@@ -15,7 +15,7 @@ A free hand, or a hand on an arm whose robot config names the free hand (``hand:
 sets are drawn with it, then the arm reaches them). A gripper with two marked points (MANUS)
 says ``points: auto`` (or ``contacts: auto``; its ``points`` chosen: two antipodal points as far
 apart as its jaws), with ``grasps`` and its ``obstacles`` (a table). ``fingers`` and ``grasps`` apply only to
-``contacts: auto`` (``grasps`` to ``points: auto``); a hand's obstacles are not supported with it yet.
+``contacts: auto`` (``grasps`` to ``points: auto``); obstacles (a table) are kept clear of.
 """
 
 from __future__ import annotations
@@ -80,8 +80,6 @@ def auto_contacts(data: Mapping, source: str, robot_cfg: RobotCfg) -> AutoContac
     if robot_cfg.kind != "hand" and robot_cfg.hand is None:
         raise ProblemError(f"{source}: contacts: auto: robot '{robot_cfg.name}' ({robot_cfg.kind}): contacts are "
                            f"chosen for a free hand, or a hand on an arm whose config names it ('hand:'), so far")
-    if data.get("obstacles"):
-        raise ProblemError(f"{source}: contacts: auto: obstacles are not supported with chosen contacts yet")
     if data.get("fingers") is not None and data.get("n_fingers") is not None:
         raise ProblemError(f"{source}: fingers and n_fingers: give one (n_fingers: N is fingers: N)")
     key = "n_fingers" if data.get("n_fingers") is not None else "fingers"

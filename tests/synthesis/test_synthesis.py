@@ -193,3 +193,22 @@ def test_a_robot_by_name_gives_what_the_built_robot_gives(robot: gt.Robot) -> No
     base = gt.baseline_grasps(robot, obj, n_grasps=1, candidates=4, seed=1)
     base_named = gt.baseline_grasps("hand", obj, n_grasps=1, candidates=4, seed=1)
     assert base and [g.touching for g in base] == [g.touching for g in base_named]
+
+
+def test_a_table_under_the_object_is_kept_clear_of(robot: gt.Robot) -> None:
+    """A 6 cm cube on a table: drawn without the table, some grasps put a link into it (FCL, the
+    table as an obstacle); given the table, none does, and each still succeeds on the cube."""
+    obj = cube()
+    table = Shape("box", (0.4, 0.4, 0.1), np.array([0.0, 0.0, 0.12, 0.0, 0.0, 0.0]))  # its top at the cube's bottom
+    on_table = placeholder_problem(robot, obj, FINGERS, None, (table,))
+    scene = CollisionScene(robot, on_table, object_tolerance=0.001, touching=False, fingers_apart=True)
+
+    def into_table(grasps) -> list[bool]:
+        return [bool(scene.check(trial_posture(robot, g.result.best)).obstacle_pairs) for g in grasps]
+
+    free = gt.synthesize_grasps(robot, obj, n_grasps=8, candidates=8, seed=0)
+    assert any(into_table(free))
+    kept = gt.synthesize_grasps(robot, obj, n_grasps=4, candidates=16, seed=0, obstacles=(table,))
+    assert kept and not any(into_table(kept))
+    assert all(g.success and g.result.best.collisions == 0 for g in kept)
+    assert all(len(g.problem.obstacles) == 1 for g in kept)

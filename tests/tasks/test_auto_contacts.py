@@ -42,8 +42,8 @@ def test_auto_problem_defaults_and_counts():
     ({"grasps": 101}, r"grasps: expected a whole number from 1 to 100"),
     ({"grasps": True}, r"grasps: expected a whole number"),
     ({"object": None}, r"contacts: auto needs an object"),
-    ({"obstacles": [{"shape": "box", "size": [0.1, 0.1, 0.1], "pose": [0.3, 0, 0, 0, 0, 0]}]},
-     r"obstacles are not supported"),
+    ({"obstacles": [{"shape": "box", "size": [0.1], "pose": [0.3, 0, 0, 0, 0, 0]}]},
+     r"p\.yaml: obstacles\[0\]\.size: expected 3 numbers"),
 ])
 def test_bad_auto_problems_are_refused_in_one_line(keys, message):
     with pytest.raises(gt.ProblemError, match=message) as info:
