@@ -68,8 +68,8 @@ def arm_palms(robot: Robot, seed: int) -> tuple[Callable[[np.random.Generator, i
     """What :func:`~graspnet_torch.synthesis.candidates.iter_contact_sets` draws palm poses with for
     ``robot``: (orientations, reachable), both None for a free hand. A hand on an arm: the palm
     orientations of uniformly random arm postures (rng, B -> (B, 3, 3)), and a palm pose kept where
-    the arm's IK reaches it (T (B, 4, 4) -> (B,) bool; as :func:`reach_sets`, the arm posture each
-    orientation came from its first start)."""
+    the arm's IK reaches it (T (B, 4, 4) -> (B,) bool; as :func:`reach_sets`, with the arm posture
+    each orientation came from among the starts)."""
     if not robot.has_body:
         return None, None
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.body_limits)
