@@ -181,6 +181,18 @@ class UrdfModel:
         if link not in self.links:
             raise ConfigError(f"{what}: link '{link}' is not in {self.path.name}")
 
+    def subtree(self, link: str) -> frozenset[str]:
+        """``link`` and every link below it."""
+        children: dict[str, list[str]] = {}
+        for j in self.robot.joints:
+            children.setdefault(j.parent, []).append(j.child)
+        out, todo = set(), [link]
+        while todo:
+            below = todo.pop()
+            out.add(below)
+            todo.extend(children.get(below, []))
+        return frozenset(out)
+
     def path_joints(self, root: str, tip: str, what: str = "chain") -> list:
         """URDF joints from ``root`` down to ``tip``, in chain order."""
         self.check_link(root, what)

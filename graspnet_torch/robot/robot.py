@@ -102,17 +102,9 @@ class Robot(Kinematics, JointValues, LinkFrames):
         """The joints that move more than one finger (:mod:`graspnet_torch.robot.shared`), among
         the fingers whose chains start at the palm (the default base) and whose tips lie below it
         (any other finger's config errors are :meth:`_finger`'s to report)."""
-        cfg, links = self.cfg, self.urdf.links
-
-        def below_palm(link: str) -> bool:
-            while link in self.urdf.parent_joint:
-                link = self.urdf.parent_joint[link].parent
-                if link == cfg.palm_link:
-                    return True
-            return False
-
-        tips = {f: c.tip for f, c in cfg.fingers.items()
-                if c.base == cfg.palm_link and c.tip in links and below_palm(c.tip)}
+        cfg = self.cfg
+        below_palm = self.urdf.subtree(cfg.palm_link) - {cfg.palm_link}
+        tips = {f: c.tip for f, c in cfg.fingers.items() if c.base == cfg.palm_link and c.tip in below_palm}
         return find_shared_joints(self.urdf, cfg.palm_link, tips, cfg.source)
 
     @cached_property

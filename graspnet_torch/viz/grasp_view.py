@@ -86,7 +86,7 @@ def grasp_panels(robot: Robot, grasps: Sequence[SynthesizedGrasp], label: str = 
     contacts red (a gripper: the points), colliding links red, captioned with its rank, epsilon (a
     gripper: its line's largest angle to the inward normals) and holds; a robot with a body drawn
     from its palm down (the hand and the object, not the arm)."""
-    focus = _below_palm(robot) if robot.has_body else frozenset()
+    focus = robot.urdf.subtree(robot.cfg.palm_link) if robot.has_body else frozenset()
     panels = []
     for k, g in enumerate(grasps[:most]):
         panel = posture_panels(robot, g.problem, g.result)[0]
@@ -102,15 +102,3 @@ def render_grasps(robot: Robot, grasps: Sequence[SynthesizedGrasp], path: str | 
     """The best grasps of an object side by side (:func:`grasp_panels`), a PNG written atomically."""
     return render_robot(robot, grasp_panels(robot, grasps, label), path)
 
-
-def _below_palm(robot: Robot) -> frozenset[str]:
-    """The palm link and every link it carries."""
-    children: dict[str, list[str]] = {}
-    for j in robot.urdf.robot.joints:
-        children.setdefault(j.parent, []).append(j.child)
-    out, todo = set(), [robot.cfg.palm_link]
-    while todo:
-        link = todo.pop()
-        out.add(link)
-        todo.extend(children.get(link, []))
-    return frozenset(out)

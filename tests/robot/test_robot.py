@@ -165,3 +165,11 @@ def test_joints_to_file_for_many_postures_equal_each_alone_in_degrees():
                         for v, t in zip(values, robot.fingers[name].chain.spec.joint_types, strict=True)]
                  for name, values in robot.finger_joint_values(q[k]).items()}
         assert many[k] == alone
+
+
+def test_subtree_is_the_palm_and_what_it_carries():
+    arm = gt.load_robot("arm_hand")
+    below = arm.urdf.subtree("palm")
+    assert "palm" in below and {c.tip for c in arm.cfg.fingers.values()} <= below
+    assert "torso" not in below and "elbow_flexion_link" not in below
+    assert arm.urdf.subtree("torso") == frozenset(arm.urdf.link_names)
