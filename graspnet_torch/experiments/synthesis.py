@@ -23,8 +23,10 @@ grasp lies inside the object (recomputed here: FCL, no link exempt, as ``contact
 grasps per second (reported grasps holding 6/6 over the wall time of the whole set, ``jobs`` processes
 over the objects: sampling, solving and physics) and the median time from the call's start to the
 first physics check that holds 6/6 (an object with none: never, so the median is "never" where half the
-objects have none). Each object's convex decomposition (CoACD: the solver's collision proxy and the
-physics check need it; once per object, cached on disk) is made before the timed runs and reported
+objects have none); the share of the time spent in the physics checks, and the rate the verified grasps
+would reach were sampling and solving free (the ceiling that checking every landed grasp under the
+pinned protocol puts on the run). Each object's convex decomposition (CoACD: the solver's collision
+proxy and the physics check need it; once per object, cached on disk) is made before the timed runs and reported
 apart, as grasp synthesis benchmarks report their object preprocessing.
 Targets (``checks``, the issue's): the hand's top-1 holds on at least 80 % of the objects, at least
 10 verified grasps/s, a median time to the first verified grasp of at most 2 s, the hand by config's
@@ -195,13 +197,21 @@ def summarize(rows: list[dict], wall: float | None = None) -> dict:
     wall = busy if wall is None else wall
     verified = sum(sum(h == 6 for h in r["holds"]) for r in rows)
     first = float(np.median([r["first_s"] for r in rows])) if rows else math.inf
+    physics = sum(r.get("stats", {}).get("physics_s", 0.0) for r in rows)
     return {"objects": n, "top-1 holds %": 100 * float(np.mean(top1)) if n else 0.0,
             "any holds %": 100 * float(np.mean(anyk)) if n else 0.0,
             "median best epsilon": float(np.median(best)) if best else math.nan,
             "with a grasp %": 100 * sum(bool(r["holds"]) for r in rows) / max(n, 1),
             "deepest mm": max((d for r in rows for d in r["depth_mm"]), default=0.0),
             "verified": verified, "wall s": wall, "verified per s": verified / wall if wall > 0 else 0.0,
-            "median first s": first, "s per object": busy / max(n, 1)}
+            "median first s": first, "s per object": busy / max(n, 1),
+            "physics %": 100 * physics / busy if busy else 0.0,
+            # the rate were sampling and solving free: the physics checks' share of the busy time alone
+            "physics-bound per s": verified / (physics * wall / busy) if physics > 0 else math.inf}
+
+
+def _rate(value: float) -> str:
+    return "-" if math.isinf(value) else f"{value:.2f}"
 
 
 def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
@@ -220,18 +230,19 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
                          "-" if math.isnan(s["median best epsilon"]) else f"{s['median best epsilon']:.4f}",
                          f"{s['deepest mm']:.2f}", f"{s['verified per s']:.2f}",
                          "never" if math.isinf(s["median first s"]) else f"{s['median first s']:.2f}",
-                         f"{s['s per object']:.1f}"])
+                         f"{s['s per object']:.1f}", f"{s['physics %']:.0f}", _rate(s["physics-bound per s"])])
             for key in ("top-1 holds %", "any holds %", "median best epsilon", "with a grasp %", "deepest mm",
                         "verified"):
                 numbers[f"{name}/{method}/{key}"] = float(s[key])
-            for key in ("verified per s", "median first s", "s per object"):  # never: null (strict JSON)
+            for key in ("verified per s", "median first s", "s per object", "physics %",
+                        "physics-bound per s"):  # never / unbounded: null (strict JSON)
                 timings[f"{name}/{method}/{key}"] = None if math.isinf(s[key]) else float(s[key])
     timings["decomposition median s"], timings["decomposition max s"] = float(np.median(prepared)), max(prepared)
     _checks(summaries, cfg, checks)
     no_baseline = f" {NO_BASELINE}" if "trifinger" in cfg.robots and "trifinger" not in cfg.baseline else ""
     headers = ["robot", "method", "objects", "with a grasp %", "top-1 holds 6/6 %", f"any of top {cfg.grasps} holds %",
                "median best epsilon", "deepest mm", "verified grasps/s", "median s to first verified",
-               "s per object"]
+               "s per object", "physics % of time", "verified grasps/s, physics alone"]
     body = (f"**An object in, grasps out.** {cfg.objects} of pybullet's random objects (`random_urdfs`, scale "
             f"{SCALE:g} as their URDFs, bounding box centred 0.2 m above the origin), drawn with seed {cfg.seed} from "
             f"the {1000 - len(EXCLUDED)} that no tuning or test uses and are not empty "
@@ -247,7 +258,11 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
             f"Verified grasps/s: reported grasps holding 6/6 over the wall time of the whole set ({cfg.jobs} "
             f"process{'es' if cfg.jobs > 1 else ''} over the objects, one torch thread each: sampling, solving, "
             "physics); first verified: from the call's start to the first physics check holding 6/6 "
-            f"(never on an object without one). Not timed: each object's convex decomposition (CoACD, for the "
+            "(never on an object without one). Physics % of time: the share of the objects' time spent in the "
+            "MuJoCo checks (every candidate that landed is checked; a failing one stops early); verified grasps/s, "
+            "physics alone: the rate were sampling and solving free (the verified grasps over the checks' share of "
+            "the wall time), the ceiling this run's checks put on its grasps. "
+            "Not timed: each object's convex decomposition (CoACD, for the "
             "solver's collision proxy and MuJoCo; once per object, cached on disk), made before the runs: "
             f"median {np.median(prepared):.1f} s, longest {max(prepared):.1f} s here "
             f"(0 where cached).{no_baseline}\n\n"
@@ -269,7 +284,8 @@ def _checks(summaries: dict, cfg: SynthesisExperimentCfg, checks: list) -> None:
                        "the objects: not run (`robots` leaves it out)", False))
     if "hand" in cfg.robots:
         s = summaries["hand", "synthesis"]
-        checks.append((f"hand: {s['verified per s']:.2f} verified grasps/s >= {RATE:g}", s["verified per s"] >= RATE))
+        checks.append((f"hand: {s['verified per s']:.2f} verified grasps/s >= {RATE:g} (the physics checks alone: "
+                       f"{_rate(s['physics-bound per s'])}/s)", s["verified per s"] >= RATE))
         first = "never" if math.isinf(s["median first s"]) else f"{s['median first s']:.2f} s"
         checks.append((f"hand: median time to the first verified grasp {first} <= {FIRST_S:g} s",
                        s["median first s"] <= FIRST_S))

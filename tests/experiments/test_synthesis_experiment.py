@@ -51,13 +51,18 @@ def test_a_bad_setting_is_refused_with_one_line(data, key):
 
 
 def test_summary_of_rows_by_hand():
-    rows = [{"holds": [6, 3], "epsilon": [0.1, 0.2], "wall": 2.0, "first_s": 1.0, "depth_mm": [0.1, 0.4]},
-            {"holds": [2, 6, 6], "epsilon": [0.3], "wall": 3.0, "first_s": 2.5, "depth_mm": [0.0]},
-            {"holds": [], "epsilon": [], "wall": 5.0, "first_s": math.inf, "depth_mm": []}]
+    rows = [{"holds": [6, 3], "epsilon": [0.1, 0.2], "wall": 2.0, "first_s": 1.0, "depth_mm": [0.1, 0.4],
+             "stats": {"physics_s": 1.0}},
+            {"holds": [2, 6, 6], "epsilon": [0.3], "wall": 3.0, "first_s": 2.5, "depth_mm": [0.0],
+             "stats": {"physics_s": 1.5}},
+            {"holds": [], "epsilon": [], "wall": 5.0, "first_s": math.inf, "depth_mm": [], "stats": {"physics_s": 2.5}}]
     s = summarize(rows)
     assert s["top-1 holds %"] == pytest.approx(100 / 3) and s["any holds %"] == pytest.approx(200 / 3)
     assert s["median best epsilon"] == pytest.approx(0.25) and s["deepest mm"] == pytest.approx(0.4)
     assert s["verified"] == 3 and s["verified per s"] == pytest.approx(0.3) and s["median first s"] == 2.5
+    # half the busy time in physics: 3 verified over half of the 10 s wall
+    assert s["physics %"] == pytest.approx(50) and s["physics-bound per s"] == pytest.approx(0.6)
+    assert summarize(rows, wall=5.0)["physics-bound per s"] == pytest.approx(1.2)  # two processes
 
 
 @pytest.mark.slow
