@@ -13,8 +13,9 @@ constant in the tip frame. Otherwise the pad is *derived* from the URDF:
 
 - the *distal link*: the nearest link at or above the tip, rigidly attached to it, that has
   collision geometry (none: the tip link, and the pad is the tip frame's origin, depth 0);
-- the *normal*: the direction the tip moves when the finger's last free joint closes (its
-  positive direction), from the finger kernel's Jacobian at the home posture, in the tip frame
+- the *normal*: the direction the tip moves when the finger's last free joint closes (the sense,
+  increasing or decreasing, whose limit puts the tip nearer the palm frame's origin:
+  :func:`closing_sense`), from the finger kernel's Jacobian at the home posture, in the tip frame
   (for a revolute last joint ``axis x (tip - joint origin)``, for a prismatic one its axis;
   constant in the tip frame when the last free joint is the chain's last joint);
 - the *point*: the distal link's support point in the normal's direction (the largest ``n . x``
@@ -47,7 +48,7 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.shape import primitive_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["TIE", "Pad", "finger_pads"]
+__all__ = ["TIE", "Pad", "closing_sense", "finger_pads"]
 
 TIE = 5e-4  # m: support points within this of the largest n . x are ties
 SAMPLES = 4000  # surface points per shape where the normal line does not decide
@@ -101,7 +102,7 @@ def finger_pads(robot: _Robot) -> dict[str, Pad]:
             shapes = {}
             for s in link_shapes(robot.urdf, "collision"):
                 shapes.setdefault(s.link, []).append(s)
-        normal = _closing_direction(robot, name, finger.chain, home[k, :finger.n_joints])
+        normal = _closing_direction(robot, name, finger, home[k, :finger.n_joints])
         out[name] = _derived(robot, finger.chain, tip_in_link, normal, shapes)
     return out
 
@@ -147,13 +148,27 @@ def _given(robot: _Robot, name: str, pad: PadCfg, tip_in_link: np.ndarray) -> Pa
     return Pad(pad.link, point, normal / np.linalg.norm(normal))
 
 
-def _closing_direction(robot: _Robot, name: str, chain: Any, q: np.ndarray) -> np.ndarray:
+def closing_sense(finger: Any, q: np.ndarray) -> float:
+    """+1 where the finger's last free joint closes it as it increases, -1 as it decreases: the
+    sense whose limit puts the tip nearer the palm frame's origin (the other free joints at ``q``
+    (n_f,), the home posture). A finger curls toward its palm; URDFs disagree on the sign (the
+    shipped hand closes positively, the Dexmate F5D6's fingers and TriFinger's negatively)."""
+    chain, near = finger.chain, []
+    for limit in (chain.lower[-1], chain.upper[-1]):
+        at = np.array(q, dtype=np.float64)
+        at[-1] = limit
+        near.append(float(np.linalg.norm((finger.base_in_palm @ chain.transform(at))[:3, 3])))
+    return 1.0 if near[1] <= near[0] else -1.0
+
+
+def _closing_direction(robot: _Robot, name: str, finger: Any, q: np.ndarray) -> np.ndarray:
     """(3,) unit direction, tip frame, in which the tip moves as the finger's last free joint
-    increases, at the free joints ``q`` (n_f,) (the home posture)."""
+    closes (:func:`closing_sense`), at the free joints ``q`` (n_f,) (the home posture)."""
+    chain = finger.chain
     qt = torch.as_tensor(q, dtype=torch.float64)
     _, J = FingerKernel(chain).position_jacobian(qt)
     R = chain.transform(q)[:3, :3]  # the tip frame in the finger's base frame
-    v = R.T @ J[:, -1].numpy()
+    v = closing_sense(finger, q) * (R.T @ J[:, -1].numpy())
     norm = float(np.linalg.norm(v))
     if not norm > 1e-9:
         raise ConfigError(f"{robot.cfg.source}: fingers.{name}: its last free joint '{chain.joint_names[-1]}' does "

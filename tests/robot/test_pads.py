@@ -21,17 +21,27 @@ HAND_RADII = {"thumb": 0.008075, "index": 0.007225, "middle": 0.007225, "ring": 
 
 def _closing_directions(robot: gt.Robot, eps: float = 1e-6) -> dict[str, np.ndarray]:
     """Finger name -> unit direction, in its tip frame, in which the tip moves as its last free
-    joint increases at the home posture: finite differences of the link frames (an oracle
-    independent of the finger kernels' Jacobians)."""
+    joint closes at the home posture: increases where its upper limit puts the tip nearer the palm
+    frame's origin than its lower limit does, else decreases; finite differences of the link frames
+    (an oracle independent of the finger kernels)."""
     home = robot.home_posture()
     frames = robot.link_frames(home)
+    lo, hi = (np.asarray(a) for a in robot.finger_limits)
     out = {}
     for k, (name, finger) in enumerate(robot.fingers.items()):
-        moved = home.fingers.clone()
-        moved[k, finger.n_joints - 1] += eps
-        after = robot.link_frames(gt.Posture(home.palm_pose, moved, home.body))
         offset = np.array([*(robot.cfg.fingers[name].tip_offset or (0.0, 0.0, 0.0)), 1.0])
-        tip = finger.chain.tip
+        tip, last = finger.chain.tip, finger.n_joints - 1
+
+        def tip_at(value: float, k=k, last=last, tip=tip, offset=offset) -> np.ndarray:
+            moved = home.fingers.clone()
+            moved[k, last] = value
+            at = robot.link_frames(gt.Posture(home.palm_pose, moved, home.body))
+            return (np.linalg.inv(at[robot.cfg.palm_link]) @ at[tip] @ offset)[:3]  # palm frame
+
+        sense = 1.0 if np.linalg.norm(tip_at(hi[k, last])) <= np.linalg.norm(tip_at(lo[k, last])) else -1.0
+        moved = home.fingers.clone()
+        moved[k, last] += sense * eps
+        after = robot.link_frames(gt.Posture(home.palm_pose, moved, home.body))
         before_p, after_p = (frames[tip] @ offset)[:3], (after[tip] @ offset)[:3]
         v = frames[tip][:3, :3].T @ (after_p - before_p)
         out[name] = v / np.linalg.norm(v)
@@ -242,3 +252,33 @@ def test_pads_do_not_depend_on_the_home_posture(tmp_path):
     straight = gt.load_robot("hand").pads["index"]
     np.testing.assert_allclose(bent.normal, straight.normal, atol=1e-12)
     np.testing.assert_allclose(bent.point, straight.point, atol=1e-12)
+
+
+def test_a_finger_that_closes_as_its_joint_decreases_gets_the_same_pad(tmp_path):
+    """The shipped hand with every finger's last joint mirrored (axis and limits negated, so that
+    the finger closes as the joint decreases, as the Dexmate F5D6's and TriFinger's do) derives
+    the same pads: the side the finger curls toward, not the side the joint's positive sense moves."""
+    import re
+
+    text = (repo_root() / "urdf" / "hand" / "hand.urdf").read_text()
+    last = ("index_dip", "middle_dip", "ring_dip", "pinky_dip")
+
+    def mirror(match: re.Match) -> str:
+        joint = match.group(0)
+        joint = re.sub(r'<axis xyz="0 0 1"/>', '<axis xyz="0 0 -1"/>', joint)
+        lower, upper = (float(v) for v in re.search(r'lower="([^"]+)" upper="([^"]+)"', joint).groups())
+        return re.sub(r'lower="[^"]+" upper="[^"]+"', f'lower="{-upper}" upper="{-lower}"', joint)
+
+    pattern = r'<joint name="(?:{})" type="revolute">.*?</joint>'.format("|".join(last))
+    mirrored, count = re.subn(pattern, mirror, text, flags=re.S)
+    assert count == len(last) and mirrored.count('<axis xyz="0 0 -1"/>') >= len(last)
+    (tmp_path / "hand.urdf").write_text(mirrored)
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    data["urdf"] = str(tmp_path / "hand.urdf")
+    for joint in last:
+        data["home"][joint] = -data["home"][joint]
+    (tmp_path / "hand.yaml").write_text(yaml.safe_dump(data))
+    original, flipped = gt.load_robot("hand").pads, gt.load_robot(tmp_path / "hand.yaml").pads
+    for finger in ("index", "middle", "ring", "pinky"):
+        np.testing.assert_allclose(flipped[finger].normal, original[finger].normal, atol=1e-9)
+        np.testing.assert_allclose(flipped[finger].point, original[finger].point, atol=1e-9)
