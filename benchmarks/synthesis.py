@@ -3,11 +3,13 @@ the surface contact model, each checked in MuJoCo as it comes) beside the peer w
 reasoning, ``gt.baseline_grasps`` (random palm poses, fingers closed until they touch), on the same
 objects in the same run: physics-verified grasps per second and the time to the first.
 
-    python benchmarks/synthesis.py [--objects 10] [--jobs 2] [--check]
+    python benchmarks/synthesis.py [--objects 10] [--jobs 2] [--grasps 5] [--candidates 64] [--check]
 
 Objects: the first ``--objects`` of the experiment ``synthesis``'s 100 (pybullet's random objects,
 seed 2026; their convex decompositions made before the timed runs, as the experiment does), the
-shipped hand (thumb, index, middle), 64 candidates, the top 5 reported, object k with seed 2026 + k.
+shipped hand (thumb, index, middle), ``--candidates`` sets (the baseline's palm poses) at most, the
+top ``--grasps`` reported (a grasp dataset: ``--grasps 32 --candidates 128``), object k with seed
+2026 + k.
 ``--jobs`` processes over the objects, one torch thread each. A grasp is verified where it holds
 6/6 pushes (``gt.simulate_grasp``); grasps/s: the reported grasps that hold over the wall time of
 the whole set; first: from the call's start to the first check that holds 6/6 (never on an object
@@ -34,7 +36,7 @@ RATE, FIRST_S = 10.0, 2.0
 FINGERS = ("thumb", "index", "middle")
 
 
-def one(k: int, obj: gt.Shape, method: str) -> tuple[int, float, float, float]:
+def one(k: int, obj: gt.Shape, method: str, grasps: int, candidates: int) -> tuple[int, float, float, float]:
     """Object k (synthesized with seed 2026 + k) by ``method``: (reported grasps holding 6/6, wall s,
     s to the first that holds, s in the physics checks)."""
     torch.set_num_threads(1)
@@ -50,16 +52,18 @@ def one(k: int, obj: gt.Shape, method: str) -> tuple[int, float, float, float]:
         return report
 
     if method == "synthesis":
-        grasps = gt.synthesize_grasps(robot, obj, n_grasps=5, fingers=FINGERS, candidates=64, seed=2026 + k,
-                                      physics=physics)
+        found = gt.synthesize_grasps(robot, obj, n_grasps=grasps, fingers=FINGERS, candidates=candidates,
+                                     seed=2026 + k, physics=physics)
     else:
-        grasps = gt.baseline_grasps(robot, obj, n_grasps=5, candidates=64, seed=2026 + k, physics=physics)
-    return sum(g.holds == 6 for g in grasps), time.perf_counter() - t0, first[0], spent[0]
+        found = gt.baseline_grasps(robot, obj, n_grasps=grasps, candidates=candidates, seed=2026 + k, physics=physics)
+    return sum(g.holds == 6 for g in found), time.perf_counter() - t0, first[0], spent[0]
 
 
 def main() -> int:
-    args = bench_args(__doc__, [("--objects", int, 10), ("--jobs", int, 2)])
-    print(f"torch threads: 1 per process, {args.jobs} process(es)")
+    args = bench_args(__doc__, [("--objects", int, 10), ("--jobs", int, 2), ("--grasps", int, 5),
+                                ("--candidates", int, 64)])
+    print(f"torch threads: 1 per process, {args.jobs} process(es); top {args.grasps} of at most {args.candidates} "
+          f"candidates per object")
     objs = [obj for _, obj in pick_objects(100, 2026)[: args.objects]]  # the experiment's first
     for obj in objs:  # object preprocessing, not timed (cached on disk)
         convex_pieces(obj.mesh, obj.scale)
@@ -68,7 +72,8 @@ def main() -> int:
     rows = {}
     for method in ("synthesis", "baseline"):
         t0 = time.perf_counter()
-        out = Parallel(n_jobs=args.jobs)(delayed(one)(k, obj, method) for k, obj in enumerate(objs))
+        out = Parallel(n_jobs=args.jobs)(delayed(one)(k, obj, method, args.grasps, args.candidates)
+                                         for k, obj in enumerate(objs))
         wall = time.perf_counter() - t0
         held = sum(o[0] for o in out)
         share = sum(o[3] for o in out) / sum(o[1] for o in out)  # of the objects' time, in physics
