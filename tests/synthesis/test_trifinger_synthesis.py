@@ -51,9 +51,12 @@ def test_trifinger_grasps_an_object_that_holds_and_checks_again(blob):
         assert gt.simulate_grasp(g.problem, g.result, robot=robot).holds == 6
 
 
-def test_the_config_pads_give_force_closure_sets_the_derived_ones_do_not(blob, tmp_path):
-    """The same palm poses with the pads the URDF gives (the last joint's closing side, facing
-    sideways where the tips close) and with the config's (facing the holder's axis)."""
+def test_the_config_pads_give_more_force_closure_sets_than_the_derived_ones(blob, tmp_path):
+    """The same palm poses with the pads the URDF gives (the side each finger curls toward, its
+    last joint decreasing: more than 60 degrees off the holder's axis where the tips close) and
+    with the config's (facing the axis): both give force-closure sets, the config's more. (Taken
+    as the side the last joint's positive sense moves, the derived pads gave fewer than a fifth of
+    the config's here.)"""
     data = yaml.safe_load(TRIFINGER.read_text())
     for finger in data["fingers"].values():
         finger.pop("pad")
@@ -63,4 +66,4 @@ def test_the_config_pads_give_force_closure_sets_the_derived_ones_do_not(blob, t
         sets = [s for batch in iter_contact_sets(robot, blob, FINGERS, 0, cone_deg=60.0, max_tries=320) for s in batch]
         centre = np.asarray(blob.pose[:3])
         closure[name] = sum(bool(grasp_quality(s.contacts, s.normals, centre, 0.6).force_closure) for s in sets)
-    assert closure["config"] >= 5 and closure["derived"] < closure["config"] / 5, closure
+    assert closure["derived"] >= 5 and closure["config"] > closure["derived"], closure
