@@ -38,7 +38,7 @@ from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
-from graspnet_torch.solver.api import robot_and_ik
+from graspnet_torch.solver.api import robot_of
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -129,7 +129,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     within the URDF's velocity limits and ``reach.acceleration``. A motion not found within
     ``reach.timeout_s`` comes back with ``found`` false and a one-line reason."""
     cfg = cfg or ReachCfg()
-    robot = robot or robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    robot = robot or robot_of(problem.robot_cfg or problem.robot)
     _refuse_shared(robot, problem)
     trial = result.best if hasattr(result, "best") else result  # a GraspResult or one of its trials
     t0 = time.perf_counter()

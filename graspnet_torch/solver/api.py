@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+import weakref
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -38,8 +39,9 @@ from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import reference_posture
 from graspnet_torch.threads import torch_threads
 
-__all__ = ["as_problem", "build_environment", "reference_posture", "result_of", "robot_and_ik",
-           "search", "settings_of", "solve", "solve_many", "solve_with", "starts_from_proposals", "trial_posture"]
+__all__ = ["as_problem", "build_environment", "finger_ik_for", "reference_posture", "result_of", "robot_and_ik",
+           "robot_of", "search", "settings_of", "solve", "solve_many", "solve_with", "starts_from_proposals",
+           "trial_posture"]
 # build_environment, reference_posture, trial_posture: from their modules, for callers here
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -48,9 +50,8 @@ PROBLEMS_KEPT = 64  # problem files kept read (one per file version)
 
 
 @lru_cache(maxsize=ROBOTS_KEPT)
-def _shipped_robot_and_ik(robot_name: str) -> tuple[Robot, FingerIK | None]:
-    robot = Robot.from_config(robot_name)
-    return robot, finger_ik_of(robot)
+def _shipped_robot(robot_name: str) -> Robot:
+    return Robot.from_config(robot_name)
 
 
 @lru_cache(maxsize=ROBOTS_KEPT)
@@ -58,27 +59,47 @@ def _shipped_cfg(robot_name: str) -> RobotCfg:
     return load_robot_cfg(robot_name)
 
 
-def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
-    """A robot and its trained FCNN (None for a robot without fingers, the MANUS): a shipped
-    robot by name, or a robot config (each built once per process); a config that differs from the shipped
-    one of its name only in its search space, home posture or description reuses the shipped
-    kinematics and FCNN."""
+def robot_of(robot: str | RobotCfg) -> Robot:
+    """A robot: a shipped robot by name, or a robot config (each built once per process; no
+    checkpoint read); a config that differs from the shipped one of its name only in its search
+    space, home posture or description reuses the shipped kinematics."""
     if isinstance(robot, str):
-        return _shipped_robot_and_ik(robot)
+        return _shipped_robot(robot)
     if robot.name in available_robots():
         shipped = _shipped_cfg(robot.name)
         if all(getattr(shipped, k) == getattr(robot, k) for k in KINEMATIC_KEYS):
-            return _shipped_robot_and_ik(robot.name)
-    key = (repr(robot), _stamp(robot.urdf), _stamp(robot_checkpoint(robot)))  # once per config and file versions
+            return _shipped_robot(robot.name)
+    key = (repr(robot), _stamp(robot.urdf))  # once per config and URDF version
     if key not in _BUILT:
-        built = Robot(robot)
-        _BUILT[key] = (built, finger_ik_of(built))
+        _BUILT[key] = Robot(robot)
         while len(_BUILT) > ROBOTS_KEPT:
             _BUILT.pop(next(iter(_BUILT)))
     return _BUILT[key]
 
 
-_BUILT: dict[tuple, tuple[Robot, FingerIK | None]] = {}
+def finger_ik_for(robot: Robot) -> FingerIK | None:
+    """A robot's trained FCNN (None for a robot without fingers, the MANUS), read once per robot
+    and checkpoint version (:func:`~graspnet_torch.fcnn.checkpoint.finger_ik_of`: a missing or
+    corrupted checkpoint raises ``CheckpointError`` naming the file)."""
+    if not robot.n_fingers:
+        return None
+    stamp = _stamp(robot_checkpoint(robot))
+    kept = _IK.get(robot)
+    if kept is None or kept[0] != stamp:
+        kept = _IK[robot] = (stamp, finger_ik_of(robot))
+    return kept[1]
+
+
+def robot_and_ik(robot: str | RobotCfg) -> tuple[Robot, FingerIK | None]:
+    """A robot and its trained FCNN (None for a robot without fingers, the MANUS): :func:`robot_of`
+    and :func:`finger_ik_for`; a config that differs from the shipped one of its name only in its
+    search space, home posture or description reuses the shipped kinematics and FCNN."""
+    built = robot_of(robot)
+    return built, finger_ik_for(built)
+
+
+_BUILT: dict[tuple, Robot] = {}
+_IK: weakref.WeakKeyDictionary[Robot, tuple] = weakref.WeakKeyDictionary()  # robot -> (checkpoint stamp, FCNN)
 
 
 def _stamp(path: Path | None) -> tuple[int, int] | None:
@@ -95,10 +116,10 @@ KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper
 
 def as_robot(robot: str | Path | RobotCfg | Robot) -> Robot:
     """A built robot, a shipped robot's name, a robot config or its YAML path -> the robot (built
-    once per process, :func:`robot_and_ik`)."""
+    once per process, :func:`robot_of`: no checkpoint read)."""
     if isinstance(robot, Robot):
         return robot
-    return robot_and_ik(str(robot) if isinstance(robot, Path) else robot)[0]
+    return robot_of(str(robot) if isinstance(robot, Path) else robot)
 
 
 def as_problem(problem: GraspProblem | str | Path) -> GraspProblem:

@@ -55,9 +55,9 @@ class ArmHandEnvironment(FingerEnvironment):
         fingers: the contact fingers, in problem order.
     """
 
-    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
-                 runs: int = 1):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg,
+                 ik: FingerIK | None, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
+                 collisions: bool = False, runs: int = 1):
         if not robot.has_body or robot.n_fingers == 0:
             first = problem if isinstance(problem, GraspProblem) else problem[0]
             raise ProblemError(f"{first.source}: robot '{robot.name}' is not an arm with fingers")

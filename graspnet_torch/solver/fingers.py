@@ -57,8 +57,8 @@ class FingerEnvironment(WholeConfiguration, Environment):
 
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
-        for p in problems:
-            missing = [f for f in p.fingers if f not in ik.experts]
+        for p in problems:  # ik None: a warm start's environment (Levenberg-Marquardt, no FCNN)
+            missing = [f for f in p.fingers if ik is not None and f not in ik.experts]
             if missing:
                 raise ProblemError(f"{p.source}: no FCNN experts for finger(s) {', '.join(missing)}")
         self.robot, self.problems, self.problem, self.ik = robot, problems, problems[0], ik
@@ -96,7 +96,8 @@ class FingerEnvironment(WholeConfiguration, Environment):
         base = torch.as_tensor(np.stack([robot.fingers[robot.finger_names[i]].base_in_palm for i in self.idx]), **kw)
         self.base_R, self.base_t = base[:, :3, :3], base[:, :3, 3]
         self._base64 = (self.base_R.to(torch.float64).cpu(), self.base_t.to(torch.float64).cpu())
-        ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
+        if ik is not None:
+            ik._bank(tuple(self.fingers), dtype, torch.device(device))  # build the finger kernels now, not in the loop
         self.proxy = None
         self.pads = None  # the surface model: the pads' normals join the errors (solver/pad_term.py)
         if any(rule.surface for rule in self.rules):
@@ -182,6 +183,14 @@ class FingerEnvironment(WholeConfiguration, Environment):
         configuration carries the joints the fingers share; else None (the fixed ones)."""
         return self.robot.base_frames(config[:, -self.shared_slots:]) if self.shared_slots else None
 
+    def fcnn(self) -> FingerIK:
+        """The FCNN the search's finger steps use; an environment built without one (a warm start's,
+        Levenberg-Marquardt only) refuses them: :class:`ProblemError`."""
+        if self.ik is None:
+            raise ProblemError(f"{self.problem.source}: this environment has no FCNN (built for a warm start): the "
+                               f"search needs the robot's trained finger IK")
+        return self.ik
+
     def shared_of(self, config: Tensor) -> Tensor | None:
         """The shared joints (B, S) of configurations (None: the robot holds them)."""
         return config[:, -self.shared_slots:] if self.shared_slots else None
@@ -191,6 +200,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
         """Finger joints (B, F, j) within limits and fingertip errors (B, F) in metres (zero for
         a finger a trial's problem does not use)."""
         targets = self.targets(config, palm, rows)
+        self.fcnn()
         if self.candidates > 1 and self.refine > 0:
             q, err = self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
         elif self.refine <= 0:
@@ -255,7 +265,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
         iterations, whole = self.final_refine, self.polishes
         if iterations > 0 and not whole:  # the whole polish moves the fingers too
             with torch.inference_mode():
-                q, err = self.ik.refine(evaluation.joints, self.targets(config), self.fingers, iterations)
+                q, err = self.fcnn().refine(evaluation.joints, self.targets(config), self.fingers, iterations)
             if self.mask is not None:
                 err = err * self.mask
             contact = None
@@ -272,7 +282,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
         return config, evaluation
 
     @classmethod
-    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK,
+    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK | None,
                dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False
                ) -> FingerEnvironment:
         """The usual environment, with the contact fingers' joints kept within

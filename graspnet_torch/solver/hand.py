@@ -53,9 +53,9 @@ class HandEnvironment(FingerEnvironment):
 
     n = 6
 
-    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg, ik: FingerIK,
-                 dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False,
-                 runs: int = 1, spaces: Sequence[PalmSearchSpace] | None = None):
+    def __init__(self, robot: Robot, problem: GraspProblem | Sequence[GraspProblem], solver: SolverCfg,
+                 ik: FingerIK | None, dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu",
+                 collisions: bool = False, runs: int = 1, spaces: Sequence[PalmSearchSpace] | None = None):
 
         problems = [problem] if isinstance(problem, GraspProblem) else list(problem)
         if robot.has_body:
@@ -85,7 +85,7 @@ class HandEnvironment(FingerEnvironment):
         self.upper = torch.as_tensor(hi, dtype=dtype, device=device)
 
     @classmethod
-    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK,
+    def around(cls, robot: Robot, problem: GraspProblem, posture: Posture, solver: SolverCfg, ik: FingerIK | None,
                dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu", collisions: bool = False
                ) -> HandEnvironment:
         """The palm searched in the frame of the posture's palm

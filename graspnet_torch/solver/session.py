@@ -27,7 +27,6 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.fcnn.checkpoint import finger_ik_of
 from graspnet_torch.fcnn.ik import FingerIK
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.robot import Posture, Robot
@@ -51,7 +50,8 @@ Start = GraspResult | TrialResult | Posture
 
 
 class Solver:
-    """A robot, its trained finger IK (FCNN) and solver settings, resolved once.
+    """A robot, its trained finger IK (FCNN: read when a search first needs it) and solver settings,
+    resolved once.
 
     Args:
         robot: a shipped robot's name, a robot config (or its YAML path), or a built robot.
@@ -76,19 +76,21 @@ class Solver:
                  max_iterations: int | None = None, solver: SolverCfg | None = None, srv: SRVNetCfg | None = None,
                  reward: RewardCfg | None = None, noise: NoiseCfg | float | None = None,
                  finger_ik: FingerIK | None = None, device: str | torch.device = "cpu", threads: int | None = None):
-        if isinstance(robot, Robot):
-            self.robot, ik = robot, finger_ik
-            if ik is None:
-
-                ik = finger_ik_of(robot)
-        else:
-            built, ik = api.robot_and_ik(str(robot) if isinstance(robot, Path) else robot)
-            self.robot, ik = built, finger_ik or ik
-        self.finger_ik = ik
+        self.robot = api.as_robot(robot)
+        self._finger_ik = finger_ik  # None: the robot's, read when a search first needs it
         self.trials, self.seed, self.device = int(trials), int(seed), device
         self.threads = check_threads(threads)
         self.noise = NoiseCfg(float(noise)) if isinstance(noise, int | float) else (noise or NoiseCfg())
         self.solver_cfg, self.srv, self.reward = api.settings_of(self.robot, solver, srv, reward, max_iterations)
+
+    @property
+    def finger_ik(self) -> FingerIK | None:
+        """The FCNN the search uses: the one given, else the robot's trained one, read on first use
+        (a warm start does not need it: a robot without a checkpoint solves warm starts; its
+        search raises ``CheckpointError`` with the command that trains one)."""
+        if self._finger_ik is None:
+            self._finger_ik = api.finger_ik_for(self.robot)
+        return self._finger_ik
 
     def __repr__(self) -> str:
         return f"Solver({self.robot.name!r}, trials={self.trials}, method={self.solver_cfg.method!r})"
@@ -207,7 +209,7 @@ class Solver:
 
     def _around(self, problem: GraspProblem, posture: Posture) -> Environment:
         cfg = self.solver_cfg
-        return build_environment(self.robot, problem, self.finger_ik, cfg, api.DTYPES[cfg.dtype], self.device,
+        return build_environment(self.robot, problem, self._finger_ik, cfg, api.DTYPES[cfg.dtype], self.device,
                                  self.reward, around=posture)
 
     def _land(self, problem: GraspProblem, env: Environment, x: Tensor, seed: int) -> GraspResult:

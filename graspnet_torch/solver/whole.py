@@ -41,7 +41,7 @@ class WholeConfiguration:
     :meth:`bases` and the others it calls are the environment's)."""
 
     robot: Robot
-    ik: FingerIK
+    ik: FingerIK | None
     n: int
     idx: list[int]
     fingers: tuple[str, ...]
@@ -123,7 +123,7 @@ class WholeConfiguration:
         finger's R B_R dk/dq (free joints; mimic joints through their coupling)."""
         B, F, j, n = x.shape[0], len(self.idx), self.robot.joints_per_finger, self.n
         R, t, Jc = self.palm_frame_jacobian(x[:, :n])
-        kernel = self.ik.kernel(self.fingers)
+        kernel = self.robot.finger_kernel.select(self.idx)  # the contact fingers' (no FCNN needed)
         local, Jq = kernel.position_jacobian(x[:, n:].reshape(B, F, j))  # (B, F, 3), (B, F, 3, j)
         base_R, base_t = self.bases(x[:, :n])
         in_palm = transform_points(base_R, base_t, local)

@@ -33,7 +33,7 @@ from graspnet_torch.robot.geometry import LinkShape
 from graspnet_torch.robot.meshes import decimate
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.settings import clip
-from graspnet_torch.solver.api import as_problem, robot_and_ik
+from graspnet_torch.solver.api import as_problem, robot_of
 from graspnet_torch.solver.environments import environment_class
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.result import GraspResult, TrialResult
@@ -94,7 +94,7 @@ def load_view(path: str | Path) -> ResultView:
     source = result["problem"]
     candidate = file.parent / source
     problem = as_problem(candidate if not Path(source).is_absolute() and candidate.is_file() else source)
-    robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    robot = robot_of(problem.robot_cfg or problem.robot)
     try:
         grasp = GraspResult.from_dict(result)
         postures = [trial_posture(robot, t) for t in grasp.trials]
@@ -127,7 +127,7 @@ def _grasps_view(file: Path, result: dict[str, Any]) -> ResultView:
     if bad is not None:
         raise ProblemError(f"{file}: grasps[{bad}] is not a grasp (a mapping of its result's fields)")
     problem = grasp_problem(file, result)
-    robot = robot_and_ik(problem.robot_cfg or problem.robot)[0]
+    robot = robot_of(problem.robot_cfg or problem.robot)
     try:
         postures = [trial_posture(robot, TrialResult.from_dict(g)) for g in grasps]
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
