@@ -51,5 +51,5 @@ def test_grasps_from_an_object_need_no_fcnn_with_sampled_starts(own_hand):
     grasps = gt.synthesize_grasps(own_hand, cube, n_grasps=2, candidates=16, seed=0)
     assert len(grasps) == 2 and all(g.success for g in grasps)
     assert all(g.result.robot == "own_hand" for g in grasps)
-    with pytest.raises(gt.CheckpointError, match="own_hand.fcnn.pt: FCNN checkpoint not found"):
+    with pytest.raises(gt.CheckpointError, match=r"own_hand\.fcnn\.pt: FCNN checkpoint not found"):
         gt.synthesize_grasps(own_hand, cube, n_grasps=1, candidates=4, seed=0, start="random")
