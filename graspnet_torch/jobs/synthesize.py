@@ -35,6 +35,7 @@ from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Robot, load_robot
 from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import MAX_LENGTH_M, Free, build, clip, number_list, setting
+from graspnet_torch.solver.api import finger_ik_for
 from graspnet_torch.synthesis import synthesize_grasps
 from graspnet_torch.synthesis.candidates import check_pad_fingers
 from graspnet_torch.synthesis.reach import carried_hand
@@ -117,7 +118,8 @@ def _check_fingers(robot: Robot, fingers: Sequence[str]) -> None:
 def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir: str | Path
                        ) -> tuple[SynthesizeGraspsJobCfg, RobotCfg, list[Path], Path]:
     """Every check of the job, before any work and without writing anything: the settings, the
-    mesh files, the robot (loaded: cached for the job) and its fingers, the output folder.
+    mesh files, the robot (loaded: cached for the job), its fingers and, where the sets are solved
+    by the search (``start`` random or proposal), its FCNN checkpoint, the output folder.
 
     Returns:
         the settings, the robot's config, the mesh files and the results folder.
@@ -129,6 +131,8 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     jaws = robot_kind(robot).schema.targets == "points"  # a gripper: its two marked points, no fingers
     if not jaws:
         _check_fingers(robot, job.fingers)
+        if job.start != "sampled":  # the search: the robot's FCNN (refused if missing or corrupted)
+            finger_ik_for(robot)
     elif job.verify == "physics":
         raise ConfigError(f"verify=physics: robot {robot.name}'s jaws do not move (fixed marked points): nothing to "
                           f"check in physics; verify=none")

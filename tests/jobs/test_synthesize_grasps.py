@@ -17,12 +17,13 @@ import sys
 import numpy as np
 import pytest
 import trimesh
+import yaml
 
 import graspnet_torch as gt
 import graspnet_torch.jobs.synthesize as job_module
-from graspnet_torch.errors import ConfigError
+from graspnet_torch.errors import CheckpointError, ConfigError
 from graspnet_torch.jobs.synthesize import OBJECT_CENTRE, SynthesizeGraspsJobCfg, prepare_synthesize, synthesize_objects
-from graspnet_torch.paths import repo_root
+from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.viz.viewer import load_view
 
@@ -152,6 +153,14 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
     for change, message in cases:
         with pytest.raises(ConfigError, match=message):
             prepare_synthesize({**_settings(folder, tmp_path / "out"), **change}, tmp_path / "run")
+    own = tmp_path / "own" / "own_hand.yaml"  # a hand with no FCNN trained: the search needs one, sampled starts not
+    own.parent.mkdir()
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    own.write_text(yaml.safe_dump({**data, "name": "own_hand", "urdf": str(repo_root() / "urdf/hand/hand.urdf")}))
+    settings = {**_settings(folder, tmp_path / "out"), "robot": str(own)}
+    with pytest.raises(CheckpointError, match=r"own_hand\.fcnn\.pt: FCNN checkpoint not found; train one"):
+        prepare_synthesize({**settings, "start": "random"}, tmp_path / "run")
+    prepare_synthesize(settings, tmp_path / "run")
     (folder / "box.obj").write_text("")
     with pytest.raises(ConfigError, match=r"would both write box\.json"):
         prepare_synthesize(_settings(folder, tmp_path / "out"), tmp_path / "run")
