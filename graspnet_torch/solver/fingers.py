@@ -200,14 +200,14 @@ class FingerEnvironment(WholeConfiguration, Environment):
         """Finger joints (B, F, j) within limits and fingertip errors (B, F) in metres (zero for
         a finger a trial's problem does not use)."""
         targets = self.targets(config, palm, rows)
-        self.fcnn()
+        ik = self.fcnn()
         if self.candidates > 1 and self.refine > 0:
-            q, err = self.ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
+            q, err = ik.solve_fingers(targets, self.fingers, self.refine, self.candidates)
         elif self.refine <= 0:
-            q, err = self.ik.compete(targets, self.fingers)
+            q, err = ik.compete(targets, self.fingers)
         else:
-            q, _err, tips, J = self.ik.compete_jacobian(targets, self.fingers)
-            q, err = self.ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
+            q, _err, tips, J = ik.compete_jacobian(targets, self.fingers)
+            q, err = ik.refine(q, targets, self.fingers, self.refine, start=(tips, J))
         mask = self._rows(self.mask, rows)
         return q, err if mask is None else err * mask
 

@@ -53,3 +53,17 @@ def test_grasps_from_an_object_need_no_fcnn_with_sampled_starts(own_hand):
     assert all(g.result.robot == "own_hand" for g in grasps)
     with pytest.raises(gt.CheckpointError, match=r"own_hand\.fcnn\.pt: FCNN checkpoint not found"):
         gt.synthesize_grasps(own_hand, cube, n_grasps=1, candidates=4, seed=0, start="random")
+
+
+def test_an_environment_built_without_an_fcnn_refuses_the_search():
+    """A warm start's environment (no FCNN) solves by Levenberg-Marquardt only; the search's finger
+    steps refuse it in one line instead of failing deep inside."""
+    from graspnet_torch.solver.api import build_environment, search, settings_of
+
+    robot = gt.load_robot("hand")
+    problem = gt.random_reachable_problem(robot, 4)
+    solver, srv, reward = settings_of(robot, None, None, None, 5)
+    env = build_environment(robot, problem, None, solver)
+    with pytest.raises(gt.ProblemError, match="this environment has no FCNN") as err:
+        search(env, 2, 0, solver, srv, reward, gt.NoiseCfg())
+    assert "\n" not in str(err.value)
