@@ -11,7 +11,7 @@ Real-Valued units (HCNN / ACNN), in PyTorch.
 from graspnet_torch.errors import CheckpointError, ConfigError, GraspnetError, InternalError, ProblemError
 from graspnet_torch.fcnn import ExpertSet, ExpertSetCfg, FCNNTrainCfg, FingerIK, load_finger_ik
 from graspnet_torch.motion import ReachCfg, Trajectory, check_motion, plan_reach
-from graspnet_torch.physics import PhysicsCfg, PhysicsReport, simulate_grasp
+from graspnet_torch.physics import PhysicsCfg, PhysicsReport, check_until_failure, simulate_grasp
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot import (
     ChainKernel,
@@ -108,6 +108,7 @@ __all__ = [
     "available_tasks",
     "baseline_grasps",
     "check_motion",
+    "check_until_failure",
     "grasp_quality",
     "load_finger_ik",
     "load_robot",

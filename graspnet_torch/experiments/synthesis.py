@@ -2,7 +2,8 @@
 (:func:`gt.synthesize_grasps`: pad contact sets ranked by grasp quality, solved in the surface
 contact model) beside the planner with no contact reasoning (:func:`gt.baseline_grasps`: random palm
 poses, every finger closed until it touches), on the same objects in the same run, every grasp
-checked in MuJoCo (:func:`gt.simulate_grasp`, the pinned protocol: 6/6 pushes).
+checked in MuJoCo (:func:`gt.check_until_failure`, the pinned protocol: 6/6 pushes; a grasp is pushed until
+one fails).
 
 Objects: ``objects`` of pybullet's procedurally generated objects (``pybullet_data/random_urdfs/
 NNN/NNN.obj``, 1000 of them, scaled as their URDFs scale them: ``SCALE``), drawn without replacement
@@ -50,7 +51,7 @@ from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
 from graspnet_torch.paths import repo_root
-from graspnet_torch.physics import simulate_grasp
+from graspnet_torch.physics import check_until_failure
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.postures import trial_posture
@@ -134,8 +135,8 @@ def _one(name: str, obj: Shape, method: str, cfg: SynthesisExperimentCfg, seed: 
     t0, first = time.perf_counter(), [math.inf]
 
     def physics(problem, result, robot):
-        report = simulate_grasp(problem, result, robot=robot)
-        if sum(report.directions.values()) == 6 and math.isinf(first[0]):
+        report = check_until_failure(problem, result, robot=robot)
+        if report.held_all and math.isinf(first[0]):
             first[0] = time.perf_counter() - t0
         return report
 
@@ -303,7 +304,8 @@ def _picture(results: dict, objs: list, cfg: SynthesisExperimentCfg, out: Path) 
     panels = []
     for label, grasp in shown:
         panel = posture_panels(robot, grasp.problem, grasp.result)[0]
-        holds = "not checked" if grasp.holds is None else f"holds {grasp.holds}/6"
+        holds = "not checked" if grasp.physics is None else "holds 6/6" if grasp.physics.held_all else \
+            f"fails push {len(grasp.physics.directions)}"
         panels.append(replace(panel, caption=f"{label}: {holds}, epsilon {grasp.quality.epsilon:.4f}"))
     if not panels:  # no object got a grasp: the first object and the hand at home
         panels = [Panel(f"{objs[0][0]}: no grasp", robot.home_posture(), meshes=(objs[0][1].trimesh(),))]

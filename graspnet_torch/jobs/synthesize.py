@@ -29,7 +29,7 @@ from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import MAX_SEED
 from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem, warn_on_failure
 from graspnet_torch.meshes import MESH_FORMATS
-from graspnet_torch.physics import simulate_grasp
+from graspnet_torch.physics import check_until_failure
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Robot, load_robot
@@ -70,7 +70,8 @@ class SynthesizeGraspsJobCfg:
     start: str = setting("sampled", choices=START)  # sampled: each set's solve from its sampled posture; random,
     # proposal: the search from random starts or the robot's learned posture proposals
     seed: int = setting(0, lo=0, hi=MAX_SEED)
-    verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo (gt.simulate_grasp)
+    verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo until a push
+    # fails (gt.check_until_failure)
     out: str | None = None  # the results folder (None: <run dir>/results)
     threads: int = setting(1, lo=1, hi=1024)
     progress: bool = True
@@ -251,7 +252,7 @@ def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, m
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     robot = load_robot(robot_cfg)
-    physics = simulate_grasp if job.verify == "physics" else None
+    physics = check_until_failure if job.verify == "physics" else None
     rows = []
     items = progress(meshes, total=len(meshes), desc="objects", unit="object") if job.progress else iter(meshes)
     for path in items:
@@ -303,7 +304,7 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
     job, problem, robot, out = prepare_auto(cfg, run_dir)
     auto = problem.auto
     jaws = not auto.fingers  # a gripper: its jaws do not move, nothing to squeeze in physics
-    physics = simulate_grasp if importlib.util.find_spec("mujoco") is not None and not jaws else None
+    physics = check_until_failure if importlib.util.find_spec("mujoco") is not None and not jaws else None
     torch.set_num_threads(job.threads)
     t0, stats = time.perf_counter(), {}
     found = synthesize_grasps(robot, problem.object, n_grasps=auto.grasps, fingers=auto.fingers,

@@ -7,7 +7,7 @@ holds when the object moves less than 5 cm and turns less than 15 degrees
 when a check runs.
 """
 
-from graspnet_torch.physics.check import PhysicsReport, simulate_grasp
+from graspnet_torch.physics.check import PhysicsReport, check_until_failure, simulate_grasp
 from graspnet_torch.physics.config import DIRECTIONS, PhysicsCfg
 
-__all__ = ["DIRECTIONS", "PhysicsCfg", "PhysicsReport", "simulate_grasp"]
+__all__ = ["DIRECTIONS", "PhysicsCfg", "PhysicsReport", "check_until_failure", "simulate_grasp"]

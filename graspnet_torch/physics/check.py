@@ -33,7 +33,7 @@ from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.result import GraspResult
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["PhysicsReport", "simulate_grasp"]
+__all__ = ["PhysicsReport", "check_until_failure", "simulate_grasp"]
 
 CHECK_EVERY_S = 0.1  # how often a push looks whether it has already failed
 G = 9.81
@@ -45,7 +45,8 @@ class PhysicsReport:
 
     Attributes:
         directions: push direction ('+x', '-x', '+y', '-y', '+z', '-z', world frame) -> whether
-            the grasp held the object through it.
+            the grasp held the object through it; in that order, those run (every push, unless
+            ``until_failure`` stopped at one that failed).
         shifts_mm, turns_deg: per direction, how far the object's centre of mass moved and how much
             it turned during that push (when it stopped early: by then).
         settle_shift_mm, settle_turn_deg: the object's shift and turn during the settle.
@@ -70,11 +71,18 @@ class PhysicsReport:
 
     @property
     def of(self) -> int:
-        return len(self.directions)
+        """How many pushes the protocol has (6; the report may list fewer: ``until_failure``)."""
+        return len(DIRECTIONS)
+
+    @property
+    def held_all(self) -> bool:
+        """Whether the grasp held the object through every push of the protocol."""
+        return self.holds == self.of
 
     def to_dict(self) -> dict:
         """``{"physics": {...}}``: the result file's ``physics`` entry (docs/interface.md)."""
-        return {"physics": {"holds": self.holds, "of": self.of, "directions": dict(self.directions),
+        return {"physics": {"holds": self.holds, "of": self.of, "pushes_run": len(self.directions),
+                            "directions": dict(self.directions),
                             "settle_shift_mm": round(self.settle_shift_mm, 3),
                             "settle_turn_deg": round(self.settle_turn_deg, 3),
                             "moved_while_settling": self.moved_while_settling, "protocol": dict(self.protocol)}}
@@ -165,8 +173,18 @@ def simulate_grasp(problem: GraspProblem | str | Path, result: GraspResult, cfg:
         data.xfrc_applied[body] = 0.0
         shifts[name], turns[name] = shift, turn
         directions[name] = bool(shift < cfg.max_shift_mm and turn < cfg.max_turn_deg)
+        if cfg.until_failure and not directions[name]:
+            break
     return PhysicsReport(directions, shifts, turns, settle_shift, settle_turn,
                          bool(settle_shift > cfg.settle_max_shift_mm), cfg.protocol(), time.perf_counter() - t0)
+
+
+def check_until_failure(problem: GraspProblem | str | Path, result: GraspResult,
+                        robot: Robot | None = None) -> PhysicsReport:
+    """The check a search for grasps that hold every push runs: :func:`simulate_grasp` with the
+    default protocol, stopping at the first push that fails (``PhysicsCfg.until_failure``): the same
+    verdict on every push held, sooner on a grasp that fails one."""
+    return simulate_grasp(problem, result, PhysicsCfg(until_failure=True), robot=robot)
 
 
 def _run(mujoco, model, data, seconds: float) -> None:

@@ -51,6 +51,10 @@ class PhysicsCfg:
         armature: rotor inertia added to the driven joints (kg m^2, kg): keeps the stiff drives
             stable at the 4 ms step.
         max_effort: the actuators' force limit (N m, N); a URDF ``effort`` below it limits instead.
+        until_failure: stop at the first push that fails; the pushes after it are not run (nor
+            reported). Whether a grasp holds every push is decided the same, sooner where it does
+            not (each push starts from the same settled state): what a search that keeps only grasps
+            holding every push needs. Off: every push is run and reported.
     """
 
     friction: float = setting(0.6, lo=0.0, hi=10.0)
@@ -69,6 +73,7 @@ class PhysicsCfg:
     damping: float = setting(0.1, lo=0.0, hi=1e6)
     armature: float = setting(0.001, lo=0.0, hi=1e3)
     max_effort: float = setting(10.0, lo=0.0, lo_open=True, hi=1e6)
+    until_failure: bool = setting(False)
 
     def protocol(self) -> dict:
         """The report's ``protocol``: what a reader needs to compare two checks."""

@@ -10,6 +10,7 @@ object's centre as the centre of mass), then by the grasp matrix's least singula
 from __future__ import annotations
 
 import functools
+import heapq
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -43,6 +44,14 @@ from graspnet_torch.tasks.problem import GraspProblem
 __all__ = ["FRICTION", "START", "SynthesizedGrasp", "no_grasp_reason", "rank_sets", "synthesize_grasps"]
 
 TRIES_PER_SET = 50  # palm poses drawn at most per contact set asked for (start="sampled")
+LOOK_AHEAD = 2  # start="sampled": sampler batches drawn before a solve while no set in hand is force closure
+# (when it came, on the 10 tuning objects, 64 sets, top 5, one process: 0 -> 2 took the s per grasp that holds
+# 6/6 from 0.95 to 0.82 and the objects whose top grasp holds from 9 to 10; 3 and 5 gave 0.86 and 0.85)
+
+
+def _rank_key(q: GraspQuality) -> tuple:
+    """:func:`rank_sets`' order as a sort key: force closure, then epsilon, then the least singular value."""
+    return (-q.force_closure, -q.epsilon, -q.min_singular_value)
 
 @dataclass
 class SynthesizedGrasp:
@@ -109,7 +118,7 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
     q = grasp_quality(np.stack([s.contacts for s in sets]), np.stack([s.normals for s in sets]),
                       np.tile(np.asarray(obj.pose[:3], dtype=np.float64), (len(sets), 1)), friction)
     eps, sig, fc = (np.asarray(a, dtype=np.float64) for a in (q.epsilon, q.min_singular_value, q.force_closure))
-    order = sorted(range(len(sets)), key=lambda i: (-fc[i], -eps[i], -sig[i]))
+    order = sorted(range(len(sets)), key=lambda i: (-fc[i], -eps[i], -sig[i]))  # as _rank_key
     return [(sets[i], GraspQuality(float(eps[i]), float(sig[i]), bool(fc[i]))) for i in order]
 
 
@@ -133,10 +142,12 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
     - ``"sampled"`` (default): at the posture the sampler found touching the set, a warm start
       (:meth:`gt.Solver.solve <graspnet_torch.solver.session.Solver.solve>` with ``search=False``:
-      Levenberg-Marquardt, one trial; a start that does not land is dropped). The sets are taken
-      batch by batch of the sampler, each batch in rank order, and the search ends once
-      ``n_grasps`` grasps hold every push (without physics: once ``n_grasps`` succeed) or
-      ``candidates`` sets were tried: the first verified grasp comes after the first batch.
+      Levenberg-Marquardt, one trial; a start that does not land is dropped). The sets the
+      sampler's batches bring wait in one pool and the best of it is solved next (rank order);
+      while no set in the pool is force closure, up to ``LOOK_AHEAD`` more batches are drawn
+      before a solve. The search ends once ``n_grasps`` grasps hold every push (without physics:
+      once ``n_grasps`` succeed) or ``candidates`` sets were tried: the first verified grasp comes
+      after the first batch or few.
     - ``"random"``: the paper's search from random starts: the ``candidates`` sets are drawn first,
       the best ``solve_top`` of them (default ``2 n_grasps``) solved as one batch
       (:func:`gt.solve_many`, ``trials`` learners each, ``solver.start: random``).
@@ -213,7 +224,7 @@ def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None
     t1 = time.perf_counter()
     g.physics = physics(g.problem, g.result, robot=robot)
     t["physics_s"] += time.perf_counter() - t1
-    if g.holds == len(g.physics.directions):
+    if g.holds == g.physics.of:
         t["held"] += 1
         if t["first_s"] is None:
             t["first_s"] = time.perf_counter() - t["t0"]
@@ -230,30 +241,40 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
     sets = iter_contact_sets(carried_hand(robot), obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
                              max_tries=TRIES_PER_SET * candidates, stats=t, orientations=orientations,
                              reachable=reachable, obstacles=obstacles)
+    pool: list[tuple[tuple, int, ContactSet, GraspQuality]] = []  # a heap, best first
+    more, ahead, drawn = True, 0, 0
     while tried < candidates:
-        t1 = time.perf_counter()
-        batch = next(sets, None)
-        t2 = time.perf_counter()
-        t["generate_s"] += t2 - t1
-        if batch is None:
+        while more and (not pool or (ahead < LOOK_AHEAD and not pool[0][3].force_closure)):
+            t1 = time.perf_counter()
+            batch = next(sets, None)
+            t2 = time.perf_counter()
+            t["generate_s"] += t2 - t1
+            if batch is None:
+                more = False
+                break
+            ahead += 1
+            for s, q in reach_sets(robot, rank_sets(batch, obj), fingers, seed + tried, candidates - tried):
+                heapq.heappush(pool, (_rank_key(q), drawn, s, q))
+                drawn += 1
+            t["rank_s"] += time.perf_counter() - t2
+        if not pool:
             break
-        ranked = reach_sets(robot, rank_sets(batch, obj), fingers, seed + tried, candidates - tried)
-        t["rank_s"] += time.perf_counter() - t2
-        for s, q in ranked:
-            tried += 1
-            problem = placeholder_problem(robot, obj, fingers, s.contacts, obstacles)
-            t3 = time.perf_counter()
-            result = session.solve(problem, start=s.posture, search=False)
-            t["solve_s"] += time.perf_counter() - t3
-            t["solved"] += 1
-            if not result.success:
-                continue
-            t["succeeded"] += 1
-            g = SynthesizedGrasp(problem, s, q, result)
-            grasps.append(g)
-            _check(g, robot, physics, t)
-            if (t["held"] if physics is not None else t["succeeded"]) >= n_grasps:
-                return grasps
+        ahead = 0
+        _, _, s, q = heapq.heappop(pool)
+        tried += 1
+        problem = placeholder_problem(robot, obj, fingers, s.contacts, obstacles)
+        t3 = time.perf_counter()
+        result = session.solve(problem, start=s.posture, search=False)
+        t["solve_s"] += time.perf_counter() - t3
+        t["solved"] += 1
+        if not result.success:
+            continue
+        t["succeeded"] += 1
+        g = SynthesizedGrasp(problem, s, q, result)
+        grasps.append(g)
+        _check(g, robot, physics, t)
+        if (t["held"] if physics is not None else t["succeeded"]) >= n_grasps:
+            return grasps
     return grasps
 
 

@@ -111,6 +111,33 @@ def test_without_friction_the_pinch_fails(pinch):
     assert report.protocol["friction"] == [0.0, 0.0]
 
 
+@needs_mujoco
+@pytest.mark.parametrize("grasp", ["pinch", "one finger"])
+def test_until_failure_is_the_full_check_cut_after_its_first_failed_push(pinch, grasp):
+    """``until_failure`` (``gt.check_until_failure``): the full check's pushes up to and including
+    its first failure, each with the same shift (every push starts from the same settled state),
+    and the same verdict on every push held."""
+    problem, result, grasp_posture, squeeze = pinch
+    posture = None
+    if grasp == "one finger":
+        q = torch.zeros_like(grasp_posture.fingers)
+        q[0] = squeeze.fingers[0]
+        posture = gt.Posture(grasp_posture.palm_pose, q, grasp_posture.body)
+    full = simulate_grasp(problem, result, posture=posture)
+    short = simulate_grasp(problem, result, PhysicsCfg(until_failure=True), posture=posture)
+    names = list(full.directions)
+    failed = [n for n in names if not full.directions[n]]
+    run = names if not failed else names[: names.index(failed[0]) + 1]
+    assert list(short.directions) == run and all(short.directions[n] == full.directions[n] for n in run)
+    assert all(short.shifts_mm[n] == pytest.approx(full.shifts_mm[n], abs=1e-9) for n in run)
+    assert short.held_all == full.held_all and short.of == full.of == 6
+    assert short.to_dict()["physics"]["pushes_run"] == len(run)
+    if grasp == "one finger":
+        assert len(run) < 6, summary(full)
+    if posture is None:
+        assert gt.check_until_failure(problem, result).to_dict() == short.to_dict()
+
+
 # ---------------------------------------------------------------------------- the report
 @needs_mujoco
 def test_report_json_shape(pinch):
@@ -118,9 +145,10 @@ def test_report_json_shape(pinch):
     out = simulate_grasp(problem, result).to_dict()
     assert list(out) == ["physics"]
     physics = out["physics"]
-    assert set(physics) == {"holds", "of", "directions", "settle_shift_mm", "settle_turn_deg",
+    assert set(physics) == {"holds", "of", "pushes_run", "directions", "settle_shift_mm", "settle_turn_deg",
                             "moved_while_settling", "protocol"}
-    assert physics["of"] == 6 and list(physics["directions"]) == ["+x", "-x", "+y", "-y", "+z", "-z"]
+    assert physics["of"] == physics["pushes_run"] == 6
+    assert list(physics["directions"]) == ["+x", "-x", "+y", "-y", "+z", "-z"]
     assert physics["holds"] == sum(physics["directions"].values())
     assert all(isinstance(v, bool) for v in physics["directions"].values())
     assert isinstance(physics["moved_while_settling"], bool)

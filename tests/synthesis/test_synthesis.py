@@ -162,6 +162,25 @@ def test_synthesize_grasps_box(robot: gt.Robot) -> None:
         np.testing.assert_allclose(g.problem.contacts_world(), g.contacts, atol=1e-9)
 
 
+def test_a_force_closure_set_is_solved_before_one_that_is_not(robot: gt.Robot, monkeypatch) -> None:
+    """A plate whose first batch of palm poses brings no force-closure set (seed 3): the search
+    draws another batch before it solves (``LOOK_AHEAD``), and its first grasp is force closure;
+    without the look-ahead it solves the first batch's best, which is not."""
+    from graspnet_torch.synthesis import synthesize
+
+    plate = Shape("box", (0.03, 0.09, 0.15), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+    firsts, default = {}, synthesize.LOOK_AHEAD
+    assert default > 0
+    for ahead in (default, 0):
+        monkeypatch.setattr(synthesize, "LOOK_AHEAD", ahead)
+        stats: dict = {}
+        grasps = gt.synthesize_grasps(robot, plate, n_grasps=1, candidates=8, seed=3, stats=stats)
+        assert stats["solved"] == 1 and grasps
+        firsts[ahead] = (grasps[0].quality.force_closure, stats["tried"])
+    assert firsts[0] == (False, 64)  # one batch of palm poses drawn
+    assert firsts[default][0] and firsts[default][1] > 64
+
+
 def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
     """Every finger's closing line starts by pushing its pad along the pad normal, the thumb's too
     (its pad faces the fingers, off its flexion side); and a seed gives the same lines."""
