@@ -319,7 +319,8 @@ def solve_auto_problem(cfg: Mapping[str, Any], run_dir: str | Path) -> dict:
     atomic_write_text(out, json.dumps(data, indent=1, allow_nan=False))
     if job.pictures and found:
         warn_on_failure("picture", render_grasps, robot, found, Path(run_dir) / "grasps.png", problem.name or "")
-    checked = f", holding {[g['holds'] for g in grasps]} of 6 pushes in MuJoCo" if physics is not None else \
+    held = sum(g["holds"] == g["physics"]["of"] for g in grasps if g.get("physics"))
+    checked = f", {held} holding all 6 pushes in MuJoCo" if physics is not None else \
         " (a gripper whose jaws do not move: nothing to check in physics)" if jaws else \
         " (mujoco is not installed: not checked in physics)"
     print(f"{problem.name or problem.source}: {len(grasps)} grasp(s) on {'points' if jaws else 'contacts'} chosen on "

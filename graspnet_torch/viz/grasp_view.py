@@ -90,7 +90,8 @@ def grasp_panels(robot: Robot, grasps: Sequence[SynthesizedGrasp], label: str = 
     panels = []
     for k, g in enumerate(grasps[:most]):
         panel = posture_panels(robot, g.problem, g.result)[0]
-        holds = "" if g.holds is None else f", holds {g.holds}/6"
+        holds = "" if g.physics is None else f", holds {g.holds}/{g.physics.of}" if len(g.physics.directions) == \
+            g.physics.of else f", fails push {len(g.physics.directions)}"  # a check run until a push fails
         quality = f"epsilon {g.quality.epsilon:.4f}" if g.problem.points is None else \
             f"{float(np.max(g.candidate.angles_deg)):.1f} deg off the normals"  # a gripper's two points
         caption = f"{label + ' ' if label else ''}#{k + 1}: {quality}{holds}"
