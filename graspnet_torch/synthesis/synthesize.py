@@ -53,6 +53,7 @@ def _rank_key(q: GraspQuality) -> tuple:
     """:func:`rank_sets`' order as a sort key: force closure, then epsilon, then the least singular value."""
     return (-q.force_closure, -q.epsilon, -q.min_singular_value)
 
+
 @dataclass
 class SynthesizedGrasp:
     """One grasp of an object.
