@@ -119,8 +119,8 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
     q = grasp_quality(np.stack([s.contacts for s in sets]), np.stack([s.normals for s in sets]),
                       np.tile(np.asarray(obj.pose[:3], dtype=np.float64), (len(sets), 1)), friction)
     eps, sig, fc = (np.asarray(a, dtype=np.float64) for a in (q.epsilon, q.min_singular_value, q.force_closure))
-    order = sorted(range(len(sets)), key=lambda i: (-fc[i], -eps[i], -sig[i]))  # as _rank_key
-    return [(sets[i], GraspQuality(float(eps[i]), float(sig[i]), bool(fc[i]))) for i in order]
+    rated = [(s, GraspQuality(float(e), float(g), bool(f))) for s, e, g, f in zip(sets, eps, sig, fc, strict=True)]
+    return sorted(rated, key=lambda sq: _rank_key(sq[1]))  # stable: drawing order within equal qualities
 
 
 def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: int = 5,

@@ -208,6 +208,7 @@ def test_verify_physics_without_mujoco_is_refused(tmp_path, monkeypatch):
     (["verify=maybe"], "verify='maybe'"),
     (["verify=physics", "physics.friction=-1"], "physics.friction=-1"),
     (["verify=physics", "physics.nope=1"], "unknown setting 'physics.nope'"),
+    (["verify=physics", "physics.until_failure=maybe"], "physics.until_failure='maybe': expected true or false"),
     (["verify_trials=0"], "verify_trials=0"),
 ])
 def test_bad_verify_settings_are_refused(tmp_path, args, message):
