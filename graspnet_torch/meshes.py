@@ -37,7 +37,7 @@ from graspnet_torch.files import MAX_MESH_BYTES, regular_file_stat
 from graspnet_torch.settings import MAX_LENGTH_M, clip
 
 __all__ = ["FACES_VARIABLE", "MAX_MESH_FACES", "MESH_FORMATS", "MIN_THICKNESS_M", "check_mesh_file", "load_mesh",
-           "load_trimesh", "max_mesh_faces", "mesh_format"]
+           "load_trimesh", "max_mesh_faces", "mesh_format", "mesh_path"]
 
 MAX_MESH_FACES = 200_000  # the largest mesh of pybullet_data has 124,789; a robot's link or an object far fewer
 FACES_VARIABLE = "GRASPNET_TORCH_MAX_MESH_FACES"  # raises MAX_MESH_FACES
@@ -116,6 +116,13 @@ def load_mesh(path: str | os.PathLike, scale=1.0, merge: bool = True):
     p = Path(path)
     s = tuple(float(v) for v in np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)))
     return _load(p, os.stat(p).st_mtime_ns, s, merge)
+
+
+@lru_cache(maxsize=1024)
+def mesh_path(path: str | os.PathLike) -> Path:
+    """A mesh file's absolute path, links resolved: the key of the per-mesh caches (distance grid,
+    inside test, convex pieces), remembered per path as given (the searches ask it on every call)."""
+    return Path(path).resolve()
 
 
 @lru_cache(maxsize=256)

@@ -21,11 +21,9 @@ boxes that touch; a ``margin`` grows A's half extents, so boxes closer than it c
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from graspnet_torch.meshes import load_mesh
+from graspnet_torch.meshes import load_mesh, mesh_path
 from graspnet_torch.robot.geometry import LinkShape
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
@@ -67,7 +65,7 @@ def shape_box(shape: Shape) -> tuple[np.ndarray, np.ndarray]:
     """An obstacle's or object's box: its pose (4, 4) in the world and half extents (3,)."""
     pose = pose_to_matrix_np(np.asarray(shape.pose, dtype=np.float64))
     if shape.kind == "mesh":
-        mesh = load_mesh(Path(shape.mesh).resolve(), shape.scale)
+        mesh = load_mesh(mesh_path(shape.mesh), shape.scale)
         T, half = _vertices_box(np.asarray(mesh.vertices, dtype=np.float64))
         return pose @ T, half
     return pose, _primitive_half(shape.kind, shape.size)

@@ -41,7 +41,7 @@ import torch
 from torch import Tensor
 
 from graspnet_torch.io import atomic_path
-from graspnet_torch.meshes import load_mesh
+from graspnet_torch.meshes import load_mesh, mesh_path
 
 __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
 
@@ -231,7 +231,7 @@ def _coacd_apart(vertices: np.ndarray, faces: np.ndarray, settings: dict) -> lis
 def convex_pieces(path: str | Path, scale: float = 1.0) -> ConvexPieces:
     """The convex pieces of a mesh file at a scale, from the cache (``cache_dir()/convex``, keyed
     by the file's bytes, the scale and the decomposition's settings) or computed and cached."""
-    return _convex_pieces(Path(path).resolve(), float(scale))
+    return _convex_pieces(mesh_path(path), float(scale))
 
 
 @lru_cache(maxsize=32)

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.convex import convex_pieces
-from graspnet_torch.meshes import load_mesh
+from graspnet_torch.meshes import load_mesh, mesh_path
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
 __all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "lattice_points", "mesh_query",
@@ -257,7 +257,7 @@ def mesh_query(shape) -> tuple[MeshQuery, np.ndarray]:
     """A mesh shape's (a problem's ``Shape``) :class:`MeshQuery` in its own frame (its convex
     pieces stand for the inside of a mesh that is not closed; cached per file and scale), and its
     pose (4, 4) in the world."""
-    return _query(Path(shape.mesh).resolve(), shape.scale), pose_to_matrix_np(shape.pose)
+    return _query(mesh_path(shape.mesh), shape.scale), pose_to_matrix_np(shape.pose)
 
 
 @lru_cache(maxsize=32)

@@ -23,13 +23,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from graspnet_torch.collision.boxes import boxes_apart, link_box, shape_box
 from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry, mesh_bvh
 from graspnet_torch.collision.mesh import mesh_query, shape_points
+from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -143,7 +143,7 @@ def _environment_object(shape: Shape):
 
     T = pose_to_matrix_np(shape.pose)
     if shape.kind == "mesh":
-        geometry = mesh_bvh(Path(shape.mesh).resolve(), shape.scale)
+        geometry = mesh_bvh(mesh_path(shape.mesh), shape.scale)
     else:
         geometry = fcl_geometry(shape.kind, shape.size)
     return fcl.CollisionObject(geometry, fcl_transform(T))

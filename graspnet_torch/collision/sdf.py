@@ -26,6 +26,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from graspnet_torch.collision.mesh import closest_points, mesh_query
+from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.shape import Shape
 
 __all__ = ["BAND_M", "CELL_M", "MARGIN_M", "MAX_CELLS", "DistanceGrid", "distance_grid"]
@@ -55,25 +56,28 @@ class DistanceGrid:
     def __call__(self, points: np.ndarray) -> np.ndarray:
         """(k,) the signed distance at points (k, 3), object frame (trilinear)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        top = np.asarray(self.values.shape) - 1
+        shape = self.values.shape
+        top = np.asarray(shape) - 1
         u = (p - self.origin) / self.cell
         inside = np.clip(u, 0.0, top)
         off = np.linalg.norm(u - inside, axis=1) * self.cell
-        i = np.minimum(np.floor(inside).astype(np.intp), top - 1)
+        i = np.minimum(inside.astype(np.intp), top - 1)  # the cell's first corner (inside >= 0: the floor)
         f = inside - i
-        v, (x, y, z) = self.values, i.T
+        sx, sy = shape[1] * shape[2], shape[2]  # the flat grid's strides along x and y (z: 1)
+        base = i @ np.array([sx, sy, 1])
+        v = self.values.reshape(-1)
         fx, fy, fz = f.T
-        c00 = v[x, y, z] * (1 - fx) + v[x + 1, y, z] * fx
-        c01 = v[x, y, z + 1] * (1 - fx) + v[x + 1, y, z + 1] * fx
-        c10 = v[x, y + 1, z] * (1 - fx) + v[x + 1, y + 1, z] * fx
-        c11 = v[x, y + 1, z + 1] * (1 - fx) + v[x + 1, y + 1, z + 1] * fx
-        return (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz + off
-
+        gx, gy, gz = 1 - fx, 1 - fy, 1 - fz
+        c00 = v[base] * gx + v[base + sx] * fx
+        c01 = v[base + 1] * gx + v[base + sx + 1] * fx
+        c10 = v[base + sy] * gx + v[base + sx + sy] * fx
+        c11 = v[base + sy + 1] * gx + v[base + sx + sy + 1] * fx
+        return (c00 * gy + c10 * fy) * gz + (c01 * gy + c11 * fy) * fz + off
 
 def distance_grid(obj: Shape) -> DistanceGrid:
     """A mesh object's :class:`DistanceGrid` (its mesh at its scale, object frame; cached per file
     and scale)."""
-    return _grid(Path(obj.mesh).resolve(), obj.scale)
+    return _grid(mesh_path(obj.mesh), obj.scale)
 
 
 @lru_cache(maxsize=32)

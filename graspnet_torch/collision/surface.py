@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from graspnet_torch.collision.mesh import closest_points, mesh_query
 from graspnet_torch.collision.sdf import distance_grid
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
@@ -81,7 +82,7 @@ def _mesh(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Outward unit normals (k, 3) and signed distances (k,) of a mesh object, in its frame: each
     point's nearest triangle among those whose centres could be near enough (a KD-tree), exactly."""
     query, _ = mesh_query(obj)
-    tree, reach = _centres(Path(obj.mesh).resolve(), obj.scale)
+    tree, reach = _centres(mesh_path(obj.mesh), obj.scale)
     triangles, face_normals = query.triangles, np.asarray(query.mesh.face_normals, dtype=np.float64)
     if not len(p):
         return np.zeros((0, 3)), np.zeros(0)

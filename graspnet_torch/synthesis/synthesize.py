@@ -32,10 +32,11 @@ from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.candidates import (
     FRICTION,
     ContactSet,
-    iter_contact_sets,
+    SetCheck,
     pad_contact_sets,
     placeholder_problem,
 )
+from graspnet_torch.synthesis.drafts import iter_contact_drafts
 from graspnet_torch.synthesis.pairs import SAMPLES as SAMPLES_OF_PAIRS
 from graspnet_torch.synthesis.pairs import WIDTH_TOL_M, PointPair, antipodal_pairs, jaw_width
 from graspnet_torch.synthesis.reach import arm_palms, carried_hand, reach_sets
@@ -234,34 +235,53 @@ def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None
 def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
              physics: Callable[..., Any] | None, solve_top: int | None, trials: int, settings: dict, t: dict,
              obstacles: tuple[Shape, ...] = ()) -> list[SynthesizedGrasp]:
-    """``start="sampled"`` (:func:`synthesize_grasps`)."""
+    """``start="sampled"`` (:func:`synthesize_grasps`): the drafts wait in one pool (a heap, best
+    first by their drafted quality) and are checked (:class:`SetCheck`; a hand on an arm: reached)
+    as they come to its top: a checked set goes back with its checked quality, and is solved when
+    it is on top again."""
     session = Solver(robot, trials=1, seed=seed, solver=settings)
     grasps: list[SynthesizedGrasp] = []
     tried = 0
     orientations, reachable = arm_palms(robot, seed)
-    sets = iter_contact_sets(carried_hand(robot), obj, fingers, seed, cone_deg=session.solver_cfg.normal_cone_deg,
-                             max_tries=TRIES_PER_SET * candidates, stats=t, orientations=orientations,
-                             reachable=reachable, obstacles=obstacles)
-    pool: list[tuple[tuple, int, ContactSet, GraspQuality]] = []  # a heap, best first
+    hand, cone = carried_hand(robot), session.solver_cfg.normal_cone_deg
+    drafts = iter_contact_drafts(hand, obj, fingers, seed, cone_deg=cone, max_tries=TRIES_PER_SET * candidates,
+                                 stats=t, orientations=orientations, reachable=reachable)
+    check = SetCheck(hand, obj, fingers, cone_deg=cone, obstacles=obstacles, stats=t)
+    pool: list[tuple[tuple, int, bool, ContactSet, GraspQuality]] = []  # (key, order, checked, set, quality)
+
+    def top() -> tuple[ContactSet, GraspQuality] | None:
+        """The pool's best checked set (left on top; None: the pool is empty), checking drafts as they surface."""
+        while pool and not pool[0][2]:
+            _, order, _, draft, _ = heapq.heappop(pool)
+            found = check(draft)
+            if found is not None:
+                for s, q in reach_sets(robot, rank_sets([found], obj), fingers, seed + order, 1):
+                    heapq.heappush(pool, (_rank_key(q), order, True, s, q))
+        return (pool[0][3], pool[0][4]) if pool else None
+
     more, ahead, drawn = True, 0, 0
     while tried < candidates:
-        while more and (not pool or (ahead < LOOK_AHEAD and not pool[0][3].force_closure)):
-            t1 = time.perf_counter()
-            batch = next(sets, None)
-            t2 = time.perf_counter()
-            t["generate_s"] += t2 - t1
+        t1 = time.perf_counter()
+        best = top()
+        while more and (best is None or (ahead < LOOK_AHEAD and not best[1].force_closure)):
+            batch = next(drafts, None)
             if batch is None:
                 more = False
                 break
             ahead += 1
-            for s, q in reach_sets(robot, rank_sets(batch, obj), fingers, seed + tried, candidates - tried):
-                heapq.heappush(pool, (_rank_key(q), drawn, s, q))
+            t2 = time.perf_counter()
+            for s, q in rank_sets(batch, obj):
+                heapq.heappush(pool, (_rank_key(q), drawn, False, s, q))
                 drawn += 1
             t["rank_s"] += time.perf_counter() - t2
-        if not pool:
+            t1 += time.perf_counter() - t2  # generate_s: drawing and checking
+            best = top()
+        t["generate_s"] += time.perf_counter() - t1
+        if best is None:
             break
         ahead = 0
-        _, _, s, q = heapq.heappop(pool)
+        heapq.heappop(pool)
+        s, q = best
         tried += 1
         problem = placeholder_problem(robot, obj, fingers, s.contacts, obstacles)
         t3 = time.perf_counter()

@@ -181,6 +181,20 @@ def test_a_force_closure_set_is_solved_before_one_that_is_not(robot: gt.Robot, m
     assert firsts[default][0] and firsts[default][1] > 64
 
 
+def test_drafts_are_checked_as_they_come_up_and_every_solved_set_passed(robot: gt.Robot) -> None:
+    """The search checks a draft (the solver's normals, the FCL scene) only when it comes to the top
+    of the pool: far fewer checked than drafted; every grasp's set carries the normals the check
+    gives, the surface model's at its contacts, and holds its pads within the cone."""
+    stats: dict = {}
+    obj = Shape("cylinder", (0.03, 0.1), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+    grasps = gt.synthesize_grasps(robot, obj, n_grasps=1, candidates=4, seed=1, stats=stats)
+    assert grasps and stats["drafts"] >= 20  # seed 1: two batches of palm poses
+    assert stats["facing"] <= stats["drafts"] / 10
+    for g in grasps:
+        np.testing.assert_allclose(g.candidate.normals, -surface_normals(obj, g.contacts), atol=1e-12)
+        assert np.all(g.candidate.angles_deg <= 30.0)
+
+
 def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
     """Every finger's closing line starts by pushing its pad along the pad normal, the thumb's too
     (its pad faces the fingers, off its flexion side); and a seed gives the same lines."""
