@@ -30,6 +30,7 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.benchmarking import bench_args, check_targets
 from graspnet_torch.collision.convex import convex_pieces
+from graspnet_torch.experiments.report import python_speed_ms
 from graspnet_torch.experiments.synthesis import pick_objects
 
 RATE, FIRST_S = 10.0, 2.0
@@ -63,7 +64,8 @@ def main() -> int:
     args = bench_args(__doc__, [("--objects", int, 10), ("--jobs", int, 2), ("--grasps", int, 5),
                                 ("--candidates", int, 64)])
     print(f"torch threads: 1 per process, {args.jobs} process(es); top {args.grasps} of at most {args.candidates} "
-          f"candidates per object")
+          f"candidates per object; this machine: sum(range(10**6)) in {python_speed_ms():.1f} ms (one core's speed: "
+          f"compare machines by it)")
     objs = [obj for _, obj in pick_objects(100, 2026)[: args.objects]]  # the experiment's first
     for obj in objs:  # object preprocessing, not timed (cached on disk)
         convex_pieces(obj.mesh, obj.scale)

@@ -171,7 +171,8 @@ def render(reports: list, info: Mapping[str, str], seconds: float, quick: bool, 
                             for r in reports]), "",
               "## Numbers that vary from run to run", "",
               "Wall times, rates, and the errors reached within a wall-time budget (Table 2's time columns) depend on "
-              "the machine and its load.", ""]
+              "the machine and its load: the machine table's `sum(range(10**6)) ms` (one core's speed, measured as the "
+              "report is written) compares two machines.", ""]
     rows = [[r.name, key, "never" if value is None else f"{value:.4g}"] for r in reports
             for key, value in r.timings.items()]
     lines += [markdown_table(["experiment", "what", "value"], rows) if rows else "(none)", ""]
