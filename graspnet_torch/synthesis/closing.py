@@ -1,5 +1,5 @@
 """Fingers closed onto an object along straight lines in joint space, each until its pad touches
-(the sampler of :mod:`graspnet_torch.synthesis.candidates`, step 2 of its docstring): the lines
+(the sampler of :mod:`graspnet_torch.synthesis.drafts`, step 2 of its docstring): the lines
 (:func:`closing_lines`: from the pad's forward direction, :func:`tip_jacobians`) and where along
 them each pad sphere first touches the surface (:func:`close_lines`, on the object's fast distance
 :func:`~graspnet_torch.collision.surface.surface_distance_near`)."""

@@ -132,9 +132,9 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first (``robot``: a
     built robot, a shipped robot's name, a robot config or its YAML path).
 
-    Contact sets are drawn (:func:`~graspnet_torch.synthesis.candidates.iter_contact_sets`, ``seed``),
-    at most ``candidates`` of them, and ranked by quality (:func:`rank_sets`); each is solved as a
-    problem of the surface contact model (``solver`` settings over ``contact_model: surface``) and
+    Contact sets are drawn (``seed``) and ranked by quality (:func:`rank_sets`), at most
+    ``candidates`` of them solved, each as a problem of the surface contact model (``solver``
+    settings over ``contact_model: surface``), and
     each success is checked in MuJoCo where ``physics`` is given: a check
     ``physics(problem, result, robot=robot)`` returning a report with ``directions`` (push ->
     held), i.e. ``gt.simulate_grasp`` (this layer sits below the physics layer, so the check is
@@ -144,8 +144,10 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
     - ``"sampled"`` (default): at the posture the sampler found touching the set, a warm start
       (:meth:`gt.Solver.solve <graspnet_torch.solver.session.Solver.solve>` with ``search=False``:
-      Levenberg-Marquardt, one trial; a start that does not land is dropped). The sets the
-      sampler's batches bring wait in one pool and the best of it is solved next (rank order);
+      Levenberg-Marquardt, one trial; a start that does not land is dropped). The drafts the
+      sampler's batches bring (:func:`~graspnet_torch.synthesis.drafts.iter_contact_drafts`) wait in
+      one pool, each checked (:class:`~graspnet_torch.synthesis.candidates.SetCheck`) only when it
+      comes to the top, and the best checked set is solved next (rank order);
       while no set in the pool is force closure, up to ``LOOK_AHEAD`` more batches are drawn
       before a solve. The search ends once ``n_grasps`` grasps hold every push (without physics:
       once ``n_grasps`` succeed) or ``candidates`` sets were tried: the first verified grasp comes
