@@ -176,15 +176,20 @@ def quick_settings(cls: type[T], data: Mapping[str, Any] | None, quick: bool, wh
     return build(cls, {**data, **(dict(overrides) if quick else {})}, where)
 
 
-def _cpu_name() -> str:
+def _cpuinfo(key: str) -> str | None:
+    """The first value of ``key`` in /proc/cpuinfo (None: none, or no such file)."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
             for line in fh:
-                if line.startswith("model name"):
+                if line.startswith(key):
                     return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    return None
+
+
+def _cpu_name() -> str:
+    return _cpuinfo("model name") or platform.processor() or platform.machine()
 
 
 def _git_commit(root: Path) -> str:
@@ -203,14 +208,11 @@ PACKAGES = ("numpy", "mujoco", "trimesh", "python-fcl", "coacd")  # the versions
 
 
 def _cpu_mhz() -> str:
+    mhz = _cpuinfo("cpu MHz")
     try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("cpu MHz"):
-                    return f"{float(line.split(':', 1)[1]):.0f}"
-    except (OSError, ValueError):
-        pass
-    return "unknown"
+        return f"{float(mhz):.0f}" if mhz else "unknown"
+    except ValueError:
+        return "unknown"
 
 
 def python_speed_ms() -> float:
