@@ -6,13 +6,15 @@ The grid covers the mesh's bounding box and ``MARGIN_M`` around it, ``CELL_M`` a
 grid would hold more than ``MAX_CELLS`` points (over about 38 cm a side, margins included) gets
 coarser cells, as many as that, and a band grown with them (a 1 m cube: 4.1 mm cells; at 1.5 mm it
 would take 333 million points, gigabytes and minutes). A grid point within ``BAND_M`` of the
-surface (times the cell over ``CELL_M``) holds its exact distance (every triangle whose box grown by
-``BAND_M`` holds the point is measured, :func:`~graspnet_torch.collision.mesh.closest_points`); a
-point farther holds an upper bound, the nearest such point's distance plus the way to it (a
-Euclidean distance transform of the band); the sign is the mesh's inside test at the point
-(:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`). Between grid points the value is
-interpolated (exact on a flat face; within ``ERROR_M`` of the exact distance near the surface where
-measured, see :func:`graspnet_torch.collision.surface.surface_distance_near`); a point off the grid
+surface (times the cell over ``CELL_M``) holds its exact distance (every triangle whose box grown
+by ``BAND_M`` holds the point and whose plane lies within ``BAND_M`` of it is measured,
+:func:`~graspnet_torch.collision.mesh.closest_points`); a point farther holds an upper bound, the
+nearest such point's distance plus the way to it (a Euclidean distance transform of the band); the
+sign is the mesh's inside test at the point (:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`;
+a closed mesh's by the parity of surface crossings along grid columns, an open one's convex pieces
+each on the grid points in its box). Between grid points the value is interpolated (exact on a
+flat face; within ``ERROR_M`` of the exact distance near the surface where measured, see
+:func:`graspnet_torch.collision.surface.surface_distance_near`); a point off the grid
 gets its nearest grid point's value plus the way to it.
 """
 
@@ -24,8 +26,9 @@ from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
+from scipy.spatial import HalfspaceIntersection, QhullError
 
-from graspnet_torch.collision.mesh import closest_points, mesh_query
+from graspnet_torch.collision.mesh import MeshQuery, closest_points, mesh_query
 from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.shape import Shape
 
@@ -37,6 +40,7 @@ MARGIN_M = 0.02  # m of grid around the mesh's bounding box
 MAX_CELLS = 1 << 24  # grid points at most (float64: 134 MB); a larger mesh's cells grow
 PAIRS = 1 << 21  # (grid point, triangle) pairs measured at once
 JITTER_M = 1.234567e-7  # m: the inside test's grid columns are moved this far in x and y
+PIECE_PAD_M = 1e-9  # m: a convex piece's box, grown by this, holds every point its planes call inside
 
 
 @dataclass(frozen=True)
@@ -98,8 +102,10 @@ def _grid(path: Path, scale: float) -> DistanceGrid:
     unsigned = np.where(known, exact, np.minimum(exact, bound))
     if query.closed:
         inside = _inside(query.triangles, axes).ravel()
-    else:  # the mesh's own test: its convex pieces
+    elif query.pieces is None:  # the mesh's own test
         inside = query.inside(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
+    else:
+        inside = _inside_pieces(query, axes).ravel()
     return DistanceGrid(origin, cell, np.where(inside, -unsigned, unsigned).reshape(shape))
 
 
@@ -131,13 +137,37 @@ def _inside(triangles: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
     return (np.cumsum(flips, axis=2)[..., :-1] % 2).astype(bool)
 
 
+def _inside_pieces(query: MeshQuery, axes: list[np.ndarray]) -> np.ndarray:
+    """(nx, ny, nz) bool: the grid points inside a mesh that is not closed, as its own test has it
+    (:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`: within the mesh's bounds, inside one of
+    its convex pieces), each piece tested only on the grid points in the box of its planes' polytope
+    (``PIECE_PAD_M`` wider; the mesh's bounds where that cannot be found)."""
+    out = np.zeros(tuple(len(a) for a in axes), dtype=bool)
+    for planes, v in zip(query.pieces.planes, query.pieces.vertices, strict=True):
+        lo, hi = query.bounds
+        try:  # the planes' polytope can be larger than the hull of the piece's vertices (planes dropped)
+            corners = HalfspaceIntersection(np.column_stack([planes[:, :3], -planes[:, 3]]), v.mean(0)).intersections
+            lo, hi = np.maximum(corners.min(0) - PIECE_PAD_M, lo), np.minimum(corners.max(0) + PIECE_PAD_M, hi)
+        except (QhullError, ValueError):
+            pass
+        box = tuple(slice(np.searchsorted(a, lo[d]), np.searchsorted(a, hi[d], side="right"))
+                    for d, a in enumerate(axes))
+        p = np.stack(np.meshgrid(*(a[b] for a, b in zip(axes, box, strict=True)), indexing="ij"), axis=-1)
+        out[box] |= (np.einsum("...c,fc->...f", p, planes[:, :3]) - planes[:, 3]).max(-1) < 0
+    return out
+
+
 def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: float, band: float) -> np.ndarray:
     """(prod(shape),) each grid point's (``cell`` apart) least distance to the triangles (M, 3, 3)
-    whose boxes grown by ``band`` hold it (inf where none does): exact below ``band``."""
+    whose boxes grown by ``band`` hold it and whose planes lie within ``band`` of it (inf where
+    none does; a degenerate triangle: its whole box): exact below ``band``."""
     lo = np.clip(np.floor((triangles.min(1) - band - origin) / cell).astype(int), 0, shape - 1)
     hi = np.clip(np.ceil((triangles.max(1) + band - origin) / cell).astype(int), 0, shape - 1)
     ext = hi - lo + 1  # (M, 3) grid points per axis in each grown box
     count = ext.prod(1)
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    area = np.linalg.norm(cross, axis=1, keepdims=True)
+    normals = np.where(area > 0, cross / np.where(area > 0, area, 1.0), 0.0)
     out = np.full(int(shape.prod()), np.inf)
     start = 0
     while start < len(triangles):
@@ -147,6 +177,8 @@ def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: fl
         e = ext[t]
         idx = lo[t] + np.stack([k // (e[:, 1] * e[:, 2]), k // e[:, 2] % e[:, 1], k % e[:, 2]], axis=1)
         p = origin + idx * cell
+        slab = np.abs(np.einsum("ij,ij->i", p - triangles[t, 0], normals[t])) <= band  # a triangle farther is
+        t, idx, p = t[slab], idx[slab], p[slab]  # farther than band: half the pairs, none below band lost
         tri = triangles[t]
         d = np.linalg.norm(p - closest_points(p, tri[:, 0], tri[:, 1], tri[:, 2]), axis=1)
         np.minimum.at(out, np.ravel_multi_index(tuple(idx.T), tuple(shape)), d)

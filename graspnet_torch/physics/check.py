@@ -5,7 +5,9 @@ The protocol is DexGraspBench's: friction 0.6 tangential / 0.02 torsional, ellip
 each; holds when the object moves less than 5 cm and turns less than 15 degrees
 (:class:`~graspnet_torch.physics.config.PhysicsCfg` holds every number, and what is pinned beside it).
 
-The run: the model (:mod:`graspnet_torch.physics.model`) starts in the grasp posture, its actuators
+The run: the model (:mod:`graspnet_torch.physics.model`; compiled once per robot, object and
+protocol, each check a copy with the bodies the posture places set: the same to the last bit as a
+model written for that posture) starts in the grasp posture, its actuators
 commanded to the squeeze posture (the trial's ``squeeze`` where the result has one, else the grasp
 posture itself); a settle of ``settle_s`` without external force, whose object shift and turn are
 reported; then from that settled state, each in turn and each from the same state, the external
@@ -17,8 +19,11 @@ force m g (times ``force_scale``) at the object's centre of mass along +x, -x, +
 
 from __future__ import annotations
 
+import copy
+import json
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +31,7 @@ import numpy as np
 
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.physics.config import DIRECTIONS, PhysicsCfg
-from graspnet_torch.physics.model import OBJECT_BODY, grasp_mjcf
+from graspnet_torch.physics.model import OBJECT_BODY, grasp_mjcf, posed_bodies, quaternion
 from graspnet_torch.robot.robot import Posture, Robot, load_robot
 from graspnet_torch.solver.api import as_problem
 from graspnet_torch.solver.postures import trial_posture
@@ -36,6 +41,8 @@ from graspnet_torch.tasks.problem import GraspProblem
 __all__ = ["PhysicsReport", "check_until_failure", "simulate_grasp"]
 
 CHECK_EVERY_S = 0.1  # how often a push looks whether it has already failed
+MODELS = 8  # compiled models kept per robot (one per object and protocol)
+_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # robot -> {(object, protocol): MjModel}
 G = 9.81
 
 
@@ -139,13 +146,18 @@ def simulate_grasp(problem: GraspProblem | str | Path, result: GraspResult, cfg:
                            f"'{problem.robot}'")
     robot = robot or load_robot(problem.robot_cfg or problem.robot)
     start, target = _postures(robot, result, posture)
-    built = grasp_mjcf(robot, problem.object, start, target, cfg)
-    model = mujoco.MjModel.from_xml_string(built.xml)
+    model = _model(mujoco, robot, problem.object, start, target, cfg)
+    for name, T in posed_bodies(robot, start).items():  # where this posture puts them (model.py)
+        body = model.body(name).id
+        model.body_pos[body], model.body_quat[body] = T[:3, 3], quaternion(T[:3, :3])
     data = mujoco.MjData(model)
-    for name, value in built.start.items():
-        data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
-    for name, value in built.targets.items():
-        data.ctrl[model.actuator(name).id] = value
+    mujoco.mj_setConst(model, data)
+    values, goals = robot.joint_values(start), robot.joint_values(target)
+    for j in range(model.njnt):
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+            data.qpos[model.jnt_qposadr[j]] = values.get(model.joint(j).name, 0.0)
+    for a in range(model.nu):
+        data.ctrl[a] = goals.get(model.actuator(a).name, 0.0)
     mujoco.mj_forward(model, data)
     body = model.body(OBJECT_BODY).id
 
@@ -177,6 +189,19 @@ def simulate_grasp(problem: GraspProblem | str | Path, result: GraspResult, cfg:
             break
     return PhysicsReport(directions, shifts, turns, settle_shift, settle_turn,
                          bool(settle_shift > cfg.settle_max_shift_mm), cfg.protocol(), time.perf_counter() - t0)
+
+
+def _model(mujoco, robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsCfg):
+    """A copy of the compiled model of ``robot`` holding ``obj`` under ``cfg`` (its posed bodies as
+    some posture left them: the caller sets them), compiled once per robot, object and protocol
+    (``MODELS`` per robot kept) and copied for each check (a check changes its copy's bodies)."""
+    key = (json.dumps(obj.to_mapping(), sort_keys=True), cfg)
+    models = _MODELS.setdefault(robot, {})
+    if key not in models:
+        if len(models) >= MODELS:
+            models.pop(next(iter(models)))
+        models[key] = mujoco.MjModel.from_xml_string(grasp_mjcf(robot, obj, start, target, cfg).xml)
+    return copy.copy(models[key])
 
 
 def check_until_failure(problem: GraspProblem | str | Path, result: GraspResult,

@@ -45,7 +45,7 @@ from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["OBJECT_BODY", "GraspModel", "grasp_mjcf"]
+__all__ = ["OBJECT_BODY", "GraspModel", "grasp_mjcf", "posed_bodies", "quaternion"]
 
 OBJECT_BODY = "grasped_object"
 ROBOT_BITS = (2, 1)  # contype, conaffinity: robot geoms touch the object, never each other
@@ -60,18 +60,21 @@ class GraspModel:
         xml: the MJCF text.
         start: movable MuJoCo joint name -> its initial value (rad or m): the grasp posture.
         targets: actuator name (its joint's) -> its commanded value: the squeeze posture.
+        posed: body name -> its (4, 4) pose in its parent body's frame, for the bodies the posture
+            places (:func:`posed_bodies`); every other body's pose is the robot's or the object's alone.
     """
 
     xml: str
     start: dict[str, float]
     targets: dict[str, float]
+    posed: dict[str, np.ndarray]
 
 
 def _fmt(values) -> str:
     return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
-def _quat(R: np.ndarray) -> np.ndarray:
+def quaternion(R: np.ndarray) -> np.ndarray:
     """(3, 3) rotation -> (4,) unit quaternion (w, x, y, z), from its largest component (exact to
     rounding everywhere)."""
     t = np.trace(R)
@@ -93,7 +96,7 @@ def _quat(R: np.ndarray) -> np.ndarray:
 def _place(el: ET.Element, T: np.ndarray) -> None:
     """Set an element's pos and quat from a (4, 4) pose in its parent's frame."""
     el.set("pos", _fmt(T[:3, 3]))
-    el.set("quat", _fmt(_quat(T[:3, :3])))
+    el.set("quat", _fmt(quaternion(T[:3, :3])))
 
 
 def _motion(kind: str, axis: np.ndarray, q: float) -> np.ndarray:
@@ -132,6 +135,36 @@ def _primitive_size(kind: str, size) -> list[float]:
     return [size[0]]
 
 
+def _locked(robot: Robot) -> set[str]:
+    """The joints a grasp's model locks: the body joints (arm, mobile base) and the mimic joints
+    that follow one."""
+    locked = set(robot.body_joint_names)
+    return locked | {j for j, (leader, _, _) in robot.urdf.mimic_joints.items() if leader in locked}
+
+
+def _joint_frame(robot: Robot, j) -> tuple[np.ndarray, np.ndarray, str]:
+    """A URDF joint's child frame in its parent's at zero (4, 4), its unit axis and its motion kind."""
+    urdf = robot.urdf
+    T = origin_matrix(getattr(urdf.links[j.child], "origin", None)) @ origin_matrix(j.origin)
+    axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+    return T, axis / np.linalg.norm(axis), "prismatic" if j.type == "prismatic" else "revolute"
+
+
+def posed_bodies(robot: Robot, posture: Posture) -> dict[str, np.ndarray]:
+    """The bodies of a grasp's model that ``posture`` places, each (4, 4) in its parent's frame:
+    the robot's root link (world frame: a free hand's palm pose, else the base) and each child of
+    a locked movable joint (:func:`grasp_mjcf`). The rest of the model does not depend on the
+    posture: a model built for one posture serves another once these are set (and its actuators'
+    targets and joints' values)."""
+    values, locked = robot.joint_values(posture), _locked(robot)
+    out = {_body_name(robot.urdf.root_link): robot.link_frames(posture)[robot.urdf.root_link]}
+    for j in robot.urdf.robot.joints:
+        if j.type in ("revolute", "continuous", "prismatic") and j.name in locked:
+            T, axis, kind = _joint_frame(robot, j)
+            out[_body_name(j.child)] = T @ _motion(kind, axis, values.get(j.name, 0.0))
+    return out
+
+
 def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsCfg) -> GraspModel:
     """The MJCF of ``robot`` in posture ``start`` (its palm and body where ``start`` puts them),
     its actuators commanded to ``target``'s joints, holding ``obj`` (a problem's object:
@@ -143,8 +176,7 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
     root = urdf.root_link
     values, goals = robot.joint_values(start), robot.joint_values(target)
     mimic = urdf.mimic_joints
-    locked = set(robot.body_joint_names)
-    locked |= {j for j, (leader, _, _) in mimic.items() if leader in locked}
+    locked, posed = _locked(robot), posed_bodies(robot, start)
 
     mj = ET.Element("mujoco", model=f"grasp_{robot.name}")
     ET.SubElement(mj, "compiler", angle="radian", autolimits="true", balanceinertia="true", boundmass="1e-5",
@@ -165,9 +197,8 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
     for j in urdf.robot.joints:
         children.setdefault(j.parent, []).append(j)
 
-    placed = robot.link_frames(start)[root]
     root_el = ET.SubElement(world, "body", name=_body_name(root))
-    _place(root_el, placed)
+    _place(root_el, posed[_body_name(root)])
     start_q, targets, meshes = {}, {}, [0]
 
     def fill(body: ET.Element, link: str) -> None:
@@ -190,13 +221,9 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
             else:
                 _geom(body, s.kind, _primitive_size(s.kind, s.size), s.origin, ROBOT_BITS)
         for j in children.get(link, []):
-            T = origin_matrix(getattr(urdf.links[j.child], "origin", None)) @ origin_matrix(j.origin)
+            T, axis, kind = _joint_frame(robot, j)
             movable = j.type in ("revolute", "continuous", "prismatic")
-            axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
-            axis = axis / np.linalg.norm(axis)
-            kind = "prismatic" if j.type == "prismatic" else "revolute"
-            if movable and j.name in locked:
-                T = T @ _motion(kind, axis, values.get(j.name, 0.0))
+            T = posed.get(_body_name(j.child), T)
             child = ET.SubElement(body, "body", name=_body_name(j.child))
             _place(child, T)
             if movable and j.name not in locked:
@@ -229,7 +256,7 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
         mj.remove(actuators)
     if not len(equality):
         mj.remove(equality)
-    return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets)
+    return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets, posed)
 
 
 def _object(world: ET.Element, asset: ET.Element, obj, cfg: PhysicsCfg) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from graspnet_torch.collision.mesh import mesh_query
 from graspnet_torch.collision.sdf import BAND_M, CELL_M, MAX_CELLS, distance_grid
 from graspnet_torch.robot.shape import Shape
 
@@ -70,3 +71,26 @@ def test_a_large_meshs_grid_grows_its_cells_and_stays_exact_near_its_faces(tmp_p
     exact = _box_distance(anywhere, half)
     clear = np.abs(exact) > grid.cell
     assert np.all(np.sign(grid(anywhere[clear])) == np.sign(exact[clear]))
+
+
+def test_an_open_meshs_grid_takes_its_sign_from_the_meshs_own_inside_test(tmp_path):
+    """A box without its top (not closed: its inside is its convex pieces', CoACD's): every grid
+    point's sign is the mesh's own inside test (each piece tested in its box only), the points near
+    its faces hold the exact distance."""
+    half = np.array([0.02, 0.015, 0.01])
+    box = trimesh.creation.box(extents=2 * half)
+    box.update_faces(box.face_normals[:, 2] < 0.5)  # the top's two triangles gone
+    path = tmp_path / "open_box.stl"
+    box.export(path)
+    obj = Shape("mesh", (), np.zeros(6), path, 1.0)
+    query = mesh_query(obj)[0]
+    assert not query.closed and query.pieces is not None
+    grid = distance_grid(obj)
+    axes = [grid.origin[d] + grid.cell * np.arange(grid.values.shape[d]) for d in range(3)]
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    inside = query.inside(points)
+    assert inside.any() and np.array_equal(grid.values.ravel() < 0, inside)
+    sides = np.abs(_box_distance(points, half)) < BAND_M
+    sides &= points[:, 2] < half[2] - BAND_M  # away from the missing top
+    exact = np.abs(_box_distance(points[sides], half))
+    np.testing.assert_allclose(np.abs(grid.values.ravel()[sides]), exact, atol=1e-8)

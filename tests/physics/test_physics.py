@@ -140,6 +140,26 @@ def test_until_failure_is_the_full_check_cut_after_its_first_failed_push(pinch, 
 
 # ---------------------------------------------------------------------------- the report
 @needs_mujoco
+def test_a_check_is_the_same_whichever_check_of_the_robot_came_before(pinch):
+    """The model is compiled once per robot and object and its posed bodies (the palm) set for each
+    check: the pinch checked on a robot fresh from its config, and again after a check with the
+    palm moved away, reports the same to the last bit; the moved palm's check is a fresh robot's."""
+    problem, result, grasp, _ = pinch
+    moved = gt.Posture(grasp.palm_pose + torch.tensor([0.0, 0.0, 0.03, 0.0, 0.0, 0.0], dtype=torch.float64),
+                       grasp.fingers, grasp.body)
+
+    def check(robot, posture=None):
+        r = simulate_grasp(problem, result, posture=posture, robot=robot)
+        return r.directions, r.shifts_mm, r.turns_deg, r.settle_shift_mm
+
+    robot = gt.load_robot("hand")
+    first = check(robot)
+    away = check(robot, moved)
+    assert check(robot) == first and sum(first[0].values()) >= 5
+    assert away == check(gt.load_robot("hand"), moved) and sum(away[0].values()) < 6
+
+
+@needs_mujoco
 def test_report_json_shape(pinch):
     problem, result, _, _ = pinch
     out = simulate_grasp(problem, result).to_dict()
