@@ -23,7 +23,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh, mesh_path
@@ -35,6 +34,7 @@ __all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "lattice_point
 SPACING = 0.002  # m between the points that measure a link's depth
 MEASURED = 0.01  # m: depths are measured up to this (deeper is reported as this)
 CHUNK = 64  # inside points measured at a time
+PAIRS = 32768  # (point, triangle) pairs closest_points measures at once (the arrays stay in the cache)
 RAY = np.array([0.4395064455, 0.617598629942, 0.652231566745])  # the inside test's ray (trimesh's default)
 MAX_POINTS = 1500
 
@@ -90,41 +90,49 @@ def closest_on_triangles(points: np.ndarray, triangles: np.ndarray) -> np.ndarra
     return closest_points(points[:, None, :], *(triangles[None, :, k, :] for k in range(3)))
 
 
-def _tensor(v: np.ndarray) -> torch.Tensor:
-    """A float64 tensor of an array (copied where the array is read-only, e.g. a cached mesh's)."""
-    v = np.asarray(v, dtype=np.float64)
-    return torch.from_numpy(v if v.flags.writeable else v.copy())
-
-
 def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(..., 3) the point of triangle (a, b, c) nearest p, all (..., 3) and broadcast together, by
     the triangle's Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), vectorised
-    (float64, in torch: a distance grid's millions of pairs in a third of numpy's time)."""
-    p, a, b, c = (_tensor(v) for v in (p, a, b, c))
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
-    bp = p - b
-    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
-    cp = p - c
-    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    (float64, numpy): ``PAIRS`` pairs at a time, each coordinate a contiguous array (a distance
+    grid's million pairs in 0.23 s, a third of the same arithmetic on (..., 3) tensors in torch)."""
+    p, a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (p, a, b, c)))
+    flat = [v.reshape(-1, 3) for v in (p, a, b, c)]
+    out = np.empty((len(flat[0]), 3))
+    for start in range(0, len(out), PAIRS):
+        out[start:start + PAIRS] = _closest(*(np.ascontiguousarray(v[start:start + PAIRS].T) for v in flat))
+    return out.reshape(p.shape)
+
+
+def _closest(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """:func:`closest_points` of (3, N) coordinates each -> (N, 3)."""
+    (px, py, pz), (ax, ay, az), (bx, by, bz), (cx, cy, cz) = p, a, b, c
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1, d2 = abx * apx + aby * apy + abz * apz, acx * apx + acy * apy + acz * apz
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3, d4 = abx * bpx + aby * bpy + abz * bpz, acx * bpx + acy * bpy + acz * bpz
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5, d6 = abx * cpx + aby * cpy + abz * cpz, acx * cpx + acy * cpy + acz * cpz
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    denom = va + vb + vc
-    v_face, w_face = vb / denom, vc / denom
-    v_ab = d1 / (d1 - d3)
-    w_ac = d2 / (d2 - d6)
-    w_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    closest = a + ab * v_face[..., None] + ac * w_face[..., None]  # inside the face
-    regions = [  # (condition, closest point), the first that holds wins
-        ((d1 <= 0) & (d2 <= 0), a),
-        ((d3 >= 0) & (d4 <= d3), b),
-        ((d6 >= 0) & (d5 <= d6), c),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + ab * torch.nan_to_num(v_ab)[..., None]),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + ac * torch.nan_to_num(w_ac)[..., None]),
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + (c - b) * torch.nan_to_num(w_bc)[..., None]),
-    ]
-    for cond, point in reversed(regions):
-        closest = torch.where(cond[..., None], point, closest)
-    return closest.numpy()
+    with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate triangle: its edges' cases win
+        denom = va + vb + vc
+        v_face, w_face = vb / denom, vc / denom
+        v_ab = np.nan_to_num(d1 / (d1 - d3))
+        w_ac = np.nan_to_num(d2 / (d2 - d6))
+        w_bc = np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    regions = [  # the first that holds wins: vertex a, b, c, edge ab, ac, bc
+        (d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6),
+        (vc <= 0) & (d1 >= 0) & (d3 <= 0), (vb <= 0) & (d2 >= 0) & (d6 <= 0),
+        (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)]
+    out = np.empty((len(px), 3))
+    for k, (A, AB, AC, B, C) in enumerate(((ax, abx, acx, bx, cx), (ay, aby, acy, by, cy), (az, abz, acz, bz, cz))):
+        closest = A + AB * v_face + AC * w_face  # inside the face
+        for cond, point in zip(reversed(regions), (B + (C - B) * w_bc, A + AC * w_ac, A + AB * v_ab, C, B, A),
+                               strict=True):
+            closest = np.where(cond, point, closest)
+        out[:, k] = closest
+    return out
 
 
 class MeshQuery:

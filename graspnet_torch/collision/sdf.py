@@ -7,15 +7,15 @@ grid would hold more than ``MAX_CELLS`` points (over about 38 cm a side, margins
 coarser cells, as many as that, and a band grown with them (a 1 m cube: 4.1 mm cells; at 1.5 mm it
 would take 333 million points, gigabytes and minutes). A grid point within ``BAND_M`` of the
 surface (times the cell over ``CELL_M``) holds its exact distance (every triangle whose box grown
-by ``BAND_M`` holds the point and whose plane lies within ``BAND_M`` of it is measured,
-:func:`~graspnet_torch.collision.mesh.closest_points`); a point farther holds an upper bound, the
-nearest such point's distance plus the way to it (a Euclidean distance transform of the band); the
-sign is the mesh's inside test at the point (:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`;
-a closed mesh's by the parity of surface crossings along grid columns, an open one's convex pieces
-each on the grid points in its box). Between grid points the value is interpolated (exact on a
-flat face; within ``ERROR_M`` of the exact distance near the surface where measured, see
-:func:`graspnet_torch.collision.surface.surface_distance_near`); a point off the grid
-gets its nearest grid point's value plus the way to it.
+by ``BAND_M`` holds the point is measured, :func:`~graspnet_torch.collision.mesh.closest_points`);
+a point farther holds an upper bound, the nearest such point's distance plus the way to it (a
+Euclidean distance transform of the band); the sign is the mesh's inside test at the point
+(:meth:`~graspnet_torch.collision.mesh.MeshQuery.inside`; a closed mesh's by the parity of surface
+crossings along grid columns, an open one's convex pieces each on the grid points in its box).
+Between grid points the value is interpolated (exact on a flat face; within ``ERROR_M`` of the
+exact distance near the surface where measured, see
+:func:`graspnet_torch.collision.surface.surface_distance_near`); a point off the grid gets its
+nearest grid point's value plus the way to it.
 """
 
 from __future__ import annotations
@@ -159,15 +159,11 @@ def _inside_pieces(query: MeshQuery, axes: list[np.ndarray]) -> np.ndarray:
 
 def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: float, band: float) -> np.ndarray:
     """(prod(shape),) each grid point's (``cell`` apart) least distance to the triangles (M, 3, 3)
-    whose boxes grown by ``band`` hold it and whose planes lie within ``band`` of it (inf where
-    none does; a degenerate triangle: its whole box): exact below ``band``."""
+    whose boxes grown by ``band`` hold it (inf where none does): exact below ``band``."""
     lo = np.clip(np.floor((triangles.min(1) - band - origin) / cell).astype(int), 0, shape - 1)
     hi = np.clip(np.ceil((triangles.max(1) + band - origin) / cell).astype(int), 0, shape - 1)
     ext = hi - lo + 1  # (M, 3) grid points per axis in each grown box
     count = ext.prod(1)
-    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    area = np.linalg.norm(cross, axis=1, keepdims=True)
-    normals = np.where(area > 0, cross / np.where(area > 0, area, 1.0), 0.0)
     out = np.full(int(shape.prod()), np.inf)
     start = 0
     while start < len(triangles):
@@ -177,8 +173,6 @@ def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: fl
         e = ext[t]
         idx = lo[t] + np.stack([k // (e[:, 1] * e[:, 2]), k // e[:, 2] % e[:, 1], k % e[:, 2]], axis=1)
         p = origin + idx * cell
-        slab = np.abs(np.einsum("ij,ij->i", p - triangles[t, 0], normals[t])) <= band  # a triangle farther is
-        t, idx, p = t[slab], idx[slab], p[slab]  # farther than band: half the pairs, none below band lost
         tri = triangles[t]
         d = np.linalg.norm(p - closest_points(p, tri[:, 0], tri[:, 1], tri[:, 2]), axis=1)
         np.minimum.at(out, np.ravel_multi_index(tuple(idx.T), tuple(shape)), d)
