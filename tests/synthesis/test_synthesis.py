@@ -113,7 +113,8 @@ def test_learned_proposals_seed_the_search(robot: gt.Robot) -> None:
 
 def test_a_warm_start_without_search_is_one_trial(robot: gt.Robot) -> None:
     """Solver.solve(start=..., search=False): a start far from the contacts that does not land is
-    the result (one trial, not a success); with the search it gets the search's trials."""
+    the result (one trial, not a success, not retried centred); with the search it gets the
+    search's trials."""
     obj = cube()
     problem = placeholder_problem(robot, obj, FINGERS, np.array([[0.0, 0.0, 0.23], [0.0, 0.03, 0.2],
                                                                   [0.0, -0.03, 0.2]]))
@@ -122,7 +123,13 @@ def test_a_warm_start_without_search_is_one_trial(robot: gt.Robot) -> None:
     solver = gt.Solver(robot, trials=2, solver={"contact_model": "surface", "max_iterations": 5})
     alone = solver.solve(problem, start=far, search=False)
     assert len(alone.trials) == 1 and not alone.success
-    assert len(solver.solve(problem, start=far).trials) == 3  # the warm trial, then the search's two
+    # not retried from the start centred either: as a solver without the centring leaves it
+    plain = gt.Solver(robot, trials=2, solver={"contact_model": "surface", "max_iterations": 5,
+                                               "polish": {"centre": None}}).solve(problem, start=far, search=False)
+    searched = solver.solve(problem, start=far)
+    assert len(searched.trials) == 3  # the warm trial (retried centred), then the search's two
+    assert torch.equal(trial_posture(robot, alone.best).fingers, trial_posture(robot, plain.best).fingers)
+    assert not torch.equal(trial_posture(robot, alone.best).fingers, trial_posture(robot, searched.trials[0]).fingers)
 
 
 @pytest.mark.slow
