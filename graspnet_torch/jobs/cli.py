@@ -340,6 +340,11 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
         what = f"{clip(str(exc.filename), 200)}: " if exc.filename else ""
         print(f"error: {what}{exc.strerror or _one_line(exc)}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start), before the job: nothing written
+        if _job_started:
+            raise
+        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
+        sys.exit(130)
 
 
 class _SkipChecks(Exception):

@@ -18,7 +18,7 @@ import pytest
 
 import graspnet_torch as gt
 from graspnet_torch.io import json_digest
-from graspnet_torch.jobs.cli import check_overrides, compose_for_check, hydra_overrides
+from graspnet_torch.jobs.cli import check_overrides, compose_for_check, hydra_overrides, run_cli
 from graspnet_torch.jobs.configs import (
     InspectRobotsJobCfg,
     ReferencePostureJobCfg,
@@ -228,6 +228,21 @@ def test_a_result_with_its_reach_motion_is_viewed_and_a_foreign_motion_refused(t
     data["trajectory"]["joint_names"] = data["trajectory"]["joint_names"][::-1]
     (tmp_path / "other.json").write_text(json.dumps(data))
     _viewer_refused(tmp_path, str(tmp_path / "other.json"), message="the trajectory's joint_names are not the planned")
+
+
+def test_ctrl_c_while_hydra_composes_the_run_is_one_line(capsys):
+    """Ctrl-C after the settings' checks but before the job starts (Hydra still composing the run,
+    seconds on a busy machine): exit 130, one line, nothing written (as the subprocess test below
+    sees when its Ctrl-C comes that early)."""
+
+    def composing() -> None:  # a Hydra main interrupted before it hands over to the job
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit_info:
+        run_cli(composing, SolveGraspJobCfg, argv=["task=glass3"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 130 and len(err.strip().splitlines()) == 1
+    assert err.startswith("interrupted (Ctrl-C) before the job started"), err
 
 
 def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
