@@ -60,14 +60,11 @@ class GraspModel:
         xml: the MJCF text.
         start: movable MuJoCo joint name -> its initial value (rad or m): the grasp posture.
         targets: actuator name (its joint's) -> its commanded value: the squeeze posture.
-        posed: body name -> its (4, 4) pose in its parent body's frame, for the bodies the posture
-            places (:func:`posed_bodies`); every other body's pose is the robot's or the object's alone.
     """
 
     xml: str
     start: dict[str, float]
     targets: dict[str, float]
-    posed: dict[str, np.ndarray]
 
 
 def _fmt(values) -> str:
@@ -256,7 +253,7 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
         mj.remove(actuators)
     if not len(equality):
         mj.remove(equality)
-    return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets, posed)
+    return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets)
 
 
 def _object(world: ET.Element, asset: ET.Element, obj, cfg: PhysicsCfg) -> None:
