@@ -6,6 +6,8 @@ them each pad sphere first touches the surface (:func:`close_lines`, on the obje
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 
@@ -25,31 +27,39 @@ HOLD = (0.35, 0.65)  # a joint that turns its pad sideways: held at this fractio
 STEP_RAD = 1e-6  # the finite-difference step of the tip Jacobian
 
 
-def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray) -> np.ndarray:
-    """Signed gaps (m) of every pad sphere to the surface: head (..., 6), q (..., F, j) -> (..., F)."""
-    tips = robot.fingertips_world(head, q).numpy()
-    return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth
+def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray,
+              rows: list[int]) -> np.ndarray:
+    """Signed gaps (m) of the pad spheres of the fingers ``rows`` to the surface: head (..., 6),
+    q (..., F, j) -> (..., len(rows))."""
+    tips = robot.fingertips_world(head, q).numpy()[..., rows, :]
+    return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth[rows]
 
 
 def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tensor, q_close: torch.Tensor,
-           depth: np.ndarray) -> tuple[torch.Tensor, np.ndarray]:
-    """Each finger closed along its line until its pad touches. head (B, 6), q_open / q_close
-    (B, F, j) -> the touching joints (B, F, j) (closed where it touches nothing), touched (B, F) bool."""
-    B = q_open.shape[0]
+                depth: np.ndarray, rows: Sequence[int] | None = None) -> tuple[torch.Tensor, np.ndarray]:
+    """Each finger of ``rows`` (None: every finger) closed along its line until its pad touches.
+    head (B, 6), q_open / q_close (B, F, j) -> the touching joints (B, F, j) (closed where it
+    touches nothing; a finger not in ``rows``: closed, not measured), touched (B, F) bool (False
+    for a finger not in ``rows``)."""
+    B, F = q_open.shape[:2]
+    rows = list(range(F)) if rows is None else list(rows)
     ts = torch.linspace(0, 1, STEPS, dtype=torch.float64)
     line = q_open[:, None] + ts[None, :, None, None] * (q_close - q_open)[:, None]  # (B, S, F, j)
-    gaps = _tip_gaps(robot, obj, head[:, None].expand(B, STEPS, 6), line, depth)  # (B, S, F)
+    gaps = _tip_gaps(robot, obj, head[:, None].expand(B, STEPS, 6), line, depth, rows)  # (B, S, k)
     inside = gaps <= 0
-    touched = inside.any(axis=1) & ~inside[:, 0]
-    first = np.where(touched, inside.argmax(axis=1), STEPS - 1)  # (B, F)
-    lo = np.where(touched, (first - 1) / (STEPS - 1), 1.0)
-    hi = first / (STEPS - 1)
-    lo_t, hi_t = torch.as_tensor(lo.copy()), torch.as_tensor(hi.copy())
+    touched = np.zeros((B, F), dtype=bool)
+    touched[:, rows] = inside.any(axis=1) & ~inside[:, 0]
+    t = torch.ones(B, F, dtype=torch.float64)
+    first = np.where(touched[:, rows], inside.argmax(axis=1), STEPS - 1)  # (B, k)
+    lo_t = torch.as_tensor(np.where(touched[:, rows], (first - 1) / (STEPS - 1), 1.0))
+    hi_t = torch.as_tensor(first / (STEPS - 1))
     for _ in range(BISECT):  # the pad on the surface: gap(lo) > 0 >= gap(hi)
-        mid = (lo_t + hi_t) / 2
-        g = _tip_gaps(robot, obj, head, q_open + mid[..., None] * (q_close - q_open), depth)
-        lo_t, hi_t = torch.where(torch.as_tensor(g > 0), mid, lo_t), torch.where(torch.as_tensor(g > 0), hi_t, mid)
-    t = torch.where(torch.as_tensor(touched), hi_t, torch.ones_like(hi_t))
+        t[:, rows] = (lo_t + hi_t) / 2
+        gap = _tip_gaps(robot, obj, head, q_open + t[..., None] * (q_close - q_open), depth, rows)
+        above = torch.as_tensor(gap > 0)
+        lo_t, hi_t = torch.where(above, t[:, rows], lo_t), torch.where(above, hi_t, t[:, rows])
+    t = torch.ones(B, F, dtype=torch.float64)
+    t[:, rows] = torch.where(torch.as_tensor(touched[:, rows]), hi_t, torch.ones_like(hi_t))
     return q_open + t[..., None] * (q_close - q_open), touched
 
 

@@ -264,7 +264,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
             heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
             q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
-            q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth)
+            q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth, rows)
             names, frames = robot.link_frames_of(None, q_touch, heads)
             angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows,
                                                 touched[:, rows])

@@ -14,7 +14,7 @@ from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import surface_fields
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.candidates import placeholder_problem
-from graspnet_torch.synthesis.closing import closing_lines
+from graspnet_torch.synthesis.closing import close_lines, closing_lines
 
 FINGERS = ("thumb", "index", "middle")
 
@@ -217,6 +217,29 @@ def test_closing_lines_move_each_pad_forward(robot: gt.Robot) -> None:
     step = robot.fingertips_palm(q0 + 0.05 * (q1 - q0)).numpy() - robot.fingertips_palm(q0).numpy()
     cos = np.sum(step * normal, axis=-1) / np.linalg.norm(step, axis=-1)
     assert cos.min() > 0.9
+
+
+def test_closing_only_the_chosen_fingers_closes_them_as_closing_every_finger_does(robot: gt.Robot) -> None:
+    """close_lines on some fingers: those fingers' touching joints and verdicts are those of
+    closing every finger (each finger's pad moves with its own joints only); the others are left
+    closed and not touching. And a touching pad lies on the surface (its sphere's gap under 1 mm)."""
+    obj = cube()
+    lo, hi = robot.finger_limits
+    q0, q1 = closing_lines(robot, lo, hi - lo, np.random.default_rng(0), 64)
+    head = gt.pad_contact_sets(robot, obj, 1, FINGERS, seed=3)[0].posture.palm_pose.expand(64, 6)  # a palm that touches
+    depth = np.array([robot.pads[f].depth for f in robot.fingers])
+    q_all, touched_all = close_lines(robot, obj, head, q0, q1, depth)
+    rows = [0, 2]
+    q_some, touched_some = close_lines(robot, obj, head, q0, q1, depth, rows)
+    assert touched_all[:, rows].any()
+    np.testing.assert_array_equal(q_some[:, rows].numpy(), q_all[:, rows].numpy())
+    np.testing.assert_array_equal(touched_some[:, rows], touched_all[:, rows])
+    others = [i for i in range(len(robot.fingers)) if i not in rows]
+    np.testing.assert_allclose(q_some[:, others].numpy(), q1[:, others].numpy(), atol=1e-12)
+    assert not touched_some[:, others].any()
+    tips = robot.fingertips_world(head, q_all).numpy()[touched_all]
+    gaps = surface_distance(obj, tips) - np.broadcast_to(depth, touched_all.shape)[touched_all]
+    assert np.all(np.abs(gaps) < 1e-3)
 
 
 def test_a_robot_by_name_gives_what_the_built_robot_gives(robot: gt.Robot) -> None:
