@@ -5,6 +5,8 @@ checked. Frames and joint tensors: :mod:`graspnet_torch.robot.robot`."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -121,6 +123,22 @@ class Kinematics:
         self._check_pose(palm_pose)
         R, t = pose_to_rt(palm_pose)
         return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.fingertips_palm(q, shared))
+
+    def some_fingertips_world(self, palm_pose: Tensor, q: Tensor, rows: Sequence[int]) -> Tensor:
+        """The tips of the fingers ``rows`` (their indices) in the world, the shared joints where
+        they are held: :meth:`fingertips_world`'s rows ``rows``, bit for bit, for their share of
+        its forward kinematics (:meth:`FingerKernel.select`).
+
+        palm_pose: (..., 6); q: (..., F, n) -> (..., len(rows), 3).
+        """
+        self._check_pose(palm_pose)
+        self._check_fingers(q)
+        rows = [int(k) for k in rows]
+        c = self._const(q.dtype, q.device)
+        base = self.finger_kernel.select(rows).position(q[..., rows, :])  # (..., k, 3)
+        tips = transform_points(c["base_R"][rows], c["base_t"][rows], base)
+        R, t = pose_to_rt(palm_pose)
+        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), tips)
 
     def world_to_bases(self, points: Tensor, palm_pose: Tensor) -> Tensor:
         """Points in the world, one per finger, -> each in its finger's base frame.

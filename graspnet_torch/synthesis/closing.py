@@ -31,7 +31,7 @@ def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, dep
               rows: list[int]) -> np.ndarray:
     """Signed gaps (m) of the pad spheres of the fingers ``rows`` to the surface: head (..., 6),
     q (..., F, j) -> (..., len(rows))."""
-    tips = robot.fingertips_world(head, q).numpy()[..., rows, :]
+    tips = robot.some_fingertips_world(head, q, rows).numpy()
     return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth[rows]
 
 

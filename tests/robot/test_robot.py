@@ -48,6 +48,18 @@ def test_hand_fingertips_world_match_pytorch_kinematics_tree(hand, gen):
     assert (hand.fingertips_palm(q) - tips_palm).abs().max() < 1e-6
 
 
+@pytest.mark.parametrize("rows", [[0], [0, 2, 3], [4, 1]])
+def test_some_fingertips_are_those_rows_of_every_fingertip_bit_for_bit(hand, gen, rows):
+    n = 257
+    lo, hi = hand.finger_limits
+    q = uniform(lo, hi, n, gen)
+    b = hand.palm_bounds
+    pose = uniform(b.lower, b.upper, n, gen)
+    assert torch.equal(hand.some_fingertips_world(pose, q, rows), hand.fingertips_world(pose, q)[:, rows])
+    with pytest.raises(ValueError, match="finger joints must have shape"):
+        hand.some_fingertips_world(pose, q[:, :2], rows)
+
+
 def test_arm_hand_fingertips_match_pytorch_kinematics_tree(robots, gen):
     robot = robots["arm_hand"]
     n = 300
