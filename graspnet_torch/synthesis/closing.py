@@ -58,8 +58,7 @@ def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tens
         gap = _tip_gaps(robot, obj, head, q_open + t[..., None] * (q_close - q_open), depth, rows)
         above = torch.as_tensor(gap > 0)
         lo_t, hi_t = torch.where(above, t[:, rows], lo_t), torch.where(above, hi_t, t[:, rows])
-    t = torch.ones(B, F, dtype=torch.float64)
-    t[:, rows] = torch.where(torch.as_tensor(touched[:, rows]), hi_t, torch.ones_like(hi_t))
+    t[:, rows] = torch.where(torch.as_tensor(touched[:, rows]), hi_t, torch.ones_like(hi_t))  # the others: 1
     return q_open + t[..., None] * (q_close - q_open), touched
 
 
