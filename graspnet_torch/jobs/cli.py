@@ -25,7 +25,9 @@ import dataclasses
 import functools
 import itertools
 import os
+import signal
 import sys
+import threading
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
@@ -40,6 +42,26 @@ __all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides
 T = TypeVar("T")
 
 _job_started = False  # set once Hydra hands over to the job: errors after that are the job's
+_interrupted = False  # set by Ctrl-C (SIGINT) while run_cli runs: whatever it turned into, the command was stopped
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    """Python's default Ctrl-C (a KeyboardInterrupt), remembered: a library may turn the
+    KeyboardInterrupt into another exception (omegaconf's flag restore in Hydra's composition does)
+    or swallow it (an optional import that catches ImportError), and the command must still stop
+    with its one line."""
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+def _exit_interrupted() -> None:
+    if _job_started:  # what was written is whole (atomic writes)
+        print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
+              file=sys.stderr)
+    else:
+        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
+    sys.exit(130)
 
 
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
@@ -51,6 +73,8 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         global _job_started
+        if _interrupted:  # a Ctrl-C that a library swallowed while Hydra started the run: nothing written yet
+            _exit_interrupted()
         _job_started = True
         try:
             return fn(*args, **kwargs)
@@ -64,9 +88,11 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
             print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
             sys.exit(130)
         except KeyboardInterrupt:  # Ctrl-C anywhere else in a job: what was written is whole (atomic writes)
-            print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
-                  file=sys.stderr)
-            sys.exit(130)
+            _exit_interrupted()
+        except Exception:
+            if _interrupted:  # a Ctrl-C that a library's clean-up turned into another exception
+                _exit_interrupted()
+            raise
 
     return wrapper
 
@@ -299,11 +325,9 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
             output path, memory...), so that a refusal happens before Hydra makes any folder.
     """
     import torch
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
 
-    global _job_started
-    _job_started = False  # a new command (a test may run several in one process)
+    global _job_started, _interrupted
+    _job_started = _interrupted = False  # a new command (a test may run several in one process)
     # the checks run on one thread (a busy machine, docs/solvers.md, "Threads"); every job sets its own count
     torch.set_num_threads(1)
     if argv is None:
@@ -311,6 +335,21 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
         argv = sys.argv[1:]
     else:
         argv = hydra_overrides(argv, schema)
+    if threading.current_thread() is not threading.main_thread():  # only the main thread sets signal handlers
+        _checks_then_main(main, schema, argv, config_name, prepare)
+        return
+    previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        _checks_then_main(main, schema, argv, config_name, prepare)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], config_name: str | None,
+                      prepare: Callable[[dict, str], Any] | None) -> None:
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
     try:
         if os.environ.get("GRASPNET_TORCH_NO_PRECHECK") == "1":  # benchmarks/bench_validation.py only
             raise _SkipChecks
@@ -320,31 +359,37 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
                 prepare(cfg, run_dir)
     except _SkipChecks:
         pass
+    except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
+        _exit_interrupted()
     except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
+        if _interrupted:
+            _exit_interrupted()
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
-    except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
-        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
-        sys.exit(130)
+    except Exception:
+        if _interrupted:
+            _exit_interrupted()
+        raise
+    if _interrupted:  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
+        _exit_interrupted()  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
     try:
         main()
-    except (HydraException, OmegaConfBaseException) as exc:
+    except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start) or closes it
+        _exit_interrupted()
+    except Exception as exc:
+        if _interrupted:  # a Ctrl-C that Hydra's or omegaconf's clean-up turned into another exception
+            _exit_interrupted()
         if _job_started:
             raise
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as exc:  # e.g. a run folder Hydra cannot make
-        if _job_started:
-            raise
-        what = f"{clip(str(exc.filename), 200)}: " if exc.filename else ""
-        print(f"error: {what}{exc.strerror or _one_line(exc)}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start), before the job: nothing written
-        if _job_started:
-            raise
-        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
-        sys.exit(130)
+        if isinstance(exc, (HydraException, OmegaConfBaseException)):
+            print(f"error: {_one_line(exc)}", file=sys.stderr)
+            sys.exit(2)
+        if isinstance(exc, OSError):  # e.g. a run folder Hydra cannot make
+            what = f"{clip(str(exc.filename), 200)}: " if exc.filename else ""
+            print(f"error: {what}{exc.strerror or _one_line(exc)}", file=sys.stderr)
+            sys.exit(2)
+        raise
 
 
 class _SkipChecks(Exception):

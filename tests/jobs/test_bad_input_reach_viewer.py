@@ -18,7 +18,7 @@ import pytest
 
 import graspnet_torch as gt
 from graspnet_torch.io import json_digest
-from graspnet_torch.jobs.cli import check_overrides, compose_for_check, hydra_overrides, run_cli
+from graspnet_torch.jobs.cli import check_overrides, compose_for_check, hydra_overrides, run_cli, user_errors_exit_2
 from graspnet_torch.jobs.configs import (
     InspectRobotsJobCfg,
     ReferencePostureJobCfg,
@@ -245,15 +245,65 @@ def test_ctrl_c_while_hydra_composes_the_run_is_one_line(capsys):
     assert err.startswith("interrupted (Ctrl-C) before the job started"), err
 
 
+def test_a_ctrl_c_that_a_library_turns_into_another_error_is_still_one_line(capsys):
+    """Hydra's composition restores omegaconf flags in a ``finally``; a Ctrl-C landing there came
+    out as an AttributeError with a traceback and exit 1 (a CI run). A real SIGINT is sent here
+    inside such a block: the command still ends with the one interrupted line, exit 130."""
+
+    def composing() -> None:
+        try:
+            signal.raise_signal(signal.SIGINT)
+        finally:
+            raise AttributeError("'NoneType' object has no attribute '_invalidate_flags_cache'")
+
+    with pytest.raises(SystemExit) as exit_info:
+        run_cli(composing, SolveGraspJobCfg, argv=["task=glass3"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 130 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("interrupted (Ctrl-C) before the job started"), err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # pytest's own Ctrl-C is back
+
+
+def test_a_ctrl_c_that_a_library_swallows_before_the_job_still_stops_it(capsys):
+    """pytorch_kinematics imports mujoco in ``try: ... except ImportError: pass``; a Ctrl-C during
+    that import was lost and the solve ran on. The interrupt is remembered: the job never starts."""
+    started = []
+
+    @user_errors_exit_2
+    def job() -> None:
+        started.append(True)
+
+    def composing() -> None:
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:
+            pass  # as an optional import's ``except ImportError`` does to what the Ctrl-C became
+        job()
+
+    with pytest.raises(SystemExit) as exit_info:
+        run_cli(composing, SolveGraspJobCfg, argv=["task=glass3"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 130 and err.startswith("interrupted (Ctrl-C) before the job started"), err
+    assert started == []
+
+
 def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
-    out = tmp_path / "result.json"
+    out, run = tmp_path / "result.json", tmp_path / "run"
     proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), "task=glass3",
                              "trials=200", "max_iterations=100000", "solver.threshold=null", f"out={out}",
-                             f"hydra.run.dir={tmp_path / 'run'}"], text=True, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    time.sleep(6.0)  # settings checked, the search under way (or still starting: either is one line)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+                             f"hydra.run.dir={run}"], text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:  # once Hydra has made the run folder (its imports take seconds on a busy machine), the search starts
+        deadline = time.monotonic() + 120
+        while not run.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 130 and "Traceback" not in err, err[-2000:]
     assert len(err.strip().splitlines()) == 1 and err.startswith("interrupted"), err
     assert not out.exists()
