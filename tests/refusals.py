@@ -4,10 +4,12 @@ stderr naming what and where, no traceback, nothing written (not even Hydra's ru
 - :func:`refused`: the script's own entry point inside the test process (milliseconds).
 - :func:`refused_in_a_fresh_process`: the script as a real command; also quick and small.
 - :func:`check_refusal`: the assertions on an exit code and stderr already in hand.
+- :func:`interrupted_command`: a real command stopped by Ctrl-C once it is under way.
 """
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -17,8 +19,8 @@ from graspnet_torch.paths import repo_root
 from tests.in_process import run_script
 from tests.processes import run_measured
 
-__all__ = ["check_refusal", "refused", "refused_in_a_fresh_process", "run_command", "run_command_measured",
-           "write_problem"]
+__all__ = ["check_refusal", "interrupted_command", "refused", "refused_in_a_fresh_process", "run_command",
+           "run_command_measured", "write_problem"]
 
 
 def run_command(script: str, *args: str, timeout: float = 120) -> tuple[subprocess.CompletedProcess, float]:
@@ -37,6 +39,28 @@ def run_command_measured(tmp_path: Path, script: str, *args: str, timeout: float
     res, peak = run_measured([sys.executable, str(repo_root() / "scripts" / script), *args], tmp_path / "peak.json",
                              capture_output=True, text=True, cwd=repo_root(), timeout=timeout)
     return res, time.perf_counter() - t0, peak
+
+
+def interrupted_command(script: str, *args: str, ready: Path, wait_s: float = 0.2, start_s: float = 120
+                        ) -> subprocess.CompletedProcess:
+    """``python scripts/<script> ARGS`` as a real command from the repository root, sent SIGINT
+    (Ctrl-C) ``wait_s`` after ``ready`` appears (at most ``start_s`` after its start: imports take
+    seconds on a busy machine); its outcome (asserted still running when interrupted)."""
+    proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / script), *args], cwd=repo_root(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + start_s
+        while not ready.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        time.sleep(wait_s)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 def check_refusal(tmp_path: Path, returncode: int, stderr: str, message: str) -> str:

@@ -34,7 +34,7 @@ from graspnet_torch.motion.trajectory import TooManyRows, time_path
 from graspnet_torch.paths import repo_root
 from graspnet_torch.viz.viewer import load_view
 from tests.in_process import run_script
-from tests.refusals import check_refusal, refused
+from tests.refusals import check_refusal, interrupted_command, refused
 
 SCRIPTS = {"solve_grasp": SolveGraspJobCfg, "train_fcnn": TrainFCNNJobCfg, "train_posture": TrainPostureJobCfg,
            "reproduce": ReproduceJobCfg, "reference_posture": ReferencePostureJobCfg,
@@ -289,21 +289,8 @@ def test_a_ctrl_c_that_a_library_swallows_before_the_job_still_stops_it(capsys):
 
 def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
     out, run = tmp_path / "result.json", tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / "solve_grasp.py"), "task=glass3",
-                             "trials=200", "max_iterations=100000", "solver.threshold=null", f"out={out}",
-                             f"hydra.run.dir={run}"], text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    try:  # once Hydra has made the run folder (its imports take seconds on a busy machine), the search starts
-        deadline = time.monotonic() + 120
-        while not run.exists() and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        time.sleep(1.0)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 130 and "Traceback" not in err, err[-2000:]
-    assert len(err.strip().splitlines()) == 1 and err.startswith("interrupted"), err
+    res = interrupted_command("solve_grasp.py", "task=glass3", "trials=200", "max_iterations=100000",
+                              "solver.threshold=null", f"out={out}", f"hydra.run.dir={run}", ready=run, wait_s=1.0)
+    assert res.returncode == 130 and "Traceback" not in res.stderr, res.stderr[-2000:]  # the search under way
+    assert len(res.stderr.strip().splitlines()) == 1 and res.stderr.startswith("interrupted"), res.stderr
     assert not out.exists()

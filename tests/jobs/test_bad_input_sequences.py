@@ -16,10 +16,7 @@ import csv
 import json
 import os
 import re
-import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -29,7 +26,7 @@ import yaml
 from graspnet_torch.jobs.solve_many import load_problems
 from graspnet_torch.paths import repo_root
 from tests.in_process import run_script
-from tests.refusals import refused, refused_in_a_fresh_process
+from tests.refusals import interrupted_command, refused, refused_in_a_fresh_process
 
 # two fingertips a hand reaches (the proposals land them at once: a solve of milliseconds)
 PROBLEM = {"robot": "hand", "contacts": [{"finger": "thumb", "position": [0.07201, -0.00564, 0.105]},
@@ -207,22 +204,9 @@ def _interrupt(tmp_path: Path, script: str, *args: str) -> tuple[subprocess.Comp
     """``script ARGS`` as a real command, sent SIGINT once its training has written a state (it
     checkpoints every step); its outcome and run folder."""
     run = tmp_path / "train"
-    proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / script), *args, "checkpoint_every=1",
-                             "progress=false", "export=false", f"hydra.run.dir={run}"], cwd=repo_root(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 60
-        while not (run / "state.pt").exists() and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        time.sleep(0.2)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err), run
+    res = interrupted_command(script, *args, "checkpoint_every=1", "progress=false", "export=false",
+                              f"hydra.run.dir={run}", ready=run / "state.pt")
+    return res, run
 
 
 def _one_interrupted_line(res: subprocess.CompletedProcess, run: Path) -> str:
