@@ -9,6 +9,7 @@ stderr naming what and where, no traceback, nothing written (not even Hydra's ru
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -41,20 +42,24 @@ def run_command_measured(tmp_path: Path, script: str, *args: str, timeout: float
     return res, time.perf_counter() - t0, peak
 
 
-def interrupted_command(script: str, *args: str, ready: Path, wait_s: float = 0.2, start_s: float = 120
-                        ) -> subprocess.CompletedProcess:
+def interrupted_command(script: str, *args: str, ready: Path, wait_s: float = 0.2, start_s: float = 120,
+                        group: bool = False) -> subprocess.CompletedProcess:
     """``python scripts/<script> ARGS`` as a real command from the repository root, sent SIGINT
     (Ctrl-C) ``wait_s`` after ``ready`` appears (at most ``start_s`` after its start: imports take
-    seconds on a busy machine); its outcome (asserted still running when interrupted)."""
+    seconds on a busy machine); its outcome (asserted still running when interrupted). ``group``:
+    the signal goes to the command's process group, its workers too, as a terminal's Ctrl-C does."""
     proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / script), *args], cwd=repo_root(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=group)
     try:
         deadline = time.monotonic() + start_s
         while not ready.exists() and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.02)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         time.sleep(wait_s)
-        proc.send_signal(signal.SIGINT)
+        if group:
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

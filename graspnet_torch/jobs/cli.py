@@ -55,8 +55,11 @@ def _on_sigint(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
-def _exit_interrupted() -> None:
-    if _job_started:  # what was written is whole (atomic writes)
+def _exit_interrupted(started: bool) -> None:
+    """The one line of a Ctrl-C and exit 130: ``started``, a job may have written files (a sweep's
+    finished jobs too); otherwise nothing was written. (An argument, not the module's flag: a
+    sweep's launcher may copy the job's wrapper into a worker process with its own copy of it.)"""
+    if started:  # what was written is whole (atomic writes)
         print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
               file=sys.stderr)
     else:
@@ -74,7 +77,7 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     def wrapper(*args, **kwargs):
         global _job_started
         if _interrupted:  # a Ctrl-C that a library swallowed while Hydra started the run: nothing written yet
-            _exit_interrupted()
+            _exit_interrupted(False)
         _job_started = True
         try:
             return fn(*args, **kwargs)
@@ -88,10 +91,10 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
             print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
             sys.exit(130)
         except KeyboardInterrupt:  # Ctrl-C anywhere else in a job: what was written is whole (atomic writes)
-            _exit_interrupted()
+            _exit_interrupted(True)
         except Exception:
             if _interrupted:  # a Ctrl-C that a library's clean-up turned into another exception
-                _exit_interrupted()
+                _exit_interrupted(True)
             raise
 
     return wrapper
@@ -360,26 +363,27 @@ def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], c
     except _SkipChecks:
         pass
     except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
-        _exit_interrupted()
+        _exit_interrupted(False)
     except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
         if _interrupted:
-            _exit_interrupted()
+            _exit_interrupted(False)
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
     except Exception:
         if _interrupted:
-            _exit_interrupted()
+            _exit_interrupted(False)
         raise
     if _interrupted:  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
-        _exit_interrupted()  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
+        _exit_interrupted(False)  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
+    sweep = bool({"-m", "--multirun"} & set(argv))  # its jobs may run in other processes, started or not
     try:
         main()
-    except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start) or closes it
-        _exit_interrupted()
+    except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start), runs a sweep, or closes it
+        _exit_interrupted(_job_started or sweep)
     except Exception as exc:
         if _interrupted:  # a Ctrl-C that Hydra's or omegaconf's clean-up turned into another exception
-            _exit_interrupted()
+            _exit_interrupted(_job_started or sweep)
         if _job_started:
             raise
         if isinstance(exc, (HydraException, OmegaConfBaseException)):

@@ -294,3 +294,17 @@ def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
     assert res.returncode == 130 and "Traceback" not in res.stderr, res.stderr[-2000:]  # the search under way
     assert len(res.stderr.strip().splitlines()) == 1 and res.stderr.startswith("interrupted"), res.stderr
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_a_parallel_sweep_says_its_finished_jobs_are_whole(tmp_path):
+    """A terminal's Ctrl-C reaches the sweep and its joblib workers: each says what was written is
+    whole; none says "nothing written" (its jobs had started)."""
+    sweep = tmp_path / "sweep"
+    res = interrupted_command("solve_grasp.py", "-m", "hydra/launcher=joblib", "task=glass3,glass4", "trials=200",
+                              "max_iterations=100000", "solver.threshold=null", f"hydra.sweep.dir={sweep}",
+                              ready=sweep / "1" / ".hydra", wait_s=1.0, group=True)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 130 and "Traceback" not in res.stderr and lines, res.stderr[-2000:]
+    assert all(line == "interrupted (Ctrl-C): files written before it are whole, the one being written is not there"
+               for line in lines), res.stderr[-2000:]
