@@ -25,13 +25,12 @@ import dataclasses
 import functools
 import itertools
 import os
-import signal
 import sys
-import threading
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 from graspnet_torch.errors import ConfigError, GraspnetError, InternalError, Interrupted
+from graspnet_torch.jobs.interrupt import exit_interrupted, interrupted, remembering_interrupts
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import Free, check_value, clip, lookup
 from graspnet_torch.solver.config import RENAMED
@@ -42,31 +41,6 @@ __all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides
 T = TypeVar("T")
 
 _job_started = False  # set once Hydra hands over to the job: errors after that are the job's
-_interrupted = False  # set by Ctrl-C (SIGINT) while run_cli runs: whatever it turned into, the command was stopped
-
-
-def _on_sigint(signum: int, frame: Any) -> None:
-    """Python's default Ctrl-C (a KeyboardInterrupt), remembered: a library may turn the
-    KeyboardInterrupt into another exception (omegaconf's flag restore in Hydra's composition does)
-    or swallow it (an optional import that catches ImportError), and the command must still stop
-    with its one line."""
-    global _interrupted
-    _interrupted = True
-    raise KeyboardInterrupt
-
-
-def _exit_interrupted(started: bool) -> None:
-    """The one line of a Ctrl-C and exit 130: ``started``, a job may have written files (a sweep's
-    finished jobs too); otherwise nothing was written. (An argument, not the module's flag: a
-    sweep's launcher may copy the job's wrapper into a worker process with its own copy of it.)"""
-    if started:  # what was written is whole (atomic writes)
-        print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
-              file=sys.stderr)
-    else:
-        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
-    sys.exit(130)
-
-
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2, an
     :class:`InternalError` prints ``internal error: <message>`` and exits 1, an
@@ -76,11 +50,11 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         global _job_started
-        if _interrupted:  # a Ctrl-C that a library swallowed while Hydra started the run: nothing written yet
-            _exit_interrupted(False)
+        if interrupted():  # a Ctrl-C that a library swallowed while Hydra started the run: nothing written yet
+            exit_interrupted(False)
         _job_started = True
         try:
-            return fn(*args, **kwargs)
+            out = fn(*args, **kwargs)
         except GraspnetError as exc:
             print(f"error: {_one_line(exc)}", file=sys.stderr)
             sys.exit(2)
@@ -91,11 +65,14 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
             print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
             sys.exit(130)
         except KeyboardInterrupt:  # Ctrl-C anywhere else in a job: what was written is whole (atomic writes)
-            _exit_interrupted(True)
+            exit_interrupted(True)
         except Exception:
-            if _interrupted:  # a Ctrl-C that a library's clean-up turned into another exception
-                _exit_interrupted(True)
+            if interrupted():  # a Ctrl-C that a library's clean-up turned into another exception
+                exit_interrupted(True)
             raise
+        if interrupted():  # a Ctrl-C that a library swallowed: the job ran on to its end
+            exit_interrupted(True)
+        return out
 
     return wrapper
 
@@ -329,8 +306,8 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
     """
     import torch
 
-    global _job_started, _interrupted
-    _job_started = _interrupted = False  # a new command (a test may run several in one process)
+    global _job_started
+    _job_started = False  # a new command (a test may run several in one process)
     # the checks run on one thread (a busy machine, docs/solvers.md, "Threads"); every job sets its own count
     torch.set_num_threads(1)
     if argv is None:
@@ -338,14 +315,8 @@ def run_cli(main: Callable[[], None], schema: type, argv: list[str] | None = Non
         argv = sys.argv[1:]
     else:
         argv = hydra_overrides(argv, schema)
-    if threading.current_thread() is not threading.main_thread():  # only the main thread sets signal handlers
+    with remembering_interrupts():  # a Ctrl-C that a library turns into another error or swallows: one line
         _checks_then_main(main, schema, argv, config_name, prepare)
-        return
-    previous = signal.signal(signal.SIGINT, _on_sigint)
-    try:
-        _checks_then_main(main, schema, argv, config_name, prepare)
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], config_name: str | None,
@@ -363,27 +334,27 @@ def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], c
     except _SkipChecks:
         pass
     except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
-        _exit_interrupted(False)
+        exit_interrupted(False)
     except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
-        if _interrupted:
-            _exit_interrupted(False)
+        if interrupted():
+            exit_interrupted(False)
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
     except Exception:
-        if _interrupted:
-            _exit_interrupted(False)
+        if interrupted():
+            exit_interrupted(False)
         raise
-    if _interrupted:  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
-        _exit_interrupted(False)  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
+    if interrupted():  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
+        exit_interrupted(False)  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report
     sweep = bool({"-m", "--multirun"} & set(argv))  # its jobs may run in other processes, started or not
     try:
         main()
     except KeyboardInterrupt:  # Ctrl-C while Hydra composes the run (a slow start), runs a sweep, or closes it
-        _exit_interrupted(_job_started or sweep)
+        exit_interrupted(_job_started or sweep)
     except Exception as exc:
-        if _interrupted:  # a Ctrl-C that Hydra's or omegaconf's clean-up turned into another exception
-            _exit_interrupted(_job_started or sweep)
+        if interrupted():  # a Ctrl-C that Hydra's or omegaconf's clean-up turned into another exception
+            exit_interrupted(_job_started or sweep)
         if _job_started:
             raise
         if isinstance(exc, (HydraException, OmegaConfBaseException)):

@@ -36,6 +36,7 @@ from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.files import read_document
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
+from graspnet_torch.jobs.interrupt import stop_if_interrupted
 from graspnet_torch.jobs.solve_grasp import check_problem, job_settings, prepare_solve, solve_grasp, with_robot_defaults
 from graspnet_torch.jobs.synthesize import prepare_auto, solve_auto_problem
 from graspnet_torch.robot.config import RobotCfg
@@ -231,7 +232,9 @@ def solve_grasps(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path)
                 result.save(out / f"{name}.json")
                 results.append(result)
                 bar.update(1)
+                stop_if_interrupted()  # a Ctrl-C that a library swallowed stops before the next frame
         for start in range(0, len(named) if not job.sequence else 0, job.batch):
+            stop_if_interrupted()  # ... and before the next batch
             chunk = named[start:start + job.batch]
             batch = solve_many([p for _, p in chunk], trials=job.trials, seed=job.seed + start, solver=solver,
                                srv=job.srv, reward=job.reward, noise=job.noise, device=device)

@@ -27,6 +27,7 @@ from graspnet_torch.errors import ConfigError, GraspnetError, ProblemError
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.jobs.configs import MAX_SEED
+from graspnet_torch.jobs.interrupt import stop_if_interrupted
 from graspnet_torch.jobs.solve_grasp import job_settings, resolve_problem, warn_on_failure
 from graspnet_torch.meshes import MESH_FORMATS
 from graspnet_torch.physics import check_until_failure
@@ -256,6 +257,7 @@ def synthesize_objects(job: SynthesizeGraspsJobCfg, robot_cfg: RobotCfg | str, m
     rows = []
     items = progress(meshes, total=len(meshes), desc="objects", unit="object") if job.progress else iter(meshes)
     for path in items:
+        stop_if_interrupted()  # a Ctrl-C that a library swallowed (trimesh's imports) stops before the next object
         result = out / f"{path.stem}.json"
         if result.exists():
             rows.append(_existing_row(path, result))

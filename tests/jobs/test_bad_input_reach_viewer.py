@@ -26,6 +26,7 @@ from graspnet_torch.jobs.configs import (
     TrainFCNNJobCfg,
     TrainPostureJobCfg,
 )
+from graspnet_torch.jobs.interrupt import interrupted, stop_if_interrupted
 from graspnet_torch.jobs.reproduce import ReproduceJobCfg
 from graspnet_torch.jobs.solve_grasp import job_settings
 from graspnet_torch.jobs.synthesize import SynthesizeGraspsJobCfg
@@ -285,6 +286,45 @@ def test_a_ctrl_c_that_a_library_swallows_before_the_job_still_stops_it(capsys):
     err = capsys.readouterr().err
     assert exit_info.value.code == 130 and err.startswith("interrupted (Ctrl-C) before the job started"), err
     assert started == []
+
+
+def test_a_ctrl_c_that_a_library_swallows_in_the_job_stops_it_at_the_next_item(capsys):
+    """trimesh imports its optional packages in ``try: ... except BaseException``; a Ctrl-C there was
+    lost and a synthesis ran on through every object (exit 0). The job's loop now stops at its next
+    item, one line, exit 130; and the next command starts with the interrupt forgotten."""
+    done = []
+
+    @user_errors_exit_2
+    def job() -> None:
+        for item in range(3):
+            stop_if_interrupted()
+            done.append(item)
+            if item == 0:
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                except BaseException:
+                    pass  # as trimesh's optional imports do
+
+    with pytest.raises(SystemExit) as exit_info:
+        run_cli(job, SolveGraspJobCfg, argv=["task=glass3"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 130 and done == [0], (done, err)
+    assert err == "interrupted (Ctrl-C): files written before it are whole, the one being written is not there\n"
+    assert not interrupted()
+    stop_if_interrupted()  # outside a command: nothing to stop
+
+
+def test_a_job_that_ran_on_past_a_swallowed_ctrl_c_still_exits_130(capsys):
+    @user_errors_exit_2
+    def job() -> None:
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:
+            pass
+
+    with pytest.raises(SystemExit) as exit_info:
+        run_cli(job, SolveGraspJobCfg, argv=["task=glass3"])
+    assert exit_info.value.code == 130 and capsys.readouterr().err.startswith("interrupted (Ctrl-C): files written")
 
 
 def test_ctrl_c_in_a_solve_is_one_line_and_leaves_no_result(tmp_path):
