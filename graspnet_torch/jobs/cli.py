@@ -41,6 +41,8 @@ __all__ = ["check_overrides", "compose_for_check", "container", "hydra_overrides
 T = TypeVar("T")
 
 _job_started = False  # set once Hydra hands over to the job: errors after that are the job's
+
+
 def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
     """Run ``fn``; a :class:`GraspnetError` prints ``error: <message>`` on stderr and exits 2, an
     :class:`InternalError` prints ``internal error: <message>`` and exits 1, an
@@ -335,15 +337,13 @@ def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], c
         pass
     except KeyboardInterrupt:  # Ctrl-C while the settings are checked: nothing started, nothing written
         exit_interrupted(False)
-    except (GraspnetError, HydraException, OmegaConfBaseException) as exc:
-        if interrupted():
+    except Exception as exc:
+        if interrupted():  # a Ctrl-C that a library turned into another exception
             exit_interrupted(False)
+        if not isinstance(exc, (GraspnetError, HydraException, OmegaConfBaseException)):
+            raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         sys.exit(2)
-    except Exception:
-        if interrupted():
-            exit_interrupted(False)
-        raise
     if interrupted():  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
         exit_interrupted(False)  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's multi-line report

@@ -32,7 +32,7 @@ __all__ = ["StopRequest", "exit_interrupted", "interrupted", "remembering_interr
 _interrupted = False  # a Ctrl-C reached the command (inside remembering_interrupts)
 
 
-def _on_sigint(signum, frame) -> None:
+def _on_sigint(signum: int, frame: object) -> None:
     global _interrupted
     _interrupted = True
     raise KeyboardInterrupt
