@@ -47,7 +47,7 @@ __all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "piec
 
 VERSION = 8  # of the cached files: bump when the decomposition or its settings change
 COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
-COACD_TIMEOUT_S = 60  # a decomposition that takes longer is given up: tried again with COACD_FAST
+COACD_TIMEOUT_S = 60  # a decomposition that takes longer is given up: tried again (COACD_FAST, then remeshed)
 COACD_FAST = {"mcts_iterations": 50, "mcts_nodes": 10}  # a shallower tree search (measured: a 432-face random
 # object whose default search ran past 600 s, 28 pieces in 3.4 s); where it too fails, the hull stands in
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
@@ -192,9 +192,9 @@ def _decompose(mesh, name: str = "a mesh") -> tuple[list[np.ndarray], bool]:
     tries = [settings, {**settings, **COACD_FAST}]  # too slow (or died): the shallower search
     if mesh.is_watertight:  # closed, yet CoACD cannot cut it as it is (self-intersecting faces): remeshed first
         tries.append({**settings, **COACD_FAST, "preprocess_mode": "on"})
-    parts = None
+    vertices, faces, parts = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), None
     for given in tries:
-        parts = _coacd_apart(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), given)
+        parts = _coacd_apart(vertices, faces, given)
         if parts is not None:
             break
     if parts is None:  # CoACD died on this mesh (it aborts on some): the hull stands in for it
