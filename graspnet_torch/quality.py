@@ -40,8 +40,9 @@ point-contact grasp matrix [I ; [p_i - c]x / L]: independent of m, and at mu = 0
 map's sigma_min (0 for fewer than 6 contacts).
 
 Cost: the edge matrix is one batched torch expression; Q1 is one 6-D scipy ConvexHull (Qhull) per
-set, a Python loop over B, about 2, 3.5 and 5.5 ms a set for k = 3, 4, 5 contacts and 8 edges (24-40 wrenches,
-2-core CPU; measured in tests/test_quality.py's timing test), growing with the hull's facet count.
+set (without pre-merged facets, ``FAST_QHULL``), a Python loop over B, about 1.2, 2.5 and 4.2 ms a set for
+k = 3, 4, 5 contacts and 8 edges (24-40 wrenches, one thread of a 2-core CPU; ``make bench-quality``),
+growing with the hull's facet count.
 """
 
 from __future__ import annotations
@@ -70,6 +71,8 @@ __all__ = [
 
 Array = Any  # a torch tensor or a numpy array
 RANK_RTOL = 1e-9  # a singular value below this fraction of the largest: the wrenches are flat
+FAST_QHULL = "Q0"  # no pre-merged facets: 3.5x faster than Qhull's default (Qx) on 6-D wrench sets; on 447
+# sets a grasp search drew, the same Q1 to 1.4e-15 and 1 precision error (answered by the default instead)
 
 
 def _batch(x: Array, name: str, dims: int) -> tuple[torch.Tensor, bool]:
@@ -180,9 +183,12 @@ def _q1_one(w: np.ndarray, signed: bool) -> float:
     if w.shape[1] < w.shape[0] + 1 or s[-1] <= RANK_RTOL * s[0]:
         return 0.0  # spans < 6 dimensions: the origin is not interior
     try:
-        hull = ConvexHull(w.T)
-    except QhullError:  # affinely flat (a hyperplane missing the origin): the origin is outside
-        return 0.0
+        hull = ConvexHull(w.T, qhull_options=FAST_QHULL)
+    except QhullError:  # what merging facets would have answered: Qhull's default
+        try:
+            hull = ConvexHull(w.T)
+        except QhullError:  # affinely flat (a hyperplane missing the origin): the origin is outside
+            return 0.0
     q = float(np.min(-hull.equations[:, -1]))
     return q if signed else max(q, 0.0)
 
@@ -251,7 +257,7 @@ def grasp_quality(contacts: Array, normals: Array, centre: Array, friction: Arra
     """All the metrics of B contact sets at once (B, k, 3), or of one (k, 3) as floats.
 
     One batched grasp matrix and SVD, then one 6-D ConvexHull per set (a Python loop; about
-    2-5.5 ms a set at k = 3-5 and 8 edges). Arguments as :func:`grasp_matrix`.
+    1-4 ms a set at k = 3-5 and 8 edges). Arguments as :func:`grasp_matrix`.
     """
     E = grasp_matrix(contacts, normals, centre, friction, edges, length, tangents)
     eps = q1(E)

@@ -200,6 +200,26 @@ def test_min_singular_value_is_the_cone_weighted_grasp_matrix_and_free_of_the_ed
         assert grasp_quality(p, n, c, mu, edges=m).min_singular_value == pytest.approx(ref, abs=1e-9)
 
 
+def test_q1_equals_qhulls_default_hull_on_symmetric_and_random_sets():
+    """Q1 is computed on Qhull's hull without pre-merged facets (the faster one); Qhull's default
+    options (merged facets) give the same value, to 1e-12, on symmetric sets (a ring, a tetrahedron,
+    evenly spaced cone edges: coplanar facets) and on 300 random ones, closed or not (signed)."""
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(5)
+    p = rng.normal(size=(300, 3, 3)) * 0.03
+    n = inward(p) + 0.4 * rng.normal(size=p.shape)
+    sets = [(ring(3), inward(ring(3)), 0.5), (ring(4), inward(ring(4)), 0.3), (TETRA, inward(TETRA), 0.5)]
+    sets += [(p[b], n[b], 0.6) for b in range(len(p))]
+    closed = 0
+    for c, nn, mu in sets:
+        E = grasp_matrix(c, nn, np.zeros(3), mu)
+        ref = float(np.min(-ConvexHull(E.T).equations[:, -1]))
+        assert q1(E, signed=True) == pytest.approx(ref, abs=1e-12)
+        closed += ref > 0
+    assert 3 <= closed < len(sets)  # both kinds were compared
+
+
 def test_torch_in_torch_out_batched_equals_one_at_a_time():
     """B sets in torch: (B,) float64 tensors, equal to the sets one at a time in numpy; to_dict lists."""
     sets = np.stack([TETRA, perturbed_tetra(1), perturbed_tetra(2), np.r_[ring(3, 1.0), [[0, 0, 1.0]]]])

@@ -164,19 +164,19 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
 
 
 def _pad_touch(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, names: list[str],
-               frames: np.ndarray, fingers: Sequence[str], rows: list[int], touched: np.ndarray
+               frames: np.ndarray, fingers: Sequence[str], rows: list[int], measure: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where each chosen pad touches: (N, k) its pad normal's angle (degrees) to the inward normal
     at its touch point, inf where it does not touch (the touch point off the surface by more than
     ``TOUCH_M``, e.g. a box's edge; the tip farther than ``TOUCH_M`` from where the surface model
     puts it for that contact, the pad's depth out along the surface normal, as on a mesh's edge
-    whose faces turn away; the tip inside the object; a pad whose closing line touched nothing:
-    ``touched`` (N, k) False, not measured, its normal and point 0), those normals (N, k, 3) and the
+    whose faces turn away; the tip inside the object; a pad not measured, ``measure`` (N, k) False: its
+    closing line touched nothing or cannot make a draft; its normal and point 0), those normals (N, k, 3) and the
     touch points (N, k, 3): head (N, 6), q (N, F, j), the link frames (N, L, 4, 4) of ``names``
     (:func:`~graspnet_torch.collision.surface.touch_points`: exact)."""
     R = frames[:, [names.index(robot.cfg.fingers[f].tip) for f in fingers], :3, :3]  # (N, k, 3, 3)
     t_all = robot.fingertips_world(head, q).numpy()[:, rows].reshape(-1, 3)
-    measured = np.flatnonzero(touched.reshape(-1))
+    measured = np.flatnonzero(measure.reshape(-1))
     t = t_all[measured]
     contacts_at, outward_at, off_by = touch_points(obj, t)
     depth = np.tile([robot.pads[f].depth for f in fingers], len(q))[measured]
@@ -266,14 +266,18 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
             q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth, rows)
             names, frames = robot.link_frames_of(None, q_touch, heads)
-            angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows,
-                                                touched[:, rows])
             k = len(rows)
-            angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
             clear = _clearance(obj, names, frames, line_spheres, F).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
-            good = touched[:, rows].reshape(B, LINES, len(rows)) & (angles <= cone_deg) & clear[:, :, rows]
             q = home.expand(B, -1, -1)  # (B, F, n): the fingers not chosen at home, as the solver holds them
             home_clear = _clearance(obj, *robot.link_frames_of(None, q, head), spheres, F) >= -penetration_m  # (B, F)
+            # the exact touch is measured only where it can make a draft: a clear line that touched, of a
+            # palm pose whose every chosen finger has one and whose other fingers are clear
+            maybe = touched[:, rows].reshape(B, LINES, k) & clear[:, :, rows]
+            maybe &= (maybe.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1))[:, None, None]
+            angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows,
+                                                maybe.reshape(B * LINES, k))
+            angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
+            good = maybe & (angles <= cone_deg)
             # (B, k) each: random good lines
             picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
             if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
