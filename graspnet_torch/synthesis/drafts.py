@@ -48,7 +48,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.robot.transforms import matrix_to_pose_np, pose_to_matrix_np
+from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
@@ -261,23 +261,33 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
                 if not B:
                     yield []
                     continue
-            head = torch.as_tensor(np.stack([matrix_to_pose_np(t) for t in T]))
+            head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))  # (B, 6)
             heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
             q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
             q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth, rows)
-            names, frames = robot.link_frames_of(None, q_touch, heads)
             k = len(rows)
-            clear = _clearance(obj, names, frames, line_spheres, F).reshape(B, LINES, -1) >= -penetration_m  # (B, M, F)
             q = home.expand(B, -1, -1)  # (B, F, n): the fingers not chosen at home, as the solver holds them
-            home_clear = _clearance(obj, *robot.link_frames_of(None, q, head), spheres, F) >= -penetration_m  # (B, F)
-            # the exact touch is measured only where it can make a draft: a clear line that touched, of a
-            # palm pose whose every chosen finger has one and whose other fingers are clear
-            maybe = touched[:, rows].reshape(B, LINES, k) & clear[:, :, rows]
-            maybe &= (maybe.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1))[:, None, None]
-            angles, inward, points = _pad_touch(robot, obj, heads, q_touch, names, frames, fingers, rows,
-                                                maybe.reshape(B * LINES, k))
+            hit = touched[:, rows].reshape(B, LINES, k)
+            # only a palm pose whose every chosen finger touched on some line can make a draft: the others'
+            # lines are not measured further (their clearance, their exact touch)
+            v = np.flatnonzero(hit.any(axis=1).all(axis=1))
+            sel = torch.as_tensor((v[:, None] * LINES + np.arange(LINES)).reshape(-1))
+            clear, home_clear = np.zeros((B, LINES, F), dtype=bool), np.zeros((B, F), dtype=bool)
+            angles = np.full((B * LINES, k), np.inf)
+            inward, points = np.zeros((B * LINES, k, 3)), np.zeros((B * LINES, k, 3))
+            if len(v):
+                names, frames = robot.link_frames_of(None, q_touch[sel], heads[sel])
+                clear[v] = (_clearance(obj, names, frames, line_spheres, F) >= -penetration_m).reshape(len(v), LINES, F)
+                at_home = robot.link_frames_of(None, q[v], head[v])
+                home_clear[v] = _clearance(obj, *at_home, spheres, F) >= -penetration_m
+                # the exact touch is measured only where it can make a draft: a clear line that touched, of a
+                # palm pose whose every chosen finger has one and whose other fingers are clear
+                maybe = hit & clear[:, :, rows]
+                maybe &= (maybe.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1))[:, None, None]
+                angles[sel], inward[sel], points[sel] = _pad_touch(robot, obj, heads[sel], q_touch[sel], names, frames,
+                                                                   fingers, rows, maybe.reshape(B * LINES, k)[sel])
             angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
-            good = maybe & (angles <= cone_deg)
+            good = touched[:, rows].reshape(B, LINES, k) & clear[:, :, rows] & (angles <= cone_deg)
             # (B, k) each: random good lines
             picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
             if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
