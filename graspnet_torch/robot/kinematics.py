@@ -132,13 +132,17 @@ class Kinematics:
         palm_pose: (..., 6); q: (..., F, n) -> (..., len(rows), 3).
         """
         self._check_pose(palm_pose)
+        R, t = pose_to_rt(palm_pose)
+        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), self.some_fingertips_palm(q, rows))
+
+    def some_fingertips_palm(self, q: Tensor, rows: Sequence[int]) -> Tensor:
+        """The tips of the fingers ``rows`` in the palm frame, the shared joints where they are held
+        (:meth:`some_fingertips_world` before the palm's pose). q: (..., F, n) -> (..., len(rows), 3)."""
         self._check_fingers(q)
         rows = [int(k) for k in rows]
         c = self._const(q.dtype, q.device)
         base = self.finger_kernel.select(rows).position(q[..., rows, :])  # (..., k, 3)
-        tips = transform_points(c["base_R"][rows], c["base_t"][rows], base)
-        R, t = pose_to_rt(palm_pose)
-        return transform_points(R.unsqueeze(-3), t.unsqueeze(-2), tips)
+        return transform_points(c["base_R"][rows], c["base_t"][rows], base)
 
     def world_to_bases(self, points: Tensor, palm_pose: Tensor) -> Tensor:
         """Points in the world, one per finger, -> each in its finger's base frame.

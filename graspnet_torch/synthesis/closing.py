@@ -14,6 +14,7 @@ import torch
 from graspnet_torch.collision.surface import surface_distance_near
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_rt
 
 __all__ = ["BISECT", "CLOSE", "FORWARD", "HOLD", "OPEN", "STEPS", "close_lines", "closing_lines", "pad_forward",
            "tip_jacobians"]
@@ -24,14 +25,15 @@ OPEN = (0.0, 0.3)  # a finger's open posture: this fraction of each joint's rang
 CLOSE = (0.45, 1.0)  # its closed posture
 FORWARD = 0.3  # a joint turns a pad "forward" when its tip motion's cosine to the pad normal is at least this
 HOLD = (0.35, 0.65)  # a joint that turns its pad sideways: held at this fraction of its range
-STEP_RAD = 1e-6  # the finite-difference step of the tip Jacobian
 
 
-def _tip_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, depth: np.ndarray,
+def _tip_gaps(robot: Robot, obj: Shape, R: torch.Tensor, t: torch.Tensor, q: torch.Tensor, depth: np.ndarray,
               rows: list[int]) -> np.ndarray:
-    """Signed gaps (m) of the pad spheres of the fingers ``rows`` to the surface: head (..., 6),
-    q (..., F, j) -> (..., len(rows))."""
-    tips = robot.some_fingertips_world(head, q, rows).numpy()
+    """Signed gaps (m) of the pad spheres of the fingers ``rows`` to the surface: the palm's pose
+    R (..., 3, 3), t (..., 3) (:func:`pose_to_rt`), q (..., F, j) -> (..., len(rows))."""
+    palm = robot.some_fingertips_palm(q, rows)
+    # R @ p + t as an einsum: the same values as transform_points' matmul, which would copy R for every tip
+    tips = (torch.einsum("...ij,...j->...i", R.unsqueeze(-3), palm) + t.unsqueeze(-2)).numpy()
     return surface_distance_near(obj, tips.reshape(-1, 3)).reshape(tips.shape[:-1]) - depth[rows]
 
 
@@ -45,7 +47,8 @@ def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tens
     rows = list(range(F)) if rows is None else list(rows)
     ts = torch.linspace(0, 1, STEPS, dtype=torch.float64)
     line = q_open[:, None] + ts[None, :, None, None] * (q_close - q_open)[:, None]  # (B, S, F, j)
-    gaps = _tip_gaps(robot, obj, head[:, None].expand(B, STEPS, 6), line, depth, rows)  # (B, S, k)
+    R, at = pose_to_rt(head)  # the palm's pose, once per line
+    gaps = _tip_gaps(robot, obj, R[:, None], at[:, None], line, depth, rows)  # (B, S, k)
     inside = gaps <= 0
     touched = np.zeros((B, F), dtype=bool)
     touched[:, rows] = inside.any(axis=1) & ~inside[:, 0]
@@ -55,7 +58,7 @@ def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tens
     hi_t = torch.as_tensor(first / (STEPS - 1))
     for _ in range(BISECT):  # the pad on the surface: gap(lo) > 0 >= gap(hi)
         t[:, rows] = (lo_t + hi_t) / 2
-        gap = _tip_gaps(robot, obj, head, q_open + t[..., None] * (q_close - q_open), depth, rows)
+        gap = _tip_gaps(robot, obj, R, at, q_open + t[..., None] * (q_close - q_open), depth, rows)
         above = torch.as_tensor(gap > 0)
         lo_t, hi_t = torch.where(above, t[:, rows], lo_t), torch.where(above, hi_t, t[:, rows])
     t[:, rows] = torch.where(torch.as_tensor(touched[:, rows]), hi_t, torch.ones_like(hi_t))  # the others: 1
@@ -64,7 +67,7 @@ def close_lines(robot: Robot, obj: Shape, head: torch.Tensor, q_open: torch.Tens
 
 def pad_forward(robot: Robot, q: np.ndarray) -> np.ndarray:
     """(N, F, n) how much each joint's increase moves its finger's pad sphere forward, along the
-    pad normal: the tip's (finite-difference) Jacobian column dotted with the tip-frame pad normal,
+    pad normal: the tip's Jacobian column (:func:`tip_jacobians`) dotted with the tip-frame pad normal,
     over the column's length (a cosine; 0 for padding or a joint that does not move the tip); palm
     frame, q (N, F, n). A finger without a pad: normal +y of its tip frame."""
     N = q.shape[0]
@@ -78,14 +81,12 @@ def pad_forward(robot: Robot, q: np.ndarray) -> np.ndarray:
 
 
 def tip_jacobians(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """(N, F, 3, n) every finger's tip Jacobian in the palm frame at joints q (N, F, n), by finite
-    differences (step ``STEP_RAD``) of :meth:`Robot.fingertips_palm`."""
-    n = q.shape[-1]
-    shifted = np.repeat(q[None], n + 1, axis=0)  # (n + 1, N, F, n): q, then each joint nudged
-    for j in range(n):
-        shifted[j + 1, ..., j] += STEP_RAD
-    tips = robot.fingertips_palm(torch.as_tensor(shifted)).numpy()  # (n + 1, N, F, 3)
-    return np.moveaxis(tips[1:] - tips[0], 0, -1) / STEP_RAD
+    """(N, F, 3, n) every finger's tip Jacobian in the palm frame at joints q (N, F, n): the finger
+    kernel's analytic one (:meth:`Robot.fingertips_base_jacobian`, each finger's base frame) turned
+    into the palm frame (each column as the move of a point, :meth:`Robot.base_to_palm`)."""
+    p, J = robot.fingertips_base_jacobian(torch.as_tensor(q))  # (N, F, 3), (N, F, 3, n)
+    at = robot.base_to_palm(p)
+    return torch.stack([robot.base_to_palm(p + J[..., j]) - at for j in range(J.shape[-1])], dim=-1).numpy()
 
 
 def closing_lines(robot: Robot, lo: np.ndarray, span: np.ndarray, rng: np.random.Generator, N: int

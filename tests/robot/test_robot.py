@@ -56,6 +56,7 @@ def test_some_fingertips_are_those_rows_of_every_fingertip_bit_for_bit(hand, gen
     b = hand.palm_bounds
     pose = uniform(b.lower, b.upper, n, gen)
     assert torch.equal(hand.some_fingertips_world(pose, q, rows), hand.fingertips_world(pose, q)[:, rows])
+    assert torch.equal(hand.some_fingertips_palm(q, rows), hand.fingertips_palm(q)[:, rows])
     with pytest.raises(ValueError, match="finger joints must have shape"):
         hand.some_fingertips_world(pose, q[:, :2], rows)
 
