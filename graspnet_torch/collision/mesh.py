@@ -42,17 +42,33 @@ MAX_POINTS = 1500
 def shape_points(kind: str, size: tuple[float, ...], mesh=None) -> np.ndarray:
     """(N, 3) points spread over a shape's surface (at most ``SPACING`` apart, at most
     ``MAX_POINTS``), its vertices included, in the shape's own frame: a box (full extents), a
-    cylinder (radius, length along z), a sphere (radius,) or a mesh (a ``trimesh.Trimesh``)."""
+    cylinder (radius, length along z), a sphere (radius,) or a mesh (a ``trimesh.Trimesh``).
+    A primitive's are made once per kind and size (cached, read-only): every collision scene of a
+    robot asks for its links' points again."""
+    if kind in ("box", "cylinder", "sphere"):
+        return _primitive_points(kind, tuple(float(x) for x in size))
+    return _surface_points(mesh)
+
+
+@lru_cache(maxsize=256)
+def _primitive_points(kind: str, size: tuple[float, ...]) -> np.ndarray:
     import trimesh
 
     if kind == "box":
         surface = trimesh.creation.box(extents=size)
     elif kind == "cylinder":
         surface = trimesh.creation.cylinder(radius=size[0], height=size[1], sections=32)
-    elif kind == "sphere":
-        surface = trimesh.creation.icosphere(subdivisions=2, radius=size[0])
     else:
-        surface = mesh
+        surface = trimesh.creation.icosphere(subdivisions=2, radius=size[0])
+    points = _surface_points(surface)
+    points.flags.writeable = False
+    return points
+
+
+def _surface_points(surface) -> np.ndarray:
+    """(N, 3) :func:`shape_points` of a ``trimesh.Trimesh``: its vertices, then an even sample."""
+    import trimesh
+
     count = min(MAX_POINTS, max(64, math.ceil(surface.area / SPACING**2)))
     samples, _ = trimesh.sample.sample_surface_even(surface, count, seed=0)
     return np.concatenate([np.asarray(surface.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
