@@ -251,3 +251,25 @@ def test_a_closed_mesh_the_decomposition_aborts_on_is_remeshed_and_cut():
     far_out = ~MeshQuery(mesh).inside(points) & (point_triangle_distance(points, np.asarray(mesh.triangles)).min(1)
                                                    > 1.5e-3)
     assert far_out.sum() > 1000 and np.mean(distance(points[far_out]) > 0) > 0.95
+
+
+def test_a_primitive_links_depth_points_lie_on_its_surface_and_are_shared_read_only():
+    """shape_points of a box, a cylinder and a sphere: every point on the shape's surface (an
+    independent test of each solid), spread at most about SPACING apart over it; asked twice, the
+    same array, which no caller can change (it is shared by every collision scene)."""
+    from graspnet_torch.collision.mesh import SPACING, shape_points
+
+    cases = {("box", (0.02, 0.03, 0.04)): lambda p: np.abs(np.abs(p) - [0.01, 0.015, 0.02]).min(1),
+             ("cylinder", (0.01, 0.04)): lambda p: np.minimum(np.abs(np.hypot(p[:, 0], p[:, 1]) - 0.01),
+                                                              np.abs(np.abs(p[:, 2]) - 0.02)),
+             ("sphere", (0.015,)): lambda p: np.abs(np.linalg.norm(p, axis=1) - 0.015)}
+    for (kind, size), off in cases.items():
+        p = shape_points(kind, size)
+        assert off(p).max() < 5e-4, kind  # the cylinder's and sphere's facets lie within 0.3 mm of the solid
+        assert shape_points(kind, list(size)) is p
+        with pytest.raises(ValueError):
+            p[0, 0] = 1.0
+        assert len(p) >= 64
+    box = shape_points("box", (0.02, 0.03, 0.04))
+    area = 2 * (0.02 * 0.03 + 0.02 * 0.04 + 0.03 * 0.04)
+    assert len(box) >= area / SPACING**2
