@@ -271,7 +271,8 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             # only a palm pose whose every chosen finger touched on some line can make a draft: the others'
             # lines are not measured further (their clearance, their exact touch)
             v = np.flatnonzero(hit.any(axis=1).all(axis=1))
-            sel = torch.as_tensor((v[:, None] * LINES + np.arange(LINES)).reshape(-1))
+            lines = (v[:, None] * LINES + np.arange(LINES)).reshape(-1)  # their lines' rows
+            sel = torch.as_tensor(lines)
             clear, home_clear = np.zeros((B, LINES, F), dtype=bool), np.zeros((B, F), dtype=bool)
             angles = np.full((B * LINES, k), np.inf)
             inward, points = np.zeros((B * LINES, k, 3)), np.zeros((B * LINES, k, 3))
@@ -284,10 +285,11 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
                 # palm pose whose every chosen finger has one and whose other fingers are clear
                 maybe = hit & clear[:, :, rows]
                 maybe &= (maybe.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1))[:, None, None]
-                angles[sel], inward[sel], points[sel] = _pad_touch(robot, obj, heads[sel], q_touch[sel], names, frames,
-                                                                   fingers, rows, maybe.reshape(B * LINES, k)[sel])
+                angles[lines], inward[lines], points[lines] = _pad_touch(robot, obj, heads[sel], q_touch[sel], names,
+                                                                         frames, fingers, rows,
+                                                                         maybe.reshape(B * LINES, k)[lines])
             angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
-            good = touched[:, rows].reshape(B, LINES, k) & clear[:, :, rows] & (angles <= cone_deg)
+            good = hit & clear[:, :, rows] & (angles <= cone_deg)
             # (B, k) each: random good lines
             picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
             if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
