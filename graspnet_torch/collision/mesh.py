@@ -28,7 +28,7 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.meshes import load_mesh, mesh_path
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "lattice_points", "mesh_query",
+__all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "closest_points_rows", "lattice_points", "mesh_query",
            "point_triangle_distance", "shape_points"]
 
 SPACING = 0.002  # m between the points that measure a link's depth
@@ -117,6 +117,15 @@ def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -
     for start in range(0, len(out), PAIRS):
         out[start:start + PAIRS] = _closest(*(np.ascontiguousarray(v[start:start + PAIRS].T) for v in flat))
     return out.reshape(p.shape)
+
+
+def closest_points_rows(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """:func:`closest_points` of points and triangles given as coordinate rows, (3, N) each, float64
+    (a caller that has its pairs in rows saves the transposed copies) -> (N, 3); the same values."""
+    out = np.empty((p.shape[1], 3))
+    for start in range(0, len(out), PAIRS):
+        out[start:start + PAIRS] = _closest(*(v[:, start:start + PAIRS] for v in (p, a, b, c)))
+    return out
 
 
 def _closest(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

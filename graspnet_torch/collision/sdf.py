@@ -28,7 +28,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 from scipy.spatial import HalfspaceIntersection, QhullError
 
-from graspnet_torch.collision.mesh import MeshQuery, closest_points, mesh_query
+from graspnet_torch.collision.mesh import MeshQuery, closest_points_rows, mesh_query
 from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.shape import Shape
 
@@ -38,7 +38,7 @@ CELL_M = 1.5e-3  # m between grid points
 BAND_M = 3e-3  # m: grid points this near the surface hold the exact distance (>= CELL_M sqrt(3))
 MARGIN_M = 0.02  # m of grid around the mesh's bounding box
 MAX_CELLS = 1 << 24  # grid points at most (float64: 134 MB); a larger mesh's cells grow
-PAIRS = 1 << 21  # (grid point, triangle) pairs measured at once
+PAIRS = 1 << 15  # (grid point, triangle) pairs measured at once (the arrays stay in the cache)
 JITTER_M = 1.234567e-7  # m: the inside test's grid columns are moved this far in x and y
 PIECE_PAD_M = 1e-9  # m: a convex piece's box, grown by this, holds every point its planes call inside
 
@@ -64,19 +64,21 @@ class DistanceGrid:
         top = np.asarray(shape) - 1
         u = (p - self.origin) / self.cell
         inside = np.clip(u, 0.0, top)
-        off = np.linalg.norm(u - inside, axis=1) * self.cell
+        outside = u - inside
         i = np.minimum(inside.astype(np.intp), top - 1)  # the cell's first corner (inside >= 0: the floor)
-        f = inside - i
+        fx, fy, fz = (inside - i).T
         sx, sy = shape[1] * shape[2], shape[2]  # the flat grid's strides along x and y (z: 1)
-        base = i @ np.array([sx, sy, 1])
-        v = self.values.reshape(-1)
-        fx, fy, fz = f.T
+        corners = self.values.reshape(-1)[(i @ np.array([sx, sy, 1]))[:, None] + np.array(
+            [0, sx, 1, sx + 1, sy, sx + sy, sy + 1, sx + sy + 1])]  # (k, 8): one gather
         gx, gy, gz = 1 - fx, 1 - fy, 1 - fz
-        c00 = v[base] * gx + v[base + sx] * fx
-        c01 = v[base + 1] * gx + v[base + sx + 1] * fx
-        c10 = v[base + sy] * gx + v[base + sx + sy] * fx
-        c11 = v[base + sy + 1] * gx + v[base + sx + sy + 1] * fx
-        return (c00 * gy + c10 * fy) * gz + (c01 * gy + c11 * fy) * fz + off
+        c00 = corners[:, 0] * gx + corners[:, 1] * fx
+        c01 = corners[:, 2] * gx + corners[:, 3] * fx
+        c10 = corners[:, 4] * gx + corners[:, 5] * fx
+        c11 = corners[:, 6] * gx + corners[:, 7] * fx
+        d = (c00 * gy + c10 * fy) * gz + (c01 * gy + c11 * fy) * fz
+        if outside.any():  # beyond the grid: plus the distance to it
+            d = d + np.linalg.norm(outside, axis=1) * self.cell
+        return d
 
 def distance_grid(obj: Shape) -> DistanceGrid:
     """A mesh object's :class:`DistanceGrid` (its mesh at its scale, object frame; cached per file
@@ -159,22 +161,24 @@ def _inside_pieces(query: MeshQuery, axes: list[np.ndarray]) -> np.ndarray:
 
 def _band(triangles: np.ndarray, origin: np.ndarray, shape: np.ndarray, cell: float, band: float) -> np.ndarray:
     """(prod(shape),) each grid point's (``cell`` apart) least distance to the triangles (M, 3, 3)
-    whose boxes grown by ``band`` hold it (inf where none does): exact below ``band``."""
+    whose boxes grown by ``band`` hold it (inf where none does): exact below ``band``. The (grid
+    point, triangle) pairs are laid out in coordinate rows, each a contiguous array."""
     lo = np.clip(np.floor((triangles.min(1) - band - origin) / cell).astype(int), 0, shape - 1)
     hi = np.clip(np.ceil((triangles.max(1) + band - origin) / cell).astype(int), 0, shape - 1)
     ext = hi - lo + 1  # (M, 3) grid points per axis in each grown box
     count = ext.prod(1)
+    corners = np.ascontiguousarray(triangles.transpose(1, 2, 0))  # (vertex, coordinate, M)
     out = np.full(int(shape.prod()), np.inf)
     start = 0
     while start < len(triangles):
         stop = start + max(1, int(np.searchsorted(np.cumsum(count[start:]), PAIRS)))
         t = np.repeat(np.arange(start, stop), count[start:stop])
         k = np.arange(len(t)) - np.repeat(np.cumsum(count[start:stop]) - count[start:stop], count[start:stop])
-        e = ext[t]
-        idx = lo[t] + np.stack([k // (e[:, 1] * e[:, 2]), k // e[:, 2] % e[:, 1], k % e[:, 2]], axis=1)
-        p = origin + idx * cell
-        tri = triangles[t]
-        d = np.linalg.norm(p - closest_points(p, tri[:, 0], tri[:, 1], tri[:, 2]), axis=1)
-        np.minimum.at(out, np.ravel_multi_index(tuple(idx.T), tuple(shape)), d)
+        ny, nz = ext[t, 1], ext[t, 2]
+        i = lo[t, 0] + k // (ny * nz), lo[t, 1] + k // nz % ny, lo[t, 2] + k % nz  # each pair's grid point
+        p = np.stack([origin[d] + i[d] * cell for d in range(3)])  # (3, N)
+        near = closest_points_rows(p, *(corners[v][:, t] for v in range(3)))
+        d = np.linalg.norm(p.T - near, axis=1)
+        np.minimum.at(out, (i[0] * shape[1] + i[1]) * shape[2] + i[2], d)
         start = stop
     return out

@@ -171,8 +171,9 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     them as collisions (the physics check leaves them out, as DexGraspBench's has no table).
 
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
-    ``solve_s``, ``physics_s``; ``first_s``: to the first grasp that holds every push, None if
-    none), ``solved``, ``succeeded`` and ``held``.
+    ``solve_s``, ``physics_s``; ``held_physics_s``: the part of ``physics_s`` spent on the checks
+    that held every push; ``first_s``: to the first grasp that holds every push, None if none),
+    ``solved``, ``succeeded`` and ``held``.
     """
     if n_grasps < 1 or candidates < 1:
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
@@ -189,7 +190,7 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
         settings = dict(solver or {})
         run = functools.partial(_pairs, obstacles=tuple(obstacles))
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
-               "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
+               "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
     if physics is not None:
         grasps.sort(key=lambda g: -(g.holds or 0))  # stable: rank order within a count
@@ -227,9 +228,11 @@ def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None
         return
     t1 = time.perf_counter()
     g.physics = physics(g.problem, g.result, robot=robot)
-    t["physics_s"] += time.perf_counter() - t1
+    spent = time.perf_counter() - t1
+    t["physics_s"] += spent
     if g.holds == g.physics.of:
         t["held"] += 1
+        t["held_physics_s"] += spent
         if t["first_s"] is None:
             t["first_s"] = time.perf_counter() - t["t0"]
 

@@ -94,3 +94,23 @@ def test_an_open_meshs_grid_takes_its_sign_from_the_meshs_own_inside_test(tmp_pa
     sides &= points[:, 2] < half[2] - BAND_M  # away from the missing top
     exact = np.abs(_box_distance(points[sides], half))
     np.testing.assert_allclose(np.abs(grid.values.ravel()[sides]), exact, atol=1e-8)
+
+
+def test_a_point_beyond_the_grid_reads_its_nearest_grid_point_plus_the_way_there(tmp_path):
+    """Beyond the grid (20 mm around the mesh's box) a distance is the value at the nearest grid
+    point plus the distance to it: an upper bound of the exact one, never below it; a point within
+    the grid reads the same value alone as in a batch that has points beyond it."""
+    half = np.array([0.02, 0.03, 0.015])
+    grid = distance_grid(_box(tmp_path, 2 * half))
+    rng = np.random.default_rng(2)
+    far = rng.normal(size=(200, 3))
+    far *= (0.1 / np.linalg.norm(far, axis=1))[:, None]  # 10 cm from the centre: beyond the grid
+    top = grid.origin + grid.cell * (np.array(grid.values.shape) - 1)
+    assert np.any((far < grid.origin) | (far > top), axis=1).all()
+    exact = _box_distance(far, half)
+    beyond = grid(far)
+    assert np.all(beyond >= exact - 1e-8) and np.all(beyond <= exact + 0.02)
+    clamped = np.clip(far, grid.origin, top)
+    np.testing.assert_allclose(beyond, grid(clamped) + np.linalg.norm(far - clamped, axis=1), atol=1e-12)
+    near = rng.uniform(-1.2, 1.2, (50, 3)) * half
+    np.testing.assert_array_equal(grid(np.concatenate([near, far]))[:50], grid(near))

@@ -52,9 +52,9 @@ def test_a_bad_setting_is_refused_with_one_line(data, key):
 
 def test_summary_of_rows_by_hand():
     rows = [{"holds": [6, 3], "epsilon": [0.1, 0.2], "wall": 2.0, "first_s": 1.0, "depth_mm": [0.1, 0.4],
-             "stats": {"physics_s": 1.0}},
+             "stats": {"physics_s": 1.0, "held": 1, "held_physics_s": 0.5}},
             {"holds": [2, 6, 6], "epsilon": [0.3], "wall": 3.0, "first_s": 2.5, "depth_mm": [0.0],
-             "stats": {"physics_s": 1.5}},
+             "stats": {"physics_s": 1.5, "held": 2, "held_physics_s": 1.0}},
             {"holds": [], "epsilon": [], "wall": 5.0, "first_s": math.inf, "depth_mm": [], "stats": {"physics_s": 2.5}}]
     s = summarize(rows)
     assert s["top-1 holds %"] == pytest.approx(100 / 3) and s["any holds %"] == pytest.approx(200 / 3)
@@ -63,6 +63,9 @@ def test_summary_of_rows_by_hand():
     # half the busy time in physics: 3 verified over half of the 10 s wall
     assert s["physics %"] == pytest.approx(50) and s["physics-bound per s"] == pytest.approx(0.6)
     assert summarize(rows, wall=5.0)["physics-bound per s"] == pytest.approx(1.2)  # two processes
+    # every check one that holds: the 3 holding checks over their 1.5 s of the 10 s busy time
+    assert s["holding-bound per s"] == pytest.approx(2.0)
+    assert summarize(rows, wall=5.0)["holding-bound per s"] == pytest.approx(4.0)
 
 
 @pytest.mark.slow

@@ -120,6 +120,8 @@ def test_physics_reports(robot: gt.Robot) -> None:
     grasps = baseline_grasps(robot, cube(), n_grasps=5, candidates=32, seed=0, physics=gt.simulate_grasp,
                              stats=stats)
     assert grasps and stats["checked"] == stats["clean"]
+    assert sum(g.holds == 6 for g in grasps) <= stats["held"] <= stats["checked"]
+    assert 0 <= stats["held_physics_s"] <= stats["physics_s"] and (stats["held_physics_s"] > 0) == (stats["held"] > 0)
     for g in grasps:
         assert set(g.physics.directions) == set(DIRECTIONS) and 0 <= g.holds <= 6
     ranks = [(len(g.touching), g.holds) for g in grasps]

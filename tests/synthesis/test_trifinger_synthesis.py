@@ -41,6 +41,7 @@ def test_trifinger_grasps_an_object_that_holds_and_checks_again(blob):
                                   physics=lambda p, r, robot: gt.simulate_grasp(p, r, robot=robot), stats=stats)
     held = [g for g in grasps if g.holds == 6]
     assert held and stats["held"] >= 1
+    assert 0 < stats["held_physics_s"] <= stats["physics_s"]  # the holding checks' part of the physics time
     for g in held:
         posture = trial_posture(robot, g.result.best)
         fields = surface_fields(robot, g.problem, [posture])[0]
