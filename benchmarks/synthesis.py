@@ -14,8 +14,10 @@ top ``--grasps`` reported (a grasp dataset: ``--grasps 32 --candidates 128``), o
 6/6 pushes (``gt.check_until_failure``: pushed until one fails); grasps/s: the reported grasps that
 hold over the wall time of the whole set; first: from the call's start to the first check that
 holds 6/6 (never on an object with none); physics % of time: the objects' time spent in the
-checks; physics alone: the rate were sampling and solving free. Targets (``--check``): at least
-10 verified grasps/s, median first at most 2 s.
+checks; physics alone: the rate were sampling and solving free; holding checks alone: the rate were
+every check one that holds (the checks holding 6/6 over their share of the wall time: the pinned
+protocol's own ceiling on the machine, whatever the search). Targets (``--check``): at least 10
+verified grasps/s, median first at most 2 s.
 """
 
 from __future__ import annotations
@@ -37,19 +39,23 @@ RATE, FIRST_S = 10.0, 2.0
 FINGERS = ("thumb", "index", "middle")
 
 
-def one(k: int, obj: gt.Shape, method: str, grasps: int, candidates: int) -> tuple[int, float, float, float]:
+def one(k: int, obj: gt.Shape, method: str, grasps: int, candidates: int
+        ) -> tuple[int, float, float, float, int, float]:
     """Object k (synthesized with seed 2026 + k) by ``method``: (reported grasps holding 6/6, wall s,
-    s to the first that holds, s in the physics checks)."""
+    s to the first that holds, s in the physics checks, checks holding 6/6, s in those)."""
     torch.set_num_threads(1)
     robot = gt.load_robot("hand")
-    t0, first, spent = time.perf_counter(), [math.inf], [0.0]
+    t0, first, spent, holding = time.perf_counter(), [math.inf], [0.0], [0, 0.0]
 
     def physics(problem, result, robot):
         t1 = time.perf_counter()
         report = gt.check_until_failure(problem, result, robot=robot)
-        spent[0] += time.perf_counter() - t1
-        if report.held_all and math.isinf(first[0]):
-            first[0] = time.perf_counter() - t0
+        dt = time.perf_counter() - t1
+        spent[0] += dt
+        if report.held_all:
+            holding[0], holding[1] = holding[0] + 1, holding[1] + dt
+            if math.isinf(first[0]):
+                first[0] = time.perf_counter() - t0
         return report
 
     if method == "synthesis":
@@ -57,7 +63,7 @@ def one(k: int, obj: gt.Shape, method: str, grasps: int, candidates: int) -> tup
                                      seed=2026 + k, physics=physics)
     else:
         found = gt.baseline_grasps(robot, obj, n_grasps=grasps, candidates=candidates, seed=2026 + k, physics=physics)
-    return sum(g.holds == 6 for g in found), time.perf_counter() - t0, first[0], spent[0]
+    return sum(g.holds == 6 for g in found), time.perf_counter() - t0, first[0], spent[0], holding[0], holding[1]
 
 
 def main() -> int:
@@ -78,22 +84,27 @@ def main() -> int:
                                          for k, obj in enumerate(objs))
         wall = time.perf_counter() - t0
         held = sum(o[0] for o in out)
-        share = sum(o[3] for o in out) / sum(o[1] for o in out)  # of the objects' time, in physics
-        rows[method] = (held / wall, float(np.median([o[2] for o in out])), held, wall, share)
+        busy = sum(o[1] for o in out)
+        share = sum(o[3] for o in out) / busy  # of the objects' time, in physics
+        holding = sum(o[5] for o in out) / busy  # ... in the checks that held 6/6
+        ceiling = sum(o[4] for o in out) / (holding * wall) if holding > 0 else math.inf
+        rows[method] = (held / wall, float(np.median([o[2] for o in out])), held, wall, share, ceiling)
     print("\n| method | objects | verified grasps | wall s | verified grasps/s | median s to first verified "
-          "| physics % of time | verified grasps/s, physics alone |")
-    print("|---|---|---|---|---|---|---|---|")
-    for method, (rate, first, held, wall, share) in rows.items():
+          "| physics % of time | verified grasps/s, physics alone | verified grasps/s, holding checks alone |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for method, (rate, first, held, wall, share, ceiling) in rows.items():
         shown = "never" if math.isinf(first) else f"{first:.2f}"
         alone = f"{rate / share:.2f}" if share > 0 else "-"
         print(f"| {method} | {args.objects} | {held} | {wall:.1f} | {rate:.2f} | {shown} | {100 * share:.0f} "
-              f"| {alone} |")
+              f"| {alone} | {'-' if math.isinf(ceiling) else f'{ceiling:.2f}'} |")
     rate, first = rows["synthesis"][:2]
     peer_rate, peer_first = rows["baseline"][:2]
     ratio = (f"{first / peer_first:.2f}x the time to the first" if math.isfinite(peer_first)
              else "the baseline's median first: never (no grasp holds on half its objects)")
     print(f"\nsynthesis / baseline: {rate / max(peer_rate, 1e-12):.2f}x the verified grasps per second; {ratio}")
-    return check_targets([(f"synthesis: {rate:.2f} verified grasps/s >= {RATE:g}", rate >= RATE),
+    ceiling = rows["synthesis"][5]
+    return check_targets([(f"synthesis: {rate:.2f} verified grasps/s >= {RATE:g} (were every check one that holds: "
+                           f"{'-' if math.isinf(ceiling) else f'{ceiling:.2f}'}/s)", rate >= RATE),
                           (f"synthesis: median first verified {first:.2f} s <= {FIRST_S:g} s", first <= FIRST_S)],
                          args.check)
 
