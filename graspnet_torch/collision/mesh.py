@@ -114,8 +114,9 @@ def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -
     p, a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (p, a, b, c)))
     flat = [v.reshape(-1, 3) for v in (p, a, b, c)]
     out = np.empty((len(flat[0]), 3))
-    for start in range(0, len(out), PAIRS):
-        out[start:start + PAIRS] = _closest(*(np.ascontiguousarray(v[start:start + PAIRS].T) for v in flat))
+    for start in range(0, len(out), PAIRS):  # each chunk transposed into rows (in the cache)
+        out[start:start + PAIRS] = closest_points_rows(*(np.ascontiguousarray(v[start:start + PAIRS].T)
+                                                         for v in flat))
     return out.reshape(p.shape)
 
 

@@ -272,7 +272,7 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
             "MuJoCo checks (every candidate that landed is checked; a failing one stops early); verified grasps/s, "
             "physics alone: the rate were sampling and solving free (the verified grasps over the checks' share of "
             "the wall time), the ceiling this run's checks put on its grasps; holding checks alone: the rate were "
-            "every check one that holds 6/6 (the verified grasps' checks over their share of the wall time), the "
+            "every check one that holds 6/6 (the checks that held 6/6 over their share of the wall time), the "
             "ceiling the pinned protocol itself puts on this machine, whatever the search. "
             "Not timed: each object's convex decomposition (CoACD, for the "
             "solver's collision proxy and MuJoCo; once per object, cached on disk), made before the runs: "
