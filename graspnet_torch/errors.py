@@ -1,8 +1,12 @@
-"""User-facing errors. Each carries one line that says what is wrong and where."""
+"""User-facing errors. Each carries one line that says what is wrong and where; :func:`say`
+writes such a line on stderr."""
 
 from __future__ import annotations
 
-__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "InternalError", "Interrupted", "ProblemError"]
+import sys
+
+__all__ = ["CheckpointError", "ConfigError", "GraspnetError", "InternalError", "Interrupted", "ProblemError",
+           "say"]
 
 
 class GraspnetError(Exception):
@@ -34,3 +38,16 @@ class Interrupted(KeyboardInterrupt):
     """Ctrl-C (SIGINT) ended a job, which says in one line what it kept (a training: its state,
     and how to resume). A ``KeyboardInterrupt``, so a program's own handling still catches it;
     command-line entry points exit 130 on it (128 + SIGINT, the shells' convention)."""
+
+
+def say(line: str) -> None:
+    """Write ``line`` and its newline on stderr in one write and flush it.
+
+    ``print(line, file=sys.stderr)`` writes the text and the newline apart: the jobs of a parallel
+    sweep share one stderr, and their lines came out run together ("...whole...whole" then two
+    empty lines). One write of under 4096 bytes to a pipe or terminal is never split (POSIX
+    ``PIPE_BUF``), so each job's line stays whole.
+    """
+    sys.stderr.flush()
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()

@@ -20,6 +20,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
+from graspnet_torch.errors import say
 from graspnet_torch.jobs.cli import container, run_cli, user_errors_exit_2
 from graspnet_torch.jobs.reproduce import NUMBERS, ReproduceJobCfg, missed_targets, prepare_reproduce, reproduce
 
@@ -32,7 +33,7 @@ def main(cfg: DictConfig) -> None:
     reproduce(plan, list(hydra_cfg.overrides.task))
     missed = missed_targets(plan.out / NUMBERS) if plan.check else []
     for line in missed:
-        print(f"MISSED  {line}", file=sys.stderr)
+        say(f"MISSED  {line}")
     if missed:
         sys.exit(1)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from graspnet_torch.errors import GraspnetError
+from graspnet_torch.errors import GraspnetError, say
 from graspnet_torch.jobs.summarize_sweep import summarize_sweep
 
 
@@ -24,7 +24,7 @@ def main() -> int:
     try:
         paths = summarize_sweep(args.sweep, args.out)
     except GraspnetError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        say(f"error: {exc}")
         return 2
     print("\n".join(f"wrote {p}" for p in paths.values()))
     return 0

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 
+from graspnet_torch.errors import say
 from graspnet_torch.jobs.cli import user_errors_exit_2
 from graspnet_torch.jobs.view_result import view_result
 
@@ -20,7 +21,7 @@ def main() -> None:
     try:
         view_result()
     except KeyboardInterrupt:  # Ctrl-C before the page is served (while the result loads)
-        print("interrupted (Ctrl-C): nothing served", file=sys.stderr)
+        say("interrupted (Ctrl-C): nothing served")
         sys.exit(130)
 
 

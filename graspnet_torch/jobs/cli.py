@@ -29,7 +29,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
-from graspnet_torch.errors import ConfigError, GraspnetError, InternalError, Interrupted
+from graspnet_torch.errors import ConfigError, GraspnetError, InternalError, Interrupted, say
 from graspnet_torch.jobs.interrupt import exit_interrupted, interrupted, remembering_interrupts
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import Free, check_value, clip, lookup
@@ -58,13 +58,13 @@ def user_errors_exit_2(fn: Callable[..., T]) -> Callable[..., T]:
         try:
             out = fn(*args, **kwargs)
         except GraspnetError as exc:
-            print(f"error: {_one_line(exc)}", file=sys.stderr)
+            say(f"error: {_one_line(exc)}")
             sys.exit(2)
         except InternalError as exc:
-            print(f"internal error: {_one_line(exc)}", file=sys.stderr)
+            say(f"internal error: {_one_line(exc)}")
             sys.exit(1)
         except Interrupted as exc:  # Ctrl-C in a job that kept its work (a training's state)
-            print(f"interrupted: {_one_line(exc)}", file=sys.stderr)
+            say(f"interrupted: {_one_line(exc)}")
             sys.exit(130)
         except KeyboardInterrupt:  # Ctrl-C anywhere else in a job: what was written is whole (atomic writes)
             exit_interrupted(True)
@@ -342,7 +342,7 @@ def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], c
             exit_interrupted(False)
         if not isinstance(exc, (GraspnetError, HydraException, OmegaConfBaseException)):
             raise
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        say(f"error: {_one_line(exc)}")
         sys.exit(2)
     if interrupted():  # a Ctrl-C that a library swallowed during the checks (pytorch_kinematics' optional
         exit_interrupted(False)  # import of mujoco catches the ImportError a Ctrl-C can become): nothing written
@@ -358,11 +358,11 @@ def _checks_then_main(main: Callable[[], None], schema: type, argv: list[str], c
         if _job_started:
             raise
         if isinstance(exc, (HydraException, OmegaConfBaseException)):
-            print(f"error: {_one_line(exc)}", file=sys.stderr)
+            say(f"error: {_one_line(exc)}")
             sys.exit(2)
         if isinstance(exc, OSError):  # e.g. a run folder Hydra cannot make
             what = f"{clip(str(exc.filename), 200)}: " if exc.filename else ""
-            print(f"error: {what}{exc.strerror or _one_line(exc)}", file=sys.stderr)
+            say(f"error: {what}{exc.strerror or _one_line(exc)}")
             sys.exit(2)
         raise
 

@@ -3,7 +3,6 @@ for a robot with fingers, with its thumb (else its first finger) opposed to one 
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -12,7 +11,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from graspnet_torch.errors import ConfigError
+from graspnet_torch.errors import ConfigError, say
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
 from graspnet_torch.least_squares import levenberg_marquardt
@@ -165,8 +164,8 @@ def inspect_robots(names: Sequence[str] | None = None, out_dir: str | Path = "ou
             row["picture"] = str(path)
         except Exception as exc:  # a picture must not stop the table
             row["picture"] = "-"
-            print(f"warning: {robot.name}: picture not written: {type(exc).__name__}: "
-                  f"{clip(' '.join(str(exc).split()), 200)}", file=sys.stderr)
+            say(f"warning: {robot.name}: picture not written: {type(exc).__name__}: "
+                f"{clip(' '.join(str(exc).split()), 200)}")
         rows.append(row)
     headers = ["robot", "links", "movable joints", "chains", "DOF", "picture"]
     print(format_table(headers, [[r[h] for h in headers] for r in rows]))

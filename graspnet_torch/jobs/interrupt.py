@@ -26,6 +26,8 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from graspnet_torch.errors import say
+
 __all__ = ["StopRequest", "exit_interrupted", "interrupted", "remembering_interrupts", "resume_hint",
            "stop_if_interrupted", "stop_on_interrupt"]
 
@@ -71,10 +73,9 @@ def exit_interrupted(started: bool) -> None:
     """Ctrl-C's one line on stderr and exit 130: ``started``, a job may have written files (whole:
     writes are atomic), else nothing was written."""
     if started:
-        print("interrupted (Ctrl-C): files written before it are whole, the one being written is not there",
-              file=sys.stderr)
+        say("interrupted (Ctrl-C): files written before it are whole, the one being written is not there")
     else:
-        print("interrupted (Ctrl-C) before the job started: nothing written", file=sys.stderr)
+        say("interrupted (Ctrl-C) before the job started: nothing written")
     sys.exit(130)
 
 

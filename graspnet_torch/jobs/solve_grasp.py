@@ -9,7 +9,6 @@ curves (like the paper's Fig. 3).
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.scene import has_environment
-from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.errors import ConfigError, ProblemError, say
 from graspnet_torch.files import check_output_path
 from graspnet_torch.io import atomic_write_text, json_digest
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, check_device, check_solve_memory
@@ -300,7 +299,7 @@ def solve_grasp(cfg: Mapping[str, Any] | SolveGraspJobCfg, run_dir: str | Path,
             stopped = solver.stop is not None and solver.stop <= n_ok < trials
             more = f" (solver.stop={solver.stop} ended the solve at {n_ok} success(es): a larger solver.stop, or " \
                    f"null, gives more trials to check)" if stopped else ""
-            print(f"warning: {verification.summary()}{more}", file=sys.stderr)
+            say(f"warning: {verification.summary()}{more}")
     result.save(out)  # InternalError (exit 1, nothing written) if anything is not finite
     print(f"result: {out}")
     if job.tensorboard:
@@ -356,8 +355,7 @@ def warn_on_failure(what: str, fn, *args, **kwargs) -> None:
     try:
         fn(*args, **kwargs)
     except Exception as exc:  # a picture or a log must not turn a written result into a failure
-        print(f"\nwarning: {what} not written: {type(exc).__name__}: {clip(' '.join(str(exc).split()), 200)}",
-              file=sys.stderr)
+        say(f"\nwarning: {what} not written: {type(exc).__name__}: {clip(' '.join(str(exc).split()), 200)}")
 
 
 def write_pictures(robot, problem: GraspProblem, result: GraspResult, run_dir: Path) -> None:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from graspnet_torch.errors import ConfigError
+from graspnet_torch.errors import ConfigError, say
 from graspnet_torch.io import atomic_write_text
 from graspnet_torch.robot.kinds import KINDS
 from graspnet_torch.settings import clip
@@ -108,9 +108,8 @@ def summarize_sweep(sweep: str | Path, out: str | Path | None = None) -> dict[st
     try:
         paths["png"] = _plot(rows, groups, folder / "summary.png", str(sweep))
     except Exception as exc:  # the tables are written; a plot failure only warns
-        import sys
 
-        print(f"warning: summary.png not written: {type(exc).__name__}: {clip(str(exc), 200)}", file=sys.stderr)
+        say(f"warning: summary.png not written: {type(exc).__name__}: {clip(str(exc), 200)}")
     return paths
 
 

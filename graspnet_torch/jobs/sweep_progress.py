@@ -18,6 +18,8 @@ from typing import Any
 
 from hydra.experimental.callback import Callback
 
+from graspnet_torch.errors import say
+
 __all__ = ["SweepProgress", "count_jobs"]
 
 
@@ -73,7 +75,7 @@ class SweepProgress(Callback):
         except (OSError, ValueError):
             return  # a job launched elsewhere (a cluster without this folder): nothing to count
         if sys.stderr.isatty():
-            print(progress_line(done, start.get("total"), time.time() - start["start"]), file=sys.stderr, flush=True)
+            say(progress_line(done, start.get("total"), time.time() - start["start"]))
 
 
 def progress_line(done: int, total: int | None, elapsed: float) -> str:

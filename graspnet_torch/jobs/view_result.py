@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import socket
-import sys
 import time
 from collections.abc import Sequence
 
-from graspnet_torch.errors import ConfigError
+from graspnet_torch.errors import ConfigError, say
 from graspnet_torch.settings import clip
 from graspnet_torch.viz.viewer import load_view, serve
 
@@ -69,15 +68,15 @@ def view_result(argv: Sequence[str] | None = None, *, block: bool = True):
     server = serve(view, args.host, port)
     try:  # from here Ctrl-C stops the server: one line, exit 0
         if public:
-            print(f"warning: serving on {args.host}: other machines that reach this one can open the page "
-                  f"(the default, 127.0.0.1, serves this machine only)", file=sys.stderr, flush=True)
+            say(f"warning: serving on {args.host}: other machines that reach this one can open the page "
+                f"(the default, 127.0.0.1, serves this machine only)")
         print(f"viewing {view.path} ({view.robot.name}, {len(view.postures)} trials"
               f"{', a reach motion' if view.motion is not None else ''}) at http://{args.host}:{server.get_port()} "
               f"(ready in {time.perf_counter() - t0:.1f} s; Ctrl-C stops)", flush=True)
         while block:
             time.sleep(1.0)
     except KeyboardInterrupt:
-        print("stopped (Ctrl-C)", file=sys.stderr, flush=True)
+        say("stopped (Ctrl-C)")
         server.stop()
     except BaseException:
         server.stop()

@@ -11,13 +11,13 @@ matplotlib is imported here only, lazily, and always with the non-interactive Ag
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.errors import say
 from graspnet_torch.io import atomic_path
 from graspnet_torch.robot.geometry import LinkShape, link_shapes
 from graspnet_torch.robot.meshes import decimate
@@ -174,7 +174,7 @@ def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title:
     shapes, errors = drawable_shapes(robot)
     if errors:
         more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-        print(f"warning: {errors[0]}{more}; drawn as a skeleton", file=sys.stderr)
+        say(f"warning: {errors[0]}{more}; drawn as a skeleton")
     skeleton = bool(errors) or not shapes
     fig, axes = new_figure(len(panels))
     for ax, panel in zip(axes, panels, strict=True):
