@@ -17,7 +17,7 @@ import io
 import json
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ from graspnet_torch.meshes import MESH_FORMATS
 from graspnet_torch.physics import check_until_failure
 from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.kinds import robot_kind
+from graspnet_torch.robot.opposition import default_fingers
 from graspnet_torch.robot.robot import Robot, load_robot
 from graspnet_torch.robot.shape import MAX_SCALE, Shape, check_mesh
 from graspnet_torch.settings import MAX_LENGTH_M, Free, build, clip, number_list, setting
@@ -64,7 +65,8 @@ class SynthesizeGraspsJobCfg:
     scale: float = setting(1.0, lo=0.0, lo_open=True, hi=MAX_SCALE)  # metres per mesh unit (0.001: millimetres)
     centre: list[float] | None = None  # where each object's bounding box is centred (world, m; None: OBJECT_CENTRE,
     # in front of a free hand; a hand on an arm needs it: where the arm reaches)
-    fingers: list[str] = setting(factory=lambda: ["thumb", "index", "middle"])
+    fingers: list[str] | None = None  # the fingers that touch (None: the hand's opposing finger and its two nearest
+    # neighbours, found from its kinematics: robot/opposition.py)
     grasps: int = setting(5, lo=1, hi=1000)  # the N best grasps kept per object
     candidates: int = setting(64, lo=1, hi=100_000)  # contact sets drawn per object
     trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set (start=random, proposal)
@@ -132,6 +134,8 @@ def prepare_synthesize(cfg: Mapping[str, Any] | SynthesizeGraspsJobCfg, run_dir:
     robot = load_robot(robot_cfg)
     jaws = robot_kind(robot).schema.targets == "points"  # a gripper: its two marked points, no fingers
     if not jaws:
+        if job.fingers is None:
+            job = replace(job, fingers=list(default_fingers(carried_hand(robot))))
         _check_fingers(robot, job.fingers)
         if job.start != "sampled":  # the search: the robot's FCNN (refused if missing or corrupted)
             finger_ik_for(robot)
@@ -183,7 +187,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     t0 = time.perf_counter()
     stats: dict = {}
     data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
-                  "settings": {"fingers": list(job.fingers), "grasps": job.grasps, "candidates": job.candidates,
+                  "settings": {"fingers": list(job.fingers or ()), "grasps": job.grasps, "candidates": job.candidates,
                                "trials": job.trials, "start": job.start, "seed": job.seed, "verify": job.verify},
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
@@ -191,7 +195,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     try:
         obj = object_shape(path, job.scale, job.centre)
         data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
-        found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=tuple(job.fingers),
+        found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=job.fingers,
                                   candidates=job.candidates, seed=job.seed, trials=job.trials, physics=physics,
                                   stats=stats, start=job.start)
         grasps = [g.to_dict() for g in found]

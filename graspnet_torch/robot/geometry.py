@@ -3,6 +3,7 @@ the package's one :class:`~graspnet_torch.robot.shape.Shape`, in its link's fram
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +14,7 @@ from graspnet_torch.robot.meshes import load_link_mesh
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose_np
 
-__all__ = ["LinkShape", "link_shapes"]
+__all__ = ["LinkShape", "link_shapes", "support"]
 
 GREY = (0.6, 0.6, 0.6, 1.0)
 
@@ -108,3 +109,17 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
             shape = Shape(kind, size, origin_pose(el.origin), path, scale)
             shapes.append(LinkShape(link.name, shape, origin_matrix(el.origin), rgba, mesh))
     return shapes
+
+
+def support(s: LinkShape, P: np.ndarray, n: np.ndarray) -> float:
+    """The largest ``n . x`` (m) over the surface of a shape placed by ``P`` (4, 4) (the shape's
+    frame in the frame of ``n`` (3,), unit): how far the shape reaches along ``n``."""
+    if s.kind == "mesh":
+        vertices = np.asarray(s.mesh.vertices, dtype=np.float64) @ P[:3, :3].T + P[:3, 3]
+        return float((vertices @ n).max())
+    d, c = P[:3, :3].T @ n, float(n @ P[:3, 3])
+    if s.kind == "box":
+        return c + float(np.abs(d) @ (np.asarray(s.size) / 2))
+    if s.kind == "cylinder":
+        return c + s.size[0] * math.hypot(d[0], d[1]) + s.size[1] / 2 * abs(d[2])
+    return c + s.size[0]

@@ -44,7 +44,7 @@ import torch
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.robot.config import PadCfg, RobotCfg
 from graspnet_torch.robot.fingers import FingerKernel
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import link_shapes, support
 from graspnet_torch.robot.shape import primitive_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
@@ -185,7 +185,7 @@ def _derived(robot: _Robot, chain: Any, tip_in_link: np.ndarray, normal: np.ndar
         return Pad(tip, np.zeros(3), normal)
     T = _link_in_tip(robot, distal, tip, tip_in_link)
     placed = [(s, T @ s.origin) for s in shapes[distal]]
-    height = max(_support(s, P, normal) for s, P in placed)
+    height = max(support(s, P, normal) for s, P in placed)
     exits = [t for t in (_line_exit(s, P, normal, height) for s, P in placed) if t is not None]
     if exits and max(exits) >= height - TIE:
         return Pad(distal, max(exits) * normal, normal)
@@ -197,18 +197,6 @@ def _derived(robot: _Robot, chain: Any, tip_in_link: np.ndarray, normal: np.ndar
 
 def _mesh_vertices(s: Any, P: np.ndarray) -> np.ndarray:
     return np.asarray(s.mesh.vertices, dtype=np.float64) @ P[:3, :3].T + P[:3, 3]
-
-
-def _support(s: Any, P: np.ndarray, n: np.ndarray) -> float:
-    """The largest ``n . x`` over a shape placed by ``P`` (4, 4)."""
-    if s.kind == "mesh":
-        return float((_mesh_vertices(s, P) @ n).max())
-    d, c = P[:3, :3].T @ n, float(n @ P[:3, 3])
-    if s.kind == "box":
-        return c + float(np.abs(d) @ (np.asarray(s.size) / 2))
-    if s.kind == "cylinder":
-        return c + s.size[0] * math.hypot(d[0], d[1]) + s.size[1] / 2 * abs(d[2])
-    return c + s.size[0]
 
 
 def _interval(o: float, d: float, lo: float, hi: float) -> tuple[float, float] | None:

@@ -5,7 +5,8 @@ each draft before it is a contact set).
 Drafts are made in batches of ``BATCH`` palm poses, in three steps:
 
 1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
-   collision box's thinnest axis, on the fingers' side) at a random point of the plane of the
+   front, the side its fingers close toward: :func:`~graspnet_torch.robot.opposition.hand_axes`;
+   :func:`_palm_front`) at a random point of the plane of the
    palm within the fingertips' reach, and at a random gap (``GAP_M``) from the palm's face, i.e.
    the palm looks at the object from a random direction, at a random roll. Once some palm pose
    has touched (step 2), ``NEAR_SHARE`` of each batch are instead drawn near those that have
@@ -23,8 +24,9 @@ Drafts are made in batches of ``BATCH`` palm poses, in three steps:
    the inward normal at its touch point, and its finger's links, as spheres, lie no deeper than
    ``penetration_m`` in the object.
 3. *Drafts*: a palm pose whose every chosen finger has a good line gives up to ``COMBOS`` drafts,
-   one good line per finger each (the first draft's thumb line the one whose inward normal best
-   opposes the others' mean: force closure needs opposition; the others at random). The fingers
+   one good line per finger each (the first draft's line of the opposing finger, the thumb of a
+   human-like hand, the one whose inward normal best opposes the others' mean: force closure
+   needs opposition; the others at random). The fingers
    not chosen stay at the robot's home posture, as the solver holds them (a palm pose where they
    enter the object gives no draft). A draft's normals are the inward normals at its touch points.
 
@@ -45,10 +47,11 @@ from scipy.spatial.transform import Rotation
 from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.collision.surface import surface_distance_near, touch_points
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import link_shapes, support
+from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np
+from graspnet_torch.robot.transforms import matrix_to_pose
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
@@ -87,17 +90,14 @@ class ContactSet:
         return iter((self.contacts, self.normals, self.posture))
 
 
-def _rotation(obj: Shape) -> np.ndarray:
-    """(3, 3) a shape's rotation."""
-    return pose_to_matrix_np(obj.pose)[:3, :3]
-
-
-def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray]:
+def _palm_front(robot: Robot, rows: list[int], front: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
     """The palm's front axis (palm frame, unit), its face's offset along it (m) and where in the
     palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates
-    :func:`_palm_plane`), for the fingers ``rows``. A palm with a collision box: the box's thinnest
-    axis, on the side of the home fingertips; the object within the fingertips' reach over their
-    joint limits. A palm without one (a holder the fingers hang from, as TriFinger's): the axis
+    :func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
+    cylinders, spheres, meshes): the front is ``front`` (3,), the side the fingers close toward
+    (:func:`~graspnet_torch.robot.opposition.hand_axes`), the face the palm's surface farthest
+    along it; the object within the fingertips' reach over their joint limits. A palm without
+    any (a holder the fingers hang from, as TriFinger's): the axis
     from the palm origin to the home fingertips' mean, the face at the fingertips' median reach
     along it (over their joints' limits and midpoints), the object within ``HOLDER_SPREAD`` of the
     home fingertips' distance from their mean axis: it hangs among the fingers, where they close."""
@@ -105,9 +105,8 @@ def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nd
     tips_all = robot.fingertips_palm(home.fingers).numpy()
     tips = tips_all.mean(axis=0)
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
-    box = next((s.shape for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link and s.shape.kind == "box"),
-               None)
-    if box is None:
+    palm = [s for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link]
+    if not palm:
         front = tips / np.linalg.norm(tips)
         grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
         q = lo[None] + grid[:, None, :] * (hi - lo)[None]  # (G, F, n): every finger at each grid point
@@ -117,12 +116,10 @@ def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nd
         off_axis = (tips_all[rows] - tips_all[rows].mean(axis=0)) @ plane
         spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
         return front, face, np.stack([mid - spread, mid + spread])
-    R = _rotation(box)
-    axis = int(np.argmin(box.size))
-    front = R[:, axis] * (1.0 if R[:, axis] @ (tips - box.pose[:3]) >= 0 else -1.0)
+    face = max(support(s, s.origin, front) for s in palm)
     tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
     reach = tips_at @ _palm_plane(front)
-    return front, float(front @ box.pose[:3] + box.size[axis] / 2), np.stack([reach.min(axis=0), reach.max(axis=0)])
+    return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)])
 
 
 def _palm_plane(front: np.ndarray) -> np.ndarray:
@@ -224,7 +221,10 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     rows = [finger_names.index(f) for f in fingers]
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
-    front, face, reach = _palm_front(robot, rows)
+    axes = hand_axes(robot)
+    lead = list(fingers).index(axes.opposing) if axes.opposing in fingers else 0  # the finger that opposes
+    rest = [i for i in range(len(rows)) if i != lead]
+    front, face, reach = _palm_front(robot, rows, axes.front)
     plane = _palm_plane(front)  # (3, 2) the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
@@ -292,10 +292,10 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             good = hit & clear[:, :, rows] & (angles <= cone_deg)
             # (B, k) each: random good lines
             picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
-            if len(rows) > 1:  # the first set's thumb: its good line most opposed to the others' normals
-                others = inward[np.arange(B)[:, None], picks[0][:, 1:], np.arange(1, len(rows))].mean(axis=1)  # (B, 3)
-                oppose = -np.einsum("bmi,bi->bm", inward[:, :, 0], others)
-                picks[0][:, 0] = np.argmax(np.where(good[:, :, 0], oppose, -np.inf), axis=1)
+            if len(rows) > 1:  # the first set's opposing finger: its good line most opposed to the others' normals
+                others = inward[np.arange(B)[:, None], picks[0][:, rest], rest].mean(axis=1)  # (B, 3)
+                oppose = -np.einsum("bmi,bi->bm", inward[:, :, lead], others)
+                picks[0][:, lead] = np.argmax(np.where(good[:, :, lead], oppose, -np.inf), axis=1)
             q_touch = q_touch.view(B, LINES, *lo.shape)
             ok = good.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1)
             counts["touching"] += int(ok.sum())

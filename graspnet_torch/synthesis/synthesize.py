@@ -23,6 +23,7 @@ from graspnet_torch.errors import ProblemError
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.kinds import robot_kind
+from graspnet_torch.robot.opposition import default_fingers
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
@@ -125,12 +126,14 @@ def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
 
 
 def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: int = 5,
-                      fingers: Sequence[str] = ("thumb", "index", "middle"), candidates: int = 64, seed: int = 0,
+                      fingers: Sequence[str] | None = None, candidates: int = 64, seed: int = 0,
                       physics: Callable[..., Any] | None = None, solve_top: int | None = None, trials: int = 8,
                       solver: dict | None = None, stats: dict | None = None, start: str = "sampled",
                       obstacles: Sequence[Shape] = ()) -> list[SynthesizedGrasp]:
     """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first (``robot``: a
-    built robot, a shipped robot's name, a robot config or its YAML path).
+    built robot, a shipped robot's name, a robot config or its YAML path; ``fingers`` None: the
+    hand's opposing finger and its two nearest neighbours, found from its kinematics,
+    :func:`~graspnet_torch.robot.opposition.default_fingers`).
 
     Contact sets are drawn (``seed``) and ranked by quality (:func:`rank_sets`), at most
     ``candidates`` of them solved, each as a problem of the surface contact model (``solver``
@@ -189,6 +192,8 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     if gripper:
         settings = dict(solver or {})
         run = functools.partial(_pairs, obstacles=tuple(obstacles))
+    if fingers is None:
+        fingers = () if gripper else default_fingers(carried_hand(robot))
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
                "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)

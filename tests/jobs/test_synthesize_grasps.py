@@ -160,12 +160,13 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
     settings = {**_settings(folder, tmp_path / "out"), "robot": str(own)}
     with pytest.raises(CheckpointError, match=r"own_hand\.fcnn\.pt: FCNN checkpoint not found; train one"):
         prepare_synthesize({**settings, "start": "random"}, tmp_path / "run")
-    prepare_synthesize(settings, tmp_path / "run")
+    job = prepare_synthesize(settings, tmp_path / "run")[0]
+    assert job.fingers == ["thumb", "index", "middle"]  # the default: found from the hand's kinematics
     (folder / "box.obj").write_text("")
     with pytest.raises(ConfigError, match=r"would both write box\.json"):
         prepare_synthesize(_settings(folder, tmp_path / "out"), tmp_path / "run")
     assert not (tmp_path / "out").exists() and not (tmp_path / "run").exists()
-    assert SynthesizeGraspsJobCfg().fingers == ["thumb", "index", "middle"]
+    assert SynthesizeGraspsJobCfg().fingers is None  # found from the hand: the shipped one's above
 
 
 def test_script_refuses_a_missing_folder_with_exit_2(tmp_path):
