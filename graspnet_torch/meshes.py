@@ -19,7 +19,8 @@ anything is built from them.
 :func:`load_trimesh` is trimesh's loader with the side files a mesh names (OBJ materials and
 textures, glTF buffers) limited to regular files of at most ``MAX_MESH_BYTES`` in the mesh's folder;
 :func:`load_mesh` is the one loader of a mesh file, a problem's object or obstacle or a URDF link's
-(cached).
+(cached). :func:`sample_even` spreads points over a mesh's surface (trimesh's even sampling,
+without its log line when the sample comes out smaller than asked).
 """
 
 from __future__ import annotations
@@ -36,8 +37,19 @@ from graspnet_torch.errors import ConfigError, GraspnetError
 from graspnet_torch.files import MAX_MESH_BYTES, regular_file_stat
 from graspnet_torch.settings import MAX_LENGTH_M, clip
 
-__all__ = ["FACES_VARIABLE", "MAX_MESH_FACES", "MESH_FORMATS", "MIN_THICKNESS_M", "check_mesh_file", "load_mesh",
-           "load_trimesh", "max_mesh_faces", "mesh_format", "mesh_path"]
+__all__ = [
+    "FACES_VARIABLE",
+    "MAX_MESH_FACES",
+    "MESH_FORMATS",
+    "MIN_THICKNESS_M",
+    "check_mesh_file",
+    "load_mesh",
+    "load_trimesh",
+    "max_mesh_faces",
+    "mesh_format",
+    "mesh_path",
+    "sample_even",
+]
 
 MAX_MESH_FACES = 200_000  # the largest mesh of pybullet_data has 124,789; a robot's link or an object far fewer
 FACES_VARIABLE = "GRASPNET_TORCH_MAX_MESH_FACES"  # raises MAX_MESH_FACES
@@ -276,3 +288,21 @@ def _obj_nonfinite_line(data: bytes) -> int | None:
         if not all(np.isfinite(values)):
             return data.count(b"\n", 0, m.start()) + 1
     return None
+
+
+def sample_even(mesh, count: int, seed: int = 0) -> np.ndarray:
+    """(N, 3) float64 points spread evenly over a ``trimesh.Trimesh``'s surface, N <= ``count``:
+    ``trimesh.sample.sample_surface_even`` (the same points for the same ``seed``), with the
+    warning it logs when it rejects some of them (N < count) kept off the user's screen."""
+    import logging
+
+    import trimesh
+
+    log = logging.getLogger("trimesh.sample")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        samples, _ = trimesh.sample.sample_surface_even(mesh, count, seed=seed)
+    finally:
+        log.setLevel(level)
+    return np.asarray(samples, dtype=np.float64)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from graspnet_torch.collision.convex import convex_pieces
-from graspnet_torch.meshes import load_mesh, mesh_path
+from graspnet_torch.meshes import load_mesh, mesh_path, sample_even
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
 __all__ = ["MeshQuery", "closest_on_triangles", "closest_points", "closest_points_rows", "lattice_points", "mesh_query",
@@ -67,11 +67,8 @@ def _primitive_points(kind: str, size: tuple[float, ...]) -> np.ndarray:
 
 def _surface_points(surface) -> np.ndarray:
     """(N, 3) :func:`shape_points` of a ``trimesh.Trimesh``: its vertices, then an even sample."""
-    import trimesh
-
     count = min(MAX_POINTS, max(64, math.ceil(surface.area / SPACING**2)))
-    samples, _ = trimesh.sample.sample_surface_even(surface, count, seed=0)
-    return np.concatenate([np.asarray(surface.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
+    return np.concatenate([np.asarray(surface.vertices, dtype=np.float64), sample_even(surface, count)])
 
 
 def lattice_points(triangles: np.ndarray, s: float) -> np.ndarray:

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from graspnet_torch.meshes import sample_even
+
 __all__ = ["SAMPLES", "SLACK", "SLACK_MIN_M", "mesh_key", "mesh_spheres"]
 
 SAMPLES = 3000  # surface points per mesh (besides its vertices)
@@ -49,10 +51,7 @@ def mesh_spheres(mesh, key: tuple | None = None) -> tuple[np.ndarray, np.ndarray
     are computed once per key in a process (None: every call)."""
     found = _CACHE.get(key) if key is not None else None
     if found is None:
-        import trimesh
-
-        samples = trimesh.sample.sample_surface_even(mesh, SAMPLES, seed=0)[0]
-        found = _spheres(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64))
+        found = _spheres(np.asarray(mesh.vertices, dtype=np.float64), sample_even(mesh, SAMPLES))
         if key is not None:
             _CACHE[key] = found
     return found[0].copy(), found[1].copy()

@@ -42,6 +42,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.meshes import sample_even
 from graspnet_torch.robot.config import PadCfg, RobotCfg
 from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.geometry import link_shapes, support
@@ -244,9 +245,6 @@ def _line_exit(s: Any, P: np.ndarray, n: np.ndarray, height: float) -> float | N
 
 def _surface_points(s: Any, P: np.ndarray) -> np.ndarray:
     """(N, 3) points spread densely over a shape's surface (vertices included), placed by ``P``."""
-    import trimesh
-
     mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
-    samples, _ = trimesh.sample.sample_surface_even(mesh, SAMPLES, seed=0)
-    points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), np.asarray(samples, dtype=np.float64)])
+    points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), sample_even(mesh, SAMPLES)])
     return points @ P[:3, :3].T + P[:3, 3]

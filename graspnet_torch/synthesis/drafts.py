@@ -132,9 +132,11 @@ def _support(vertices: np.ndarray, centre: np.ndarray, d: np.ndarray) -> np.ndar
     return ((vertices - centre) @ d.T).max(axis=0)
 
 
-def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray]]:
+def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray, bool]]:
     """Every finger link's collision shapes as spheres: (finger row, link, centres (s, 3) in the
-    link frame, radii (s,)) (:func:`~graspnet_torch.collision.spheres.shape_spheres`)."""
+    link frame, radii (s,), whether they cover a mesh) (:func:`~graspnet_torch.collision.spheres.shape_spheres`;
+    a mesh's spheres may stand out of it by a share of its thickness:
+    :mod:`~graspnet_torch.collision.mesh_spheres`)."""
     owner = {}
     for i, finger in enumerate(robot.fingers.values()):
         for joint in robot.urdf.path_joints(finger.chain.root, finger.chain.tip):
@@ -143,16 +145,16 @@ def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray
     for shape in link_shapes(robot.urdf):
         if shape.link in owner:
             centres, radii = shape_spheres(shape)
-            out.append((owner[shape.link], shape.link, centres, radii))
+            out.append((owner[shape.link], shape.link, centres, radii, shape.kind == "mesh"))
     return out
 
 
 def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
-               spheres: list[tuple[int, str, np.ndarray, np.ndarray]], F: int) -> np.ndarray:
+               spheres: list[tuple[int, str, np.ndarray, np.ndarray, bool]], F: int) -> np.ndarray:
     """(N, F) each of F fingers' least clearance (m, negative: how deep) from the object, its links
     as ``spheres`` (inf: none given); frames (N, L, 4, 4) of the links ``names``."""
     out = np.full((len(frames), F), np.inf)
-    for row, link, centres, radii in spheres:
+    for row, link, centres, radii, _ in spheres:
         T = frames[:, names.index(link)]  # (N, 4, 4)
         world = np.einsum("nij,sj->nsi", T[:, :3, :3], centres) + T[:, None, :3, 3]
         gap = surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(frames), -1) - radii
@@ -228,10 +230,12 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     plane = _palm_plane(front)  # (3, 2) the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
-    spheres = _finger_spheres(robot)
     F = len(finger_names)
-    tips = {robot.cfg.fingers[f].tip for f in fingers}  # a touching pad's link: its spheres may bound it loosely
-    line_spheres = [sp for sp in spheres if sp[0] in rows and sp[1] not in tips]  # (the set check's FCL has them all)
+    spheres = _finger_spheres(robot)
+    tips = {robot.cfg.fingers[f].tip for f in fingers}  # a touching pad's link: its spheres may bound it loosely, and
+    pads = {robot.pads[f].link for f in fingers}  # so may the meshes of the link that carries a pad (the set check's
+    line_spheres = [sp for sp in spheres if sp[0] in rows and sp[1] not in tips and not (sp[1] in pads and sp[4])]
+    # FCL has them all)
     home = robot.home_posture(torch.float64).fingers
     others_rows = [i for i in range(len(finger_names)) if i not in rows]
     counts = stats if stats is not None else {}
