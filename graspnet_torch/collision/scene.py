@@ -101,11 +101,11 @@ def _apart_at_home(robot: Robot, owner: dict[str, str] | None) -> list[tuple[str
             link = robot.urdf.parent_joint[link].parent
         return link if link in with_geometry else None
 
-    def moved_by(link: str) -> frozenset:  # the movable joints between the root and the link
+    def moved_by(link: str) -> frozenset:  # the movable joints between the root and the link (a wrist: held)
         joints = set()
         while link in robot.urdf.parent_joint:
             joint = robot.urdf.parent_joint[link]
-            if joint.type != "fixed":
+            if joint.type != "fixed" and joint.name not in robot.wrist:
                 joints.add(joint.name)
             link = joint.parent
         return frozenset(joints)

@@ -13,7 +13,10 @@ The model, in the problem's world frame:
   convex hulls, whatever the file format or ``package://`` path), so MuJoCo's URDF reader and its
   mesh-path rules play no part;
 - its root link fixed where the posture places it (a free hand: the palm pose; a robot with a body:
-  its base at the world origin), the body joints (arm, mobile base) locked at the posture's values;
+  its base at the world origin), the body joints (arm, mobile base) locked at the posture's values,
+  a free hand's wrist joints (between its root and palm) locked where the robot holds them
+  (:attr:`Robot.wrist <graspnet_torch.robot.robot.Robot.wrist>`): the links above the palm rigid
+  with it;
 - every other movable joint a MuJoCo joint within its limits, with a position actuator (gain
   ``kp``, joint damping and armature, force limit ``max_effort`` or the URDF ``effort``), mimic
   joints an equality constraint on their leader instead;
@@ -40,7 +43,7 @@ from scipy.spatial import ConvexHull
 from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.physics.config import PhysicsCfg
-from graspnet_torch.robot.chain import origin_matrix
+from graspnet_torch.robot.chain import joint_motion, origin_matrix
 from graspnet_torch.robot.geometry import link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_matrix_np
@@ -96,17 +99,6 @@ def _place(el: ET.Element, T: np.ndarray) -> None:
     el.set("quat", _fmt(quaternion(T[:3, :3])))
 
 
-def _motion(kind: str, axis: np.ndarray, q: float) -> np.ndarray:
-    """(4, 4) the motion of a joint of ``kind`` about / along its unit ``axis`` by ``q``."""
-    M = np.eye(4)
-    if kind == "prismatic":
-        M[:3, 3] = axis * q
-        return M
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    M[:3, :3] = np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
-    return M
-
-
 def _geom(parent: ET.Element, kind: str, size, T: np.ndarray | None, bits: tuple[int, int], **extra) -> ET.Element:
     g = ET.SubElement(parent, "geom", type=kind, contype=str(bits[0]), conaffinity=str(bits[1]))
     if size is not None:
@@ -133,9 +125,9 @@ def _primitive_size(kind: str, size) -> list[float]:
 
 
 def _locked(robot: Robot) -> set[str]:
-    """The joints a grasp's model locks: the body joints (arm, mobile base) and the mimic joints
-    that follow one."""
-    locked = set(robot.body_joint_names)
+    """The joints a grasp's model locks: the body joints (arm, mobile base), a free hand's wrist
+    joints and the mimic joints that follow one."""
+    locked = set(robot.body_joint_names) | set(robot.wrist)
     return locked | {j for j, (leader, _, _) in robot.urdf.mimic_joints.items() if leader in locked}
 
 
@@ -143,8 +135,7 @@ def _joint_frame(robot: Robot, j) -> tuple[np.ndarray, np.ndarray, str]:
     """A URDF joint's child frame in its parent's at zero (4, 4), its unit axis and its motion kind."""
     urdf = robot.urdf
     T = origin_matrix(getattr(urdf.links[j.child], "origin", None)) @ origin_matrix(j.origin)
-    axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
-    return T, axis / np.linalg.norm(axis), "prismatic" if j.type == "prismatic" else "revolute"
+    return T, urdf.joint_axis(j.name), "prismatic" if j.type == "prismatic" else "revolute"
 
 
 def posed_bodies(robot: Robot, posture: Posture) -> dict[str, np.ndarray]:
@@ -158,7 +149,7 @@ def posed_bodies(robot: Robot, posture: Posture) -> dict[str, np.ndarray]:
     for j in robot.urdf.robot.joints:
         if j.type in ("revolute", "continuous", "prismatic") and j.name in locked:
             T, axis, kind = _joint_frame(robot, j)
-            out[_body_name(j.child)] = T @ _motion(kind, axis, values.get(j.name, 0.0))
+            out[_body_name(j.child)] = T @ joint_motion(kind, axis, values.get(j.name, 0.0))
     return out
 
 

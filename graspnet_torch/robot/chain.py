@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
@@ -31,7 +32,7 @@ from graspnet_torch.settings import clip
 if TYPE_CHECKING:  # pragma: no cover
     import pytorch_kinematics as pk
 
-__all__ = ["ChainSpec", "UrdfModel", "origin_matrix", "origin_pose"]
+__all__ = ["ChainSpec", "UrdfModel", "joint_motion", "origin_matrix", "origin_pose"]
 
 
 def origin_pose(origin) -> np.ndarray:
@@ -46,6 +47,19 @@ def origin_pose(origin) -> np.ndarray:
 def origin_matrix(origin) -> np.ndarray:
     """(4, 4) float64 of a URDF ``<origin>`` (None, or missing xyz / rpy: zeros)."""
     return np.eye(4) if origin is None else pose_to_matrix_np(origin_pose(origin))
+
+
+def joint_motion(kind: str, axis: np.ndarray, q: float) -> np.ndarray:
+    """(4, 4) float64 motion of a joint of ``kind`` ('revolute' | 'prismatic') about / along its
+    unit ``axis`` (3,) by ``q`` (rad or m): Rodrigues' formula, or a translation."""
+    M = np.eye(4)
+    if kind == "prismatic":
+        M[:3, 3] = np.asarray(axis) * q
+        return M
+    a = axis
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    M[:3, :3] = np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+    return M
 
 
 @dataclass(frozen=True)
@@ -77,14 +91,7 @@ class ChainSpec:
         """Reference evaluation (float64, one configuration): q (n,) -> T (4, 4) of tip in root."""
         T = self.offsets[0].copy()
         for i, kind in enumerate(self.joint_types):
-            M = np.eye(4)
-            if kind == "revolute":
-                a = self.axes[i]
-                K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-                M[:3, :3] = np.eye(3) + math.sin(q[i]) * K + (1 - math.cos(q[i])) * K @ K
-            else:
-                M[:3, 3] = self.axes[i] * q[i]
-            T = T @ M @ self.offsets[i + 1]
+            T = T @ joint_motion(kind, self.axes[i], q[i]) @ self.offsets[i + 1]
         return T
 
 
@@ -208,13 +215,36 @@ class UrdfModel:
 
     def fixed_transform(self, root: str, tip: str, what: str = "frame") -> np.ndarray:
         """(4, 4) float64 pose of ``tip`` in ``root``; every joint between them must be fixed."""
+        return self.transform_at(root, tip, {}, what)
+
+    def transform_at(self, root: str, tip: str, values: Mapping[str, float], what: str = "frame") -> np.ndarray:
+        """(4, 4) float64 pose of ``tip`` in ``root`` with each movable joint between them at
+        ``values[name]`` (rad or m); a movable joint ``values`` leaves out is refused."""
         T = np.eye(4)
         for joint in self.path_joints(root, tip, what):
-            if joint.type != "fixed":
+            T = T @ self._link_offset(joint.child) @ origin_matrix(joint.origin)
+            if joint.type == "fixed":
+                continue
+            if joint.name not in values:
                 raise ConfigError(f"{what}: joint '{joint.name}' between '{root}' and '{tip}' is "
                                   f"{joint.type}, expected only fixed joints")
-            T = T @ self._link_offset(joint.child) @ origin_matrix(joint.origin)
+            T = T @ joint_motion("prismatic" if joint.type == "prismatic" else "revolute",
+                                 self.joint_axis(joint.name), values[joint.name])
         return T
+
+    def joint_axis(self, name: str) -> np.ndarray:
+        """(3,) float64 unit axis of joint ``name`` in its own frame (no ``<axis>``: z)."""
+        axis = self.joints[name].axis
+        a = np.asarray(axis if axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
+        return a / np.linalg.norm(a)
+
+    def joint_limits(self, name: str) -> tuple[float, float]:
+        """(lower, upper) of joint ``name`` (rad or m); a continuous joint or one without limits:
+        (-pi, pi)."""
+        joint = self.joints[name]
+        if joint.type == "continuous" or joint.limit is None:
+            return -math.pi, math.pi
+        return float(joint.limit.lower), float(joint.limit.upper)
 
     def serial_chain(self, root: str, tip: str) -> pk.SerialChain:
         """The pytorch-kinematics ``SerialChain`` from ``root`` to ``tip`` (the reference in tests)."""
@@ -247,16 +277,10 @@ class UrdfModel:
             current = np.eye(4)
             names.append(frame.joint.name)
             types.append(frame.joint.joint_type)
-            axis = np.asarray(urdf_joint.axis if urdf_joint.axis is not None else
-                              frame.joint.axis.tolist(), dtype=np.float64)
-            axes.append(axis / np.linalg.norm(axis))
-            lim = urdf_joint.limit
-            if urdf_joint.type == "continuous" or lim is None:
-                lower.append(-math.pi)
-                upper.append(math.pi)
-            else:
-                lower.append(float(lim.lower))
-                upper.append(float(lim.upper))
+            axes.append(self.joint_axis(urdf_joint.name))  # pytorch-kinematics' default too: z
+            lo, hi = self.joint_limits(urdf_joint.name)
+            lower.append(lo)
+            upper.append(hi)
         offsets.append(current)
         n = len(names)
         return ChainSpec(root=root, tip=tip, joint_names=tuple(names), joint_types=tuple(types),

@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.files import confined_file, read_document
+from graspnet_torch.files import read_document
 from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.robot.kinds import ProblemSchema, robot_kind
-from graspnet_torch.robot.meshes import package_candidates, package_roots
+from graspnet_torch.robot.meshes import urdf_file
 from graspnet_torch.settings import MAX_ANGLE_DEG, MAX_LENGTH_M, clip, number_list, short
 
 __all__ = ["ChainCfg", "PadCfg", "PoseBounds", "RobotCfg", "available_robots", "load_robot_cfg",
@@ -109,6 +109,8 @@ class RobotCfg:
         gripper_points: the two marked point links of a gripper (manus), or ().
         home: joint name -> home value as written in the file (degrees for revolute joints, metres
             for prismatic ones), for pictures; missing joints are 0.
+        wrist: a free hand's movable joints between the URDF root and ``palm_link`` -> the value
+            each is held at, as written (degrees or metres); missing joints are 0.
         hand: the free hand an arm carries (a robot's name or config file): ``contacts: auto``
             chooses contact sets with it and the arm reaches them (its fingers must be this robot's).
         checkpoint: the FCNN checkpoint of its fingers, when it is not ``checkpoints/<name>/fcnn.pt``
@@ -138,6 +140,7 @@ class RobotCfg:
     mobile_base: ChainCfg | None = None
     gripper_points: tuple[str, ...] = ()
     home: dict[str, float] = field(default_factory=dict)
+    wrist: dict[str, float] = field(default_factory=dict)
     checkpoint: Path | None = None
     hand: str | None = None
     floor: float | None = None
@@ -181,13 +184,13 @@ class RobotCfg:
         ``urdf`` is looked up in ``folder`` (the config file's folder, when it has one) and then the
         repository root; it must stay within those, or an installed Python package, unless
         ``allow_outside_paths``. ``urdf: package://<python package>/<path>`` names a file inside an
-        installed Python package (found without importing it; see :func:`_urdf_file`).
+        installed Python package (found without importing it; see :func:`~graspnet_torch.robot.meshes.urdf_file`).
         """
         if not isinstance(data, Mapping):
             raise ConfigError(f"{source}: a robot config must be a mapping, got {type(data).__name__}")
         known = {"name", "urdf", "palm_link", "fingers", "palm_bounds", "arm", "mobile_base",
                  "gripper_points", "home", "description", "checkpoint", "solver_defaults",
-                 "floor", "self_collision", "hand"}
+                 "floor", "self_collision", "hand", "wrist"}
         unknown = sorted(clip(k, 40) for k in data if k not in known)
         if unknown:
             raise ConfigError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
@@ -210,12 +213,11 @@ class RobotCfg:
             raise ConfigError(f"{source}: 'gripper_points' must list two link names")
         if not fingers and not points:
             raise ConfigError(f"{source}: a robot needs 'fingers' or 'gripper_points'")
-        home = {}
-        for joint, value in _mapping(data, "home", source, "joint names to numbers").items():
-            home[clip(joint, 80)] = number_list([value], 1, f"{source}: home.{clip(joint, 40)}", ConfigError,
-                                                -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
+        home, wrist = _joint_values(data, "home", source), _joint_values(data, "wrist", source)
+        if wrist and arm is not None:
+            raise ConfigError(f"{source}: 'wrist' holds a free hand's wrist joints; with 'arm' they are arm joints")
         bases = (Path(folder), repo_root()) if folder is not None else (repo_root(),)
-        urdf = _urdf_file(data["urdf"], f"{source}: urdf", bases, allow_outside_paths)
+        urdf = urdf_file(data["urdf"], f"{source}: urdf", bases, allow_outside_paths)
         checkpoint = None
         if data.get("checkpoint") is not None:
             raw = data["checkpoint"]
@@ -237,39 +239,9 @@ class RobotCfg:
             raise ConfigError(f"{source}: 'self_collision' must be true or false, got {short(self_collision)}")
         return cls(name=data["name"], urdf=urdf, palm_link=data["palm_link"], fingers=fingers,
                    palm_bounds=palm_bounds, arm=arm, mobile_base=base, gripper_points=tuple(points),
-                   home=home, checkpoint=checkpoint, hand=hand, floor=floor, self_collision=self_collision,
+                   home=home, wrist=wrist, checkpoint=checkpoint, hand=hand, floor=floor, self_collision=self_collision,
                    solver_defaults=_solver_defaults(data, source), source=source,
                    folder=Path(folder) if folder is not None else None, allow_outside_paths=allow_outside_paths)
-
-
-def _urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: bool) -> Path:
-    """The URDF a config names: a path (relative to ``bases``, see :func:`confined_file`) or
-    ``package://<python package>/<path>``, resolved like a mesh URI (:func:`package_candidates`:
-    a folder named ``<python package>`` above the config, then the installed package, found
-    without importing it)."""
-    if not raw.startswith("package://"):
-        return confined_file(raw, where, bases, ConfigError, allow_outside)
-    from urllib.parse import unquote
-
-    pkg, _, rel = raw[len("package://"):].partition("/")
-    rel = unquote(rel)
-    if not pkg or not rel.strip("/") or Path(rel).is_absolute() or "\x00" in rel or len(raw) > 4096:
-        raise ConfigError(f"{where}: expected package://<python package>/<path inside it>, got {clip(raw, 120)}")
-    if ".." in Path(rel).parts:
-        raise ConfigError(f"{where}: {clip(raw, 120)}: '..' would lead out of package '{clip(pkg, 60)}'")
-    installed = package_roots(pkg)
-    candidates = package_candidates(pkg, rel, bases[0])
-    if not candidates:
-        hint = f" (pip install {pkg.replace('_', '-')})" if pkg.replace("-", "_").isidentifier() else ""
-        raise ConfigError(f"{where}: {clip(raw, 120)}: Python package '{clip(pkg, 60)}' is not installed{hint}")
-    found = next((c for c in candidates if _is_file(c)), None)
-    if found is None:
-        looked = ", ".join(dict.fromkeys(str(c.parent) for c in candidates))
-        raise ConfigError(f"{where}: {clip(raw, 120)}: no file '{clip(rel, 120)}' in package '{clip(pkg, 60)}' "
-                          f"(looked in {clip(looked, 300)})")
-    # the package named is trusted as a base (an editable install may live outside site-packages);
-    # '..' or a link leading out of it is refused like any path
-    return confined_file(str(found), where, (*bases, *installed), ConfigError, allow_outside)
 
 
 def _finger(value: Any, where: str, palm: str) -> ChainCfg:
@@ -326,6 +298,13 @@ def _mapping(data: Mapping[str, Any], key: str, source: str, what: str) -> Mappi
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{source}: '{key}' must map {what}")
     return raw
+
+
+def _joint_values(data: Mapping[str, Any], key: str, source: str) -> dict[str, float]:
+    """``data[key]``: joint names to numbers (degrees or metres, as written); missing: empty."""
+    return {clip(joint, 80): number_list([value], 1, f"{source}: {key}.{clip(joint, 40)}", ConfigError,
+                                         -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "number")[0]
+            for joint, value in _mapping(data, key, source, "joint names to numbers").items()}
 
 
 def available_robots() -> list[str]:

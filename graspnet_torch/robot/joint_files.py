@@ -31,6 +31,7 @@ class JointValues:
     joints_per_finger: int
     body_joint_names: tuple[str, ...]
     body_joint_types: tuple[str, ...]
+    wrist: dict[str, float]
 
     def finger_all_joint_names(self, name: str) -> tuple[str, ...]:
         """Every movable joint on a finger's URDF chain from the palm to its tip, in chain order:
@@ -159,8 +160,8 @@ class JointValues:
     def joint_values(self, posture: Posture) -> dict[str, float]:
         """Every movable URDF joint's value in a posture (radians / metres), mimic joints at their
         coupled values, joints shared by several fingers where they are held
-        (:attr:`shared_reference`)."""
-        out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True))
+        (:attr:`shared_reference`), a free hand's wrist joints where they are held (:attr:`wrist`)."""
+        out = dict(zip(self.body_joint_names, posture.body.tolist(), strict=True)) | self.wrist
         out.update(self.shared.joint_values(self._shared_rows(posture.shared, 1)[0]))
         for name, values in self.finger_joint_values(posture.fingers, posture.shared).items():
             out.update(zip(self.finger_all_joint_names(name), values, strict=True))

@@ -62,8 +62,7 @@ def link_tree(urdf: UrdfModel) -> LinkTree:
             offsets.append(poses[up] @ step)
             joints.append(j.name)
             types.append(_TYPES[j.type])
-            axis = np.asarray(j.axis if j.axis is not None else (0.0, 0.0, 1.0), dtype=np.float64)
-            axes.append(axis / np.linalg.norm(axis))
+            axes.append(urdf.joint_axis(j.name))
             attach.append(len(joints) - 1)
             poses.append(np.eye(4))
         else:
@@ -86,6 +85,16 @@ class LinkFrames:
     shared: SharedJoints
     body: ChainSpec | None
     body_joint_names: tuple[str, ...]
+    wrist: dict[str, float]
+
+    def root_to_palm(self) -> np.ndarray:
+        """(4, 4) float64 pose of ``palm_link`` in the URDF root link of a free hand, its wrist
+        joints (those between them) held where :attr:`wrist` says: the links above the palm are
+        rigid with it there. A robot with a body has no such pose (its body joints move the palm)."""
+        if "_root_to_palm" not in self.__dict__:
+            self._root_to_palm = self.urdf.transform_at(self.urdf.root_link, self.cfg.palm_link, self.wrist,
+                                                        f"{self.cfg.source}: palm_link")
+        return self._root_to_palm
 
     def link_frames(self, posture: Posture) -> dict[str, np.ndarray]:
         """(4, 4) float64 world pose of every link (the tree kernel; pictures, collision scenes)."""
@@ -130,7 +139,8 @@ class LinkFrames:
                        shared: Tensor | np.ndarray | None = None) -> tuple[list[str], np.ndarray]:
         """The links' names and world poses (B, L, 4, 4) float64 from joints: body (B, m) (a robot
         with a body; else None), fingers (B, F, n) free joints (padded), palm_pose (B, 6) (a free
-        hand's), shared (B, S) (default: where they are held)."""
+        hand's), shared (B, S) (default: where they are held). A free hand's wrist joints are
+        held where :attr:`wrist` says, the links above its palm placed by :meth:`root_to_palm`."""
         if "_link_tree" not in self.__dict__:  # the tree, and where each of its joints' values comes from, once
             self._link_tree = link_tree(self.urdf)
             self._joint_columns = self._joint_sources(self._link_tree.joints)
@@ -146,24 +156,30 @@ class LinkFrames:
                 th[:, c] = body[:, k].detach().cpu().numpy()
             elif kind == "finger":
                 th[:, c] = expanded[k][:, i]
+            elif kind == "wrist":
+                th[:, c] = self.wrist[names[c]]
             elif kind == "shared":
                 leader, m, b = self.shared.followers.get(names[c], (names[c], 1.0, 0.0))
                 th[:, c] = m * s[:, index[leader]] + b
         frames = tree.kernel.frames(torch.as_tensor(th)).numpy()
         if self.body is None:
-            root_to_palm = self.urdf.fixed_transform(self.urdf.root_link, self.cfg.palm_link)
-            world = pose_to_matrix(palm_pose.detach().to(torch.float64).cpu()).numpy() @ np.linalg.inv(root_to_palm)
+            palm = pose_to_matrix(palm_pose.detach().to(torch.float64).cpu()).numpy()
+            world = palm @ np.linalg.inv(self.root_to_palm())
             frames = world[:, None] @ frames
         return list(tree.links), frames
 
     def _joint_sources(self, names: Sequence[str]) -> list[tuple[str, int, int]]:
         """Where each joint's value comes from: ('body', column, 0), ('finger', finger, joint of its
-        whole chain), ('shared', 0, 0) (a shared joint or a follower) or ('none', 0, 0) (held at 0)."""
+        whole chain), ('wrist', 0, 0) (:attr:`wrist`), ('shared', 0, 0) (a shared joint or a
+        follower) or ('none', 0, 0) (held at 0)."""
         body_names = list(self.body_joint_names) if self.body is not None else []
         sources = []
         for name in names:
             if name in body_names:
                 sources.append(("body", body_names.index(name), 0))
+                continue
+            if name in self.wrist:
+                sources.append(("wrist", 0, 0))
                 continue
             for k, f in enumerate(self.fingers.values()):
                 if name in f.chain.all_joint_names:

@@ -28,12 +28,12 @@ from urllib.parse import unquote
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.files import allowed_roots
+from graspnet_torch.files import allowed_roots, confined_file
 from graspnet_torch.meshes import check_mesh_file, load_mesh
 from graspnet_torch.settings import clip
 
 __all__ = ["PICTURE_FACES", "decimate", "load_link_mesh", "mesh_candidates", "mesh_roots", "package_candidates",
-           "package_roots", "resolve_mesh"]
+           "package_roots", "resolve_mesh", "urdf_file"]
 
 PICTURE_FACES = 2000  # meshes with more faces are decimated for pictures
 
@@ -65,6 +65,34 @@ def package_candidates(pkg: str, rel: str, folder: str | Path) -> list[Path]:
     folder = Path(folder).resolve()
     out = [parent / rel for parent in (folder, *folder.parents) if parent.name == pkg]
     return out + [root / rel for root in package_roots(pkg)]
+
+
+def urdf_file(raw: str, where: str, bases: tuple[Path, ...], allow_outside: bool) -> Path:
+    """The URDF a config names: a path (relative to ``bases``, see :func:`confined_file`) or
+    ``package://<python package>/<path>``, resolved like a mesh URI (:func:`package_candidates`:
+    a folder named ``<python package>`` above the config, then the installed package, found
+    without importing it)."""
+    if not raw.startswith("package://"):
+        return confined_file(raw, where, bases, ConfigError, allow_outside)
+    pkg, _, rel = raw[len("package://"):].partition("/")
+    rel = unquote(rel)
+    if not pkg or not rel.strip("/") or Path(rel).is_absolute() or "\x00" in rel or len(raw) > 4096:
+        raise ConfigError(f"{where}: expected package://<python package>/<path inside it>, got {clip(raw, 120)}")
+    if ".." in Path(rel).parts:
+        raise ConfigError(f"{where}: {clip(raw, 120)}: '..' would lead out of package '{clip(pkg, 60)}'")
+    installed = package_roots(pkg)
+    candidates = package_candidates(pkg, rel, bases[0])
+    if not candidates:
+        hint = f" (pip install {pkg.replace('_', '-')})" if pkg.replace("-", "_").isidentifier() else ""
+        raise ConfigError(f"{where}: {clip(raw, 120)}: Python package '{clip(pkg, 60)}' is not installed{hint}")
+    found = next((c for c in candidates if _is_file(c)), None)
+    if found is None:
+        looked = ", ".join(dict.fromkeys(str(c.parent) for c in candidates))
+        raise ConfigError(f"{where}: {clip(raw, 120)}: no file '{clip(rel, 120)}' in package '{clip(pkg, 60)}' "
+                          f"(looked in {clip(looked, 300)})")
+    # the package named is trusted as a base (an editable install may live outside site-packages);
+    # '..' or a link leading out of it is refused like any path
+    return confined_file(str(found), where, (*bases, *installed), ConfigError, allow_outside)
 
 
 def mesh_candidates(uri: str, urdf_path: str | Path) -> list[Path]:

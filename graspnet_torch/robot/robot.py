@@ -60,6 +60,7 @@ class Robot(Kinematics, JointValues, LinkFrames):
         self.urdf = UrdfModel(cfg.urdf, cfg.mesh_roots, cfg.allow_outside_paths)  # checked: robot/urdf_checks.py
         src = cfg.source
         self.urdf.check_link(cfg.palm_link, f"{src}: palm_link")
+        self.wrist: dict[str, float] = self._wrist_values()  # a free hand's wrist joints -> held value (rad or m)
 
         self.shared = self._shared_joints()
         fingers = [self._finger(fname, chain) for fname, chain in cfg.fingers.items()]
@@ -106,6 +107,51 @@ class Robot(Kinematics, JointValues, LinkFrames):
         below_palm = self.urdf.subtree(cfg.palm_link) - {cfg.palm_link}
         tips = {f: c.tip for f, c in cfg.fingers.items() if c.base == cfg.palm_link and c.tip in below_palm}
         return find_shared_joints(self.urdf, cfg.palm_link, tips, cfg.source)
+
+    def _wrist_values(self) -> dict[str, float]:
+        """A free hand's wrist: every movable joint between the URDF root and ``palm_link`` -> the
+        value it is held at (rad or m): the config's ``wrist`` (degrees or metres), else 0; a mimic
+        joint at its leader's coupled value. {} for a robot with an arm. Raises ConfigError for a
+        ``wrist`` joint not on that path or a mimic one, and for a value (given, or the default 0)
+        outside the joint's limits."""
+        cfg, urdf = self.cfg, self.urdf
+        if cfg.arm is not None:
+            return {}
+        src, root, palm, mimic = cfg.source, urdf.root_link, cfg.palm_link, urdf.mimic_joints
+        path = [j for j in urdf.path_joints(root, palm, f"{src}: palm_link") if j.type != "fixed"]
+        names = [j.name for j in path]
+        for name in cfg.wrist:
+            if name not in names:
+                raise ConfigError(f"{src}: wrist.{name}: not a movable joint between the URDF root '{root}' and "
+                                  f"palm_link '{palm}' (those are: {', '.join(names) or 'none'})")
+            if name in mimic:
+                raise ConfigError(f"{src}: wrist.{name}: a mimic joint of '{mimic[name][0]}', which it follows; "
+                                  f"set wrist.{mimic[name][0]}")
+        out = {}
+        for j in path:
+            if j.name in mimic:
+                continue
+            given = cfg.wrist.get(j.name, 0.0)
+            unit = 1.0 if j.type == "prismatic" else math.pi / 180  # file units -> m or rad
+            lo, hi = urdf.joint_limits(j.name)
+            if j.type != "continuous" and not lo - 1e-9 <= given * unit <= hi + 1e-9:
+                limits = f"[{lo / unit:g}, {hi / unit:g}] {'m' if j.type == 'prismatic' else 'degrees'}"
+                raise ConfigError(f"{src}: wrist.{j.name}: {given:g} is outside the joint's limits {limits}"
+                                  if j.name in cfg.wrist else
+                                  f"{src}: wrist joint '{j.name}' (between '{root}' and palm_link '{palm}') is held "
+                                  f"at 0 by default, outside its limits {limits}; set wrist.{j.name}")
+            out[j.name] = min(max(given * unit, lo), hi) if j.type != "continuous" else given * unit
+        todo = [name for name in names if name in mimic]
+        while todo:  # mimic joints, each once its leader has a value
+            ready = [name for name in todo if mimic[name][0] in out]
+            if not ready:
+                raise ConfigError(f"{src}: wrist joint '{todo[0]}' mimics '{mimic[todo[0]][0]}', which is not "
+                                  f"between the URDF root '{root}' and palm_link '{palm}'")
+            for name in ready:
+                leader, m, b = mimic[name]
+                out[name] = m * out[leader] + b
+                todo.remove(name)
+        return {name: out[name] for name in names}
 
     @cached_property
     def shared_reference(self) -> np.ndarray:

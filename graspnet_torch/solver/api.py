@@ -111,7 +111,8 @@ def _stamp(path: Path | None) -> tuple[int, int] | None:
     return None if stat is None else (stat.st_size, stat.st_mtime_ns)
 
 
-KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision")
+KINEMATIC_KEYS = ("urdf", "palm_link", "fingers", "arm", "mobile_base", "gripper_points", "floor", "self_collision",
+                  "wrist")
 
 
 def as_robot(robot: str | Path | RobotCfg | Robot) -> Robot:
