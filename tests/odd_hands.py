@@ -104,7 +104,8 @@ def write_oddhand(folder: Path, **changes) -> Path:
 
 def pk_fingertips_palm(robot, q):
     """Fingertips in the palm frame by pytorch-kinematics on the whole URDF: every joint set,
-    mimic joints computed here from the URDF's own numbers, tip offset applied. q: (B, F, n)."""
+    mimic joints computed here from the URDF's own numbers, the robot's tip offsets applied (the config's,
+    moved onto the pads' normal lines: robot/pads.py). q: (B, F, n)."""
     import pytorch_kinematics as pk
 
     chain = pk.build_chain_from_urdf(robot.urdf.path.read_bytes()).to(dtype=torch.float64)
@@ -121,7 +122,7 @@ def pk_fingertips_palm(robot, q):
     out = []
     for f in robot.fingers.values():
         T = torch.linalg.solve(palm, frames[f.chain.tip].get_matrix())
-        offset = torch.tensor([*(MIDDLE_TIP_OFFSET if f.name == "middle" else (0, 0, 0)), 1.0], dtype=torch.float64)
+        offset = torch.tensor([*(robot.cfg.fingers[f.name].tip_offset or (0, 0, 0)), 1.0], dtype=torch.float64)
         out.append((T @ offset)[:, :3])
     return torch.stack(out, dim=1)
 

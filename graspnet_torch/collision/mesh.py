@@ -150,7 +150,8 @@ def _closest(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.n
         (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)]
     out = np.empty((len(px), 3))
     for k, (A, AB, AC, B, C) in enumerate(((ax, abx, acx, bx, cx), (ay, aby, acy, by, cy), (az, abz, acz, bz, cz))):
-        closest = A + AB * v_face + AC * w_face  # inside the face
+        with np.errstate(invalid="ignore"):  # a degenerate triangle's face point (nan): one of the regions wins
+            closest = A + AB * v_face + AC * w_face  # inside the face
         for cond, point in zip(reversed(regions), (B + (C - B) * w_bc, A + AC * w_ac, A + AB * v_ab, C, B, A),
                                strict=True):
             closest = np.where(cond, point, closest)

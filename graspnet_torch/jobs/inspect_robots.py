@@ -1,5 +1,6 @@
-"""Load robots (shipped or by path), print a summary table and draw each at its home posture and,
-for a robot with fingers, with its thumb (else its first finger) opposed to one or two others."""
+"""Load robots (shipped or by path), print a summary table and draw each at its home posture, with
+its fingers' pads (point and normal), and, for a robot with fingers, with its opposing finger (the
+thumb of a human-like hand, found from its kinematics) opposed to one or two others."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -16,6 +18,7 @@ from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
 from graspnet_torch.least_squares import levenberg_marquardt
 from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
+from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
 from graspnet_torch.viz import Panel, render_robot
@@ -24,12 +27,14 @@ __all__ = [
     "inspect_robots",
     "opposing_fingers",
     "opposition_posture",
+    "pad_arrows",
     "pinch_posture",
     "prepare_inspect",
     "robot_summary",
 ]
 
 MAX_OPPOSITIONS = 2  # opposition panels per robot
+PAD_ARROW_M = 0.025  # how long a pad's normal is drawn (m)
 
 
 def robot_summary(robot: Robot) -> dict[str, object]:
@@ -39,13 +44,34 @@ def robot_summary(robot: Robot) -> dict[str, object]:
 
 
 def opposing_fingers(robot: Robot) -> list[tuple[str, str]]:
-    """(first, other) finger pairs to oppose: the thumb (else the first finger) and each other
-    finger, at most ``MAX_OPPOSITIONS``; none for a robot with fewer than two fingers."""
+    """(first, other) finger pairs to oppose: the opposing finger (:func:`~graspnet_torch.robot.opposition.hand_axes`;
+    the first finger where none opposes) and its nearest others, at most ``MAX_OPPOSITIONS``; none
+    for a robot with fewer than two fingers."""
     names = list(robot.finger_names)
     if len(names) < 2:
         return []
-    first = "thumb" if "thumb" in names else names[0]
-    return [(first, other) for other in names if other != first][:MAX_OPPOSITIONS]
+    try:
+        order = list(hand_axes(robot).order)
+    except ConfigError:
+        order = names
+    return [(order[0], other) for other in order[1:]][:MAX_OPPOSITIONS]
+
+
+def pad_arrows(robot: Robot, posture: Posture, length: float = PAD_ARROW_M) -> tuple[np.ndarray, np.ndarray]:
+    """Every finger's pad at ``posture``, world: its points (F, 3) and its normals as segments
+    (F, 2, 3) ``length`` (m) long from the points; none for a robot without pads."""
+    if not robot.pads:
+        return np.zeros((0, 3)), np.zeros((0, 2, 3))
+    frames = robot.link_frames(posture)
+    points, arrows = [], []
+    for name, pad in robot.pads.items():
+        cfg = robot.cfg.fingers[name]
+        T = frames[cfg.tip].copy()
+        T[:3, 3] = T[:3, :3] @ np.asarray(cfg.tip_offset or (0.0, 0.0, 0.0)) + T[:3, 3]
+        p = T[:3, :3] @ pad.point + T[:3, 3]
+        points.append(p)
+        arrows.append([p, p + length * (T[:3, :3] @ pad.normal)])
+    return np.asarray(points), np.asarray(arrows)
 
 
 def _base_rotations(robot: Robot, dtype: torch.dtype) -> torch.Tensor:
@@ -101,8 +127,8 @@ def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: i
 
 
 def pinch_posture(robot: Robot, finger: str, start: Posture) -> tuple[Posture, float]:
-    """``finger`` opposed to the thumb (else the first finger): :func:`opposition_posture`."""
-    first = "thumb" if "thumb" in robot.finger_names else robot.finger_names[0]
+    """``finger`` opposed to the opposing finger (:func:`opposing_fingers`): :func:`opposition_posture`."""
+    first = opposing_fingers(robot)[0][0]
     return opposition_posture(robot, first, finger, start)
 
 
@@ -126,7 +152,9 @@ def _panels(robot: Robot, row: dict) -> list:
     pairs = opposing_fingers(robot)
     focus = hand_links(robot)  # the palm and its fingers (the whole robot for a free hand)
     if pairs:
-        panels.append(Panel(f"{name}: home, side view", home, (15.0, -15.0), focus=focus))
+        points, arrows = pad_arrows(robot, home)
+        panels.append(Panel(f"{name}: home, side view; pads (green: normals)", home, (15.0, -15.0), markers=points,
+                            focus=focus, arrows=arrows))
     for a, b in pairs:
         posture, gap = opposition_posture(robot, a, b, home)
         panels.append(Panel(f"{a}-{b} opposition (gap {gap * 1000:.2f} mm)", posture, (10.0, 20.0), focus=focus))

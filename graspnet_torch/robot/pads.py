@@ -35,7 +35,7 @@ degrees in 0.1 % of random pinches, the given side in about a third (``tests/rob
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -49,9 +49,10 @@ from graspnet_torch.robot.geometry import link_shapes, support
 from graspnet_torch.robot.shape import primitive_mesh
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
-__all__ = ["TIE", "Pad", "closing_sense", "finger_pads"]
+__all__ = ["SHIFT_M", "TIE", "Pad", "centred_config", "closing_sense", "derived_pad", "finger_pads"]
 
 TIE = 5e-4  # m: support points within this of the largest n . x are ties
+SHIFT_M = 1e-6  # m: a pad point this far off its tip's normal line moves the tip onto that line (centred_config)
 SAMPLES = 4000  # surface points per shape where the normal line does not decide
 
 
@@ -106,6 +107,45 @@ def finger_pads(robot: _Robot) -> dict[str, Pad]:
         normal = _closing_direction(robot, name, finger, home[k, :finger.n_joints])
         out[name] = _derived(robot, finger.chain, tip_in_link, normal, shapes)
     return out
+
+
+def centred_config(robot: _Robot, pads: dict[str, Pad]) -> RobotCfg | None:
+    """The robot's config with each finger's tip moved onto its pad's normal line, or None where
+    every pad ``pads`` (:func:`finger_pads`) lies on it already (within ``SHIFT_M``).
+
+    The surface contact model puts a finger's pad on its contact as the sphere of radius ``depth``
+    about the tip point (``tip + depth * outward normal`` on the contact); a pad point off the line
+    through the tip along the pad normal (a tip frame at the end of a rounded fingertip, as the
+    Allegro's, or at a knuckle, as the D'Claw's) would leave the real pad that far from where the
+    model puts it. So the tip point is moved, in its link's frame, by the pad point's part across
+    the normal (the config's ``tip_offset`` plus that part), and the pad is given at the same place
+    on the same link (``pad:``): in the new tip frame its point is ``depth * normal``. Every part
+    of the package then reads the one tip point (kinematics, the FCNN, the point and surface
+    models, the results)."""
+    fingers = dict(robot.cfg.fingers)
+    for name, pad in pads.items():
+        across = pad.point - (pad.point @ pad.normal) * pad.normal
+        if not float(np.linalg.norm(across)) >= SHIFT_M:
+            continue
+        chain = fingers[name]
+        offset = (np.zeros(3) if chain.tip_offset is None else np.asarray(chain.tip_offset, dtype=np.float64)) + across
+        tip_in_link = pose_to_matrix_np([*offset, 0.0, 0.0, 0.0])
+        T = np.linalg.inv(_link_in_tip(robot, pad.link, chain.tip, tip_in_link))  # the new tip frame -> the link
+        point, normal = T[:3, :3] @ (pad.point - across) + T[:3, 3], T[:3, :3] @ pad.normal
+        fingers[name] = replace(chain, tip_offset=tuple(float(v) for v in offset),
+                                pad=PadCfg(pad.link, tuple(float(v) for v in point), tuple(float(v) for v in normal)))
+    return replace(robot.cfg, fingers=fingers) if fingers != dict(robot.cfg.fingers) else None
+
+
+def derived_pad(robot: _Robot, name: str, normal: np.ndarray) -> Pad:
+    """The pad of finger ``name`` facing ``normal`` (3,), unit, in its tip frame: on its distal
+    link's collision surface, where it reaches farthest along ``normal`` (module docstring)."""
+    cfg = robot.cfg.fingers[name]
+    tip_in_link = np.eye(4) if cfg.tip_offset is None else pose_to_matrix_np([*cfg.tip_offset, 0, 0, 0])
+    shapes: dict[str, list] = {}
+    for s in link_shapes(robot.urdf, "collision"):
+        shapes.setdefault(s.link, []).append(s)
+    return _derived(robot, robot.fingers[name].chain, tip_in_link, normal, shapes)
 
 
 def _rigid_links(robot: _Robot, tip: str, root: str) -> list[str]:

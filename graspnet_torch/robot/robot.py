@@ -36,7 +36,8 @@ from graspnet_torch.robot.kernel import ChainKernel
 from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.kinematics import Kinematics
 from graspnet_torch.robot.link_frames import LinkFrames
-from graspnet_torch.robot.pads import Pad, finger_pads
+from graspnet_torch.robot.opposition import facing_pads
+from graspnet_torch.robot.pads import Pad, centred_config, finger_pads
 from graspnet_torch.robot.shared import SharedJoints, find_shared_joints
 from graspnet_torch.robot.structure import Finger, Posture
 from graspnet_torch.robot.transforms import pose_to_matrix_np, rt_to_pose
@@ -98,6 +99,16 @@ class Robot(Kinematics, JointValues, LinkFrames):
         elif cfg.gripper_points:
             raise ConfigError(f"{src}: gripper_points need an arm")
         self._consts: dict[tuple, dict[str, Tensor]] = {}
+        if self.fingers:  # each tip on its pad's normal line (robot/pads.py, centred_config)
+            try:
+                pads = facing_pads(self, finger_pads(self))
+            except ConfigError:  # a pad that cannot be derived (a distal link's mesh missing): said where pads
+                return  # are used (the property below), as a robot without pads works for the point model
+            centred = centred_config(self, pads)
+            if centred is not None:
+                self.__init__(centred)
+                return
+            self.__dict__["pads"] = pads  # the cached property's value
 
     def _shared_joints(self) -> SharedJoints:
         """The joints that move more than one finger (:mod:`graspnet_torch.robot.shared`), among
@@ -284,8 +295,10 @@ class Robot(Kinematics, JointValues, LinkFrames):
     @cached_property
     def pads(self) -> dict[str, Pad]:
         """Finger name -> its :class:`~graspnet_torch.robot.pads.Pad` (a point and outward normal in
-        the finger's tip frame: the config's ``pad``, else derived from the URDF); {} without fingers."""
-        return finger_pads(self)
+        the finger's tip frame: the config's ``pad``, else derived from the URDF, the opposing
+        finger's facing the others: :func:`~graspnet_torch.robot.opposition.facing_pads`); {} without
+        fingers."""
+        return facing_pads(self, finger_pads(self))
 
     @property
     def palm_bounds(self) -> PoseBounds | None:

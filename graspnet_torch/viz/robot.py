@@ -120,9 +120,9 @@ def _frame_axes(ax, points: np.ndarray, elev: float, azim: float, title: str) ->
 @dataclass(frozen=True)
 class Panel:
     """One picture panel: a posture seen from (elevation, azimuth) degrees, with optional red
-    markers (N, 3) in the world (e.g. contact points), trimesh meshes (objects, obstacles), the
-    links to draw red (colliding) and the links to draw (``focus``; empty: all), e.g. the hand at
-    the end of an arm."""
+    markers (N, 3) in the world (e.g. contact points), green arrows (pad normals), trimesh meshes
+    (objects, obstacles), the links to draw red (colliding) and the links to draw (``focus``;
+    empty: all), e.g. the hand at the end of an arm."""
 
     caption: str
     posture: Posture
@@ -131,6 +131,7 @@ class Panel:
     meshes: tuple = ()
     red_links: frozenset[str] = frozenset()
     focus: frozenset[str] = frozenset()
+    arrows: np.ndarray | None = None  # (N, 2, 3) green segments from [:, 0] to [:, 1] in the world (pad normals)
 
 
 def draw_mesh(ax, mesh, color=(0.45, 0.65, 0.9), alpha: float = 0.35) -> np.ndarray:
@@ -189,6 +190,10 @@ def render_robot(robot: Robot, panels: Sequence[Panel], path: str | Path, title:
             mk = np.asarray(panel.markers)
             ax.scatter(mk[:, 0], mk[:, 1], mk[:, 2], color="red", s=14, depthshade=False)
             pts = np.concatenate([pts, mk])
+        if panel.arrows is not None and len(panel.arrows):
+            for a, b in np.asarray(panel.arrows):
+                ax.plot(*np.stack([a, b]).T, color="green", linewidth=1.6)
+            pts = np.concatenate([pts, np.asarray(panel.arrows).reshape(-1, 3)])
         _frame_axes(ax, pts, *panel.view, panel.caption)
     if title:
         fig.suptitle(title, fontsize=11)

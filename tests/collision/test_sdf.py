@@ -3,10 +3,12 @@ mesh's distance (analytic) and inside (its extents), also where its faces lie on
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import trimesh
 
-from graspnet_torch.collision.mesh import mesh_query
+from graspnet_torch.collision.mesh import closest_points, mesh_query
 from graspnet_torch.collision.sdf import BAND_M, CELL_M, MAX_CELLS, distance_grid
 from graspnet_torch.robot.shape import Shape
 
@@ -114,3 +116,16 @@ def test_a_point_beyond_the_grid_reads_its_nearest_grid_point_plus_the_way_there
     np.testing.assert_allclose(beyond, grid(clamped) + np.linalg.norm(far - clamped, axis=1), atol=1e-12)
     near = rng.uniform(-1.2, 1.2, (50, 3)) * half
     np.testing.assert_array_equal(grid(np.concatenate([near, far]))[:50], grid(near))
+
+
+def test_nearly_flat_triangles_give_a_finite_point_without_a_warning():
+    """Triangles whose corners are collinear to round-off (a mesh's slivers): a finite point, with no
+    numpy warning on stderr ('invalid value encountered in add' before)."""
+    rng = np.random.default_rng(0)
+    n = 20000
+    a, d, p = rng.uniform(-0.05, 0.05, (n, 3)), rng.uniform(-0.01, 0.01, (n, 3)), rng.uniform(-0.05, 0.05, (n, 3))
+    s = rng.uniform(-2, 3, n)  # c = a + s d: on the line through a and b = a + d
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = closest_points(p, a, a + d, a + s[:, None] * d)
+    assert np.isfinite(got).all()

@@ -16,7 +16,14 @@ from graspnet_torch.fcnn.checkpoint import chain_fingerprint
 from graspnet_torch.robot.fingers import FingerKernel
 from graspnet_torch.robot.kernel import ChainKernel
 from tests.conftest import uniform
-from tests.odd_hands import MIMIC, assert_jacobian_matches_fd, oddhand_config, pk_fingertips_palm, write_oddhand
+from tests.odd_hands import (
+    MIDDLE_TIP_OFFSET,
+    MIMIC,
+    assert_jacobian_matches_fd,
+    oddhand_config,
+    pk_fingertips_palm,
+    write_oddhand,
+)
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +47,8 @@ def test_structure_free_joints_padding_and_mimic(odd):
 
 
 def test_fingertips_match_pytorch_kinematics_with_mimic_and_offset(odd, gen):
+    moved = np.subtract(odd.cfg.fingers["middle"].tip_offset, MIDDLE_TIP_OFFSET)  # onto its pad's normal line only
+    assert abs(float(moved @ odd.pads["middle"].normal)) < 1e-12
     q = uniform(*odd.finger_limits, 64, gen)  # pytorch-kinematics keeps joint origins in float32: ~1e-8 m
     np.testing.assert_allclose(odd.fingertips_palm(q).numpy(), pk_fingertips_palm(odd, q).numpy(), atol=5e-8)
     q32 = q.float()

@@ -5,6 +5,8 @@ cannot oppose is refused in one line by the synthesis command."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -86,3 +88,37 @@ def test_fingers_that_cannot_oppose_are_refused_naming_their_angles(tmp_path):
     line = refused(tmp_path, "synthesize_grasps.py", f"robot={config}", f"objects={mesh}", f"out={out}",
                    message="no finger's pad opposes the others'")
     assert "two_alike.yaml: fingers:" in line and not out.exists()
+
+
+def test_a_thumb_whose_closing_side_faces_away_gets_its_pad_on_the_side_that_faces_the_fingers():
+    robot = gt.load_robot(EXAMPLES / "allegro_hand" / "allegro_hand_right.yaml")
+    assert hand_axes(robot).opposing == "thumb" and robot.cfg.fingers["thumb"].pad is not None
+    lo, hi = (torch.as_tensor(np.asarray(a)) for a in robot.finger_limits)
+    home = robot.home_posture()
+    postures = [home.fingers, *(lo + u * (hi - lo) for u in (0.25, 0.5, 0.75))]
+
+    def closing(q):  # the thumb tip's move as its last joint turns toward the palm (finite differences), tip frame
+        k, n = robot.finger_index("thumb"), robot.fingers["thumb"].n_joints
+        moves = []
+        for sign in (1.0, -1.0):
+            moved = q.clone()
+            moved[k, n - 1] += sign * 1e-6
+            moves.append(robot.fingertips_palm(moved)[k] - robot.fingertips_palm(q)[k])
+        tip = robot.fingertips_palm(q)[k]
+        move = min(moves, key=lambda m: float((tip + m).norm()))  # nearer the palm frame's origin
+        R = robot.link_frames(replace(home, fingers=q))[robot.cfg.fingers["thumb"].tip][:3, :3]
+        return R.T @ (move / move.norm()).numpy()
+
+    def least_opposition(thumb_normal):  # the thumb's pad normal against the others', at its best posture
+        out = []
+        for q in postures:
+            frames = robot.link_frames(replace(home, fingers=q))
+            n = [frames[robot.cfg.fingers[f].tip][:3, :3] @ robot.pads[f].normal for f in robot.finger_names[1:]]
+            R = frames[robot.cfg.fingers["thumb"].tip][:3, :3]
+            out.append(float((R @ (closing(q) if thumb_normal is None else thumb_normal)) @ np.mean(n, axis=0)))
+        return min(out)
+
+    facing = least_opposition(robot.pads["thumb"].normal)
+    assert facing < -0.9 and facing < least_opposition(None) - 0.2  # its closing side faces the fingers far less
+    for f in robot.finger_names[1:]:  # the others' pads stay on their closing sides
+        np.testing.assert_allclose(robot.pads[f].normal, robot.pads["index"].normal, atol=1e-9)

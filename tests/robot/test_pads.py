@@ -194,21 +194,26 @@ def _hand_with(tmp_path, finger: str = "index", **chain) -> gt.Robot:
 
 def test_a_config_pad_is_read_and_moved_into_the_tip_frame(tmp_path):
     robot = _hand_with(tmp_path, pad={"link": "index_distal", "point": [0.015, 0.007, 0.001], "normal": [0, 2, 0]})
-    cfg = robot.cfg.fingers["index"].pad
-    assert cfg.link == "index_distal" and cfg.normal == (0.0, 1.0, 0.0)
+    cfg = robot.cfg.fingers["index"]
+    assert cfg.pad.link == "index_distal" and cfg.pad.normal == (0.0, 1.0, 0.0)
+    np.testing.assert_allclose(cfg.pad.point, [0.015, 0.007, 0.001], atol=1e-12)  # where the config put it, on its link
+    # the pad point lies off the tip's normal line: the tip (x = 0.01843 on the link) moves across onto it
+    np.testing.assert_allclose(cfg.tip_offset, [0.015 - 0.01843, 0.0, 0.001], atol=1e-12)
     pad = robot.pads["index"]
     assert pad.link == "index_distal"
-    np.testing.assert_allclose(pad.point, [0.015 - 0.01843, 0.007, 0.001], atol=1e-12)  # tip: x = 0.01843 on it
+    np.testing.assert_allclose(pad.point, [0.0, 0.007, 0.0], atol=1e-12)
     np.testing.assert_allclose(pad.normal, [0.0, 1.0, 0.0])
     assert pad.depth == pytest.approx(0.007)
     assert robot.pads["middle"].depth == pytest.approx(0.007225)  # the others are still derived
+    assert robot.cfg.fingers["middle"].tip_offset is None  # and on their tips' normal lines
 
 
 def test_a_config_pad_on_the_tip_link_with_a_tip_offset(tmp_path):
     robot = _hand_with(tmp_path, tip={"link": "index_distal", "offset": [0.01, 0.0, 0.0]},
                        pad={"link": "index_distal", "point": [0.01843, 0.0, 0.007225], "normal": [0, 0, 1]})
     pad = robot.pads["index"]
-    np.testing.assert_allclose(pad.point, [0.00843, 0.0, 0.007225], atol=1e-12)
+    np.testing.assert_allclose(robot.cfg.fingers["index"].tip_offset, [0.01843, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(pad.point, [0.0, 0.0, 0.007225], atol=1e-12)
     np.testing.assert_allclose(pad.normal, [0.0, 0.0, 1.0])
     derived = _hand_with(tmp_path, tip={"link": "index_distal", "offset": [0.01843, 0.0, 0.0]}).pads["index"]
     np.testing.assert_allclose(derived.point, [0.0, 0.007225, 0.0], atol=1e-9)
