@@ -12,7 +12,7 @@ one of its ancestors rigidly attached to it (only fixed joints between them), so
 constant in the tip frame. Otherwise the pad is *derived* from the URDF:
 
 - the *distal link*: the nearest link at or above the tip, rigidly attached to it, that has
-  collision geometry (none: the tip link, and the pad is the tip frame's origin, depth 0);
+  collision geometry (none: refused in one line naming the finger and what to give);
 - the *normal*: the direction the tip moves when the finger's last free joint closes (the sense,
   increasing or decreasing, whose limit puts the tip nearer the palm frame's origin:
   :func:`closing_sense`), from the finger kernel's Jacobian at the home posture, in the tip frame
@@ -105,7 +105,7 @@ def finger_pads(robot: _Robot) -> dict[str, Pad]:
             for s in link_shapes(robot.urdf, "collision"):
                 shapes.setdefault(s.link, []).append(s)
         normal = _closing_direction(robot, name, finger, home[k, :finger.n_joints])
-        out[name] = _derived(robot, finger.chain, tip_in_link, normal, shapes)
+        out[name] = _derived(robot, name, tip_in_link, normal, shapes)
     return out
 
 
@@ -145,7 +145,7 @@ def derived_pad(robot: _Robot, name: str, normal: np.ndarray) -> Pad:
     shapes: dict[str, list] = {}
     for s in link_shapes(robot.urdf, "collision"):
         shapes.setdefault(s.link, []).append(s)
-    return _derived(robot, robot.fingers[name].chain, tip_in_link, normal, shapes)
+    return _derived(robot, name, tip_in_link, normal, shapes)
 
 
 def _rigid_links(robot: _Robot, tip: str, root: str) -> list[str]:
@@ -218,12 +218,18 @@ def _closing_direction(robot: _Robot, name: str, finger: Any, q: np.ndarray) -> 
     return v / norm
 
 
-def _derived(robot: _Robot, chain: Any, tip_in_link: np.ndarray, normal: np.ndarray, shapes: dict) -> Pad:
-    """The pad on the distal link's collision surface (module docstring)."""
+def _derived(robot: _Robot, name: str, tip_in_link: np.ndarray, normal: np.ndarray, shapes: dict) -> Pad:
+    """The pad of finger ``name`` on its distal link's collision surface (module docstring);
+    :class:`ConfigError` where no link from its tip up to its last movable joint has any."""
+    chain = robot.fingers[name].chain
     tip = chain.tip
-    distal = next((link for link in _rigid_links(robot, tip, chain.root) if shapes.get(link)), None)
+    rigid = _rigid_links(robot, tip, chain.root)
+    distal = next((link for link in rigid if shapes.get(link)), None)
     if distal is None:
-        return Pad(tip, np.zeros(3), normal)
+        raise ConfigError(f"{robot.cfg.source}: fingers.{name}: no pad can be derived: none of its links "
+                          f"{', '.join(repr(x) for x in rigid)} (its tip, rigidly attached) has collision geometry; "
+                          f"give the link a <collision> in the URDF, or give fingers.{name}.pad: {{link: <link>, "
+                          f"point: [x, y, z], normal: [nx, ny, nz]}}")
     T = _link_in_tip(robot, distal, tip, tip_in_link)
     placed = [(s, T @ s.origin) for s in shapes[distal]]
     height = max(support(s, P, normal) for s, P in placed)

@@ -122,3 +122,28 @@ def test_a_thumb_whose_closing_side_faces_away_gets_its_pad_on_the_side_that_fac
     assert facing < -0.9 and facing < least_opposition(None) - 0.2  # its closing side faces the fingers far less
     for f in robot.finger_names[1:]:  # the others' pads stay on their closing sides
         np.testing.assert_allclose(robot.pads[f].normal, robot.pads["index"].normal, atol=1e-9)
+
+
+def test_a_finger_with_no_geometry_and_no_pad_is_refused_naming_it(tmp_path):
+    urdf = (repo_root() / "urdf" / "hand" / "hand.urdf").read_text()
+    start = urdf.index('<link name="index_distal">')
+    end = urdf.index("</link>", start)
+    link = urdf[start:end]
+    bare = link
+    while "<collision" in bare:  # the index finger's distal link without its collision shapes
+        a = bare.index("<collision")
+        bare = bare[:a] + bare[bare.index("</collision>", a) + len("</collision>"):]
+    (tmp_path / "robot").mkdir()
+    (tmp_path / "robot" / "bare.urdf").write_text(urdf[:start] + bare + urdf[end:])
+    data = yaml.safe_load((configs_dir() / "robot" / "hand.yaml").read_text())
+    data.update(name="bare", urdf="bare.urdf")
+    config = tmp_path / "robot" / "bare.yaml"
+    config.write_text(yaml.safe_dump(data))
+    mesh = tmp_path / "ball.obj"
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=2, radius=0.03).export(mesh)
+    out = tmp_path / "out"
+    line = refused(tmp_path, "synthesize_grasps.py", f"robot={config}", f"objects={mesh}", f"out={out}",
+                   message="fingers.index: no pad can be derived")
+    assert "'index_distal'" in line and "fingers.index.pad" in line and not out.exists()

@@ -197,3 +197,17 @@ def test_the_physics_model_holds_the_forearm_where_the_wrist_puts_it(wrist_hand)
         body = model.body(link).id
         np.testing.assert_allclose(data.xpos[body], T[:3, 3], atol=1e-6, err_msg=link)
         np.testing.assert_allclose(data.xmat[body].reshape(3, 3), T[:3, :3], atol=1e-6, err_msg=link)
+
+
+def test_a_wrist_outside_its_limits_is_refused_by_the_command_with_exit_2(tmp_path):
+    from tests.refusals import refused
+
+    path = write_wrist_hand(tmp_path / "robot", {"wrj2": 30})
+    mesh = tmp_path / "ball.obj"
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=2, radius=0.03).export(mesh)
+    out = tmp_path / "out"
+    refused(tmp_path, "synthesize_grasps.py", f"robot={path}", f"objects={mesh}", f"out={out}",
+            message="wrist.wrj2: 30 is outside the joint's limits")
+    assert not out.exists()
