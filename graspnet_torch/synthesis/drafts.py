@@ -61,7 +61,6 @@ GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
-HOLDER_COS = math.cos(math.radians(45.0))  # home fingertips within 45 degrees of the palm's front: a holder
 HOLDER_SPREAD = 0.2  # a palm without a box: how far off the fingers' mean axis the object is drawn (share
 # of the home fingertips' distance from it)
 NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
@@ -98,9 +97,7 @@ def _palm_front(robot: Robot, rows: list[int], front: np.ndarray) -> tuple[np.nd
     cylinders, spheres, meshes): the front is ``front`` (3,), the side the fingers close toward
     (:func:`~graspnet_torch.robot.opposition.hand_axes`), the face the palm's surface farthest
     along it; the object within the fingertips' reach over their joint limits. A palm without
-    any (a holder the fingers hang from, as TriFinger's), or one whose home fingertips lie within
-    ``acos(HOLDER_COS)`` of its front (fingers that reach out from the palm's face and close around
-    an object there, as the D'Claw's and the Barrett hand's): the axis
+    any (a holder the fingers hang from, as TriFinger's): the axis
     from the palm origin to the home fingertips' mean, the face at the fingertips' median reach
     along it (over their joints' limits and midpoints), the object within ``HOLDER_SPREAD`` of the
     home fingertips' distance from their mean axis: it hangs among the fingers, where they close."""
@@ -109,7 +106,7 @@ def _palm_front(robot: Robot, rows: list[int], front: np.ndarray) -> tuple[np.nd
     tips = tips_all.mean(axis=0)
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     palm = [s for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link]
-    if not palm or front @ tips >= HOLDER_COS * np.linalg.norm(tips):  # no palm, or fingers that reach out in front
+    if not palm:
         front = tips / np.linalg.norm(tips)
         grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
         q = lo[None] + grid[:, None, :] * (hi - lo)[None]  # (G, F, n): every finger at each grid point
