@@ -15,11 +15,11 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError, ProblemError
 from graspnet_torch.physics import DIRECTIONS, PhysicsCfg, PhysicsReport, simulate_grasp
-from graspnet_torch.physics.model import grasp_mjcf
 from graspnet_torch.robot.ik import refine
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.solver.result import GraspResult
 from tests.mesh_robots import mesh_hand_urdf, write_box_mesh, write_robot
+from tests.mujoco_models import posed_model
 from tests.odd_hands import MIMIC, write_oddhand
 
 needs_mujoco = pytest.mark.skipif(importlib.util.find_spec("mujoco") is None,
@@ -206,14 +206,7 @@ def test_a_problem_without_an_object_is_refused(pinch):
 # ---------------------------------------------------------------------------- the model
 def _frames_agree(robot, posture, obj) -> None:
     """The compiled model's bodies sit where the package's forward kinematics puts the links."""
-    import mujoco
-
-    built = grasp_mjcf(robot, obj, posture, posture, PhysicsCfg())
-    model = mujoco.MjModel.from_xml_string(built.xml)
-    data = mujoco.MjData(model)
-    for name, value in built.start.items():
-        data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
-    mujoco.mj_forward(model, data)
+    model, data, built = posed_model(robot, obj, posture)
     for link, T in robot.link_frames(posture).items():
         body = model.body("urdf_world" if link == "world" else link).id
         np.testing.assert_allclose(data.xpos[body], T[:3, 3], atol=1e-9, err_msg=link)

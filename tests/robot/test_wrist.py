@@ -24,6 +24,7 @@ from graspnet_torch.robot.config import RobotCfg
 from graspnet_torch.robot.frames import link_attachments
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
+from tests.mujoco_models import posed_model
 
 WRIST_LIMITS = {"wrj2": (-0.5, 0.2), "wrj1": (-0.7, 0.5)}  # rad
 PALM = np.array([0.1, -0.2, 0.3, 0.4, -0.5, 0.6])  # a palm pose (m, rad)
@@ -177,19 +178,9 @@ def test_a_hand_without_a_wrist_is_unchanged(hand):
 
 @needs_mujoco
 def test_the_physics_model_holds_the_forearm_where_the_wrist_puts_it(wrist_hand):
-    import mujoco
-
-    from graspnet_torch.physics import PhysicsCfg
-    from graspnet_torch.physics.model import grasp_mjcf
-
     obj = Shape.from_mapping({"shape": "sphere", "size": [0.03], "pose": [0.3, 0, 0, 0, 0, 0]}, "object")
     posture = posture_of(wrist_hand)
-    built = grasp_mjcf(wrist_hand, obj, posture, posture, PhysicsCfg())
-    model = mujoco.MjModel.from_xml_string(built.xml)
-    data = mujoco.MjData(model)
-    for name, value in built.start.items():
-        data.qpos[model.jnt_qposadr[model.joint(name).id]] = value
-    mujoco.mj_forward(model, data)
+    model, data, _ = posed_model(wrist_hand, obj, posture)
     joints = {model.joint(k).name for k in range(model.njnt)}
     assert not joints & {"wrj1", "wrj2"} and model.nu == len(wrist_hand.urdf.movable_joint_names) - 2  # welded
     expected = oracle_frames(wrist_hand, posture, ["forearm", "wrist_link", "palm"])
