@@ -90,11 +90,11 @@ class ContactSet:
         return iter((self.contacts, self.normals, self.posture))
 
 
-def _palm_front(robot: Robot, rows: list[int], front: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray]:
     """The palm's front axis (palm frame, unit), its face's offset along it (m) and where in the
     palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates
     :func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
-    cylinders, spheres, meshes): the front is ``front`` (3,), the side the fingers close toward
+    cylinders, spheres, meshes): the front is the side the fingers close toward
     (:func:`~graspnet_torch.robot.opposition.hand_axes`), the face the palm's surface farthest
     along it; the object within the fingertips' reach over their joint limits. A palm without
     any (a holder the fingers hang from, as TriFinger's): the axis
@@ -116,10 +116,19 @@ def _palm_front(robot: Robot, rows: list[int], front: np.ndarray) -> tuple[np.nd
         off_axis = (tips_all[rows] - tips_all[rows].mean(axis=0)) @ plane
         spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
         return front, face, np.stack([mid - spread, mid + spread])
+    front = hand_axes(robot).front
     face = max(support(s, s.origin, front) for s in palm)
     tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
     reach = tips_at @ _palm_plane(front)
     return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)])
+
+
+def _leader(robot: Robot, fingers: Sequence[str]) -> tuple[int, list[int]]:
+    """The column of ``fingers`` whose line a first draft picks to oppose the others' (the hand's
+    opposing finger, :func:`~graspnet_torch.robot.opposition.hand_axes`, else the first) and the others'."""
+    opposing = hand_axes(robot).opposing
+    lead = list(fingers).index(opposing) if opposing in fingers else 0
+    return lead, [i for i in range(len(fingers)) if i != lead]
 
 
 def _palm_plane(front: np.ndarray) -> np.ndarray:
@@ -147,6 +156,16 @@ def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray
             centres, radii = shape_spheres(shape)
             out.append((owner[shape.link], shape.link, centres, radii, shape.kind == "mesh"))
     return out
+
+
+def _line_spheres(robot: Robot, spheres: list[tuple[int, str, np.ndarray, np.ndarray, bool]],
+                  fingers: Sequence[str], rows: list[int]) -> list[tuple[int, str, np.ndarray, np.ndarray, bool]]:
+    """The spheres (:func:`_finger_spheres`) a closing line's clearance is measured on: the chosen
+    fingers' (``rows``), less a touching pad's tip link (its spheres may bound it loosely) and the
+    meshes of the link that carries its pad (so may theirs); the set check's FCL has them all."""
+    tips = {robot.cfg.fingers[f].tip for f in fingers}
+    pads = {robot.pads[f].link for f in fingers}
+    return [sp for sp in spheres if sp[0] in rows and sp[1] not in tips and not (sp[1] in pads and sp[4])]
 
 
 def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
@@ -223,19 +242,14 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     rows = [finger_names.index(f) for f in fingers]
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
-    axes = hand_axes(robot)
-    lead = list(fingers).index(axes.opposing) if axes.opposing in fingers else 0  # the finger that opposes
-    rest = [i for i in range(len(rows)) if i != lead]
-    front, face, reach = _palm_front(robot, rows, axes.front)
+    lead, rest = _leader(robot, fingers)
+    front, face, reach = _palm_front(robot, rows)
     plane = _palm_plane(front)  # (3, 2) the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     F = len(finger_names)
     spheres = _finger_spheres(robot)
-    tips = {robot.cfg.fingers[f].tip for f in fingers}  # a touching pad's link: its spheres may bound it loosely, and
-    pads = {robot.pads[f].link for f in fingers}  # so may the meshes of the link that carries a pad (the set check's
-    line_spheres = [sp for sp in spheres if sp[0] in rows and sp[1] not in tips and not (sp[1] in pads and sp[4])]
-    # FCL has them all)
+    line_spheres = _line_spheres(robot, spheres, fingers, rows)
     home = robot.home_posture(torch.float64).fingers
     others_rows = [i for i in range(len(finger_names)) if i not in rows]
     counts = stats if stats is not None else {}
