@@ -59,12 +59,17 @@ def opposing_fingers(robot: Robot) -> list[tuple[str, str]]:
 
 def pad_arrows(robot: Robot, posture: Posture, length: float = PAD_ARROW_M) -> tuple[np.ndarray, np.ndarray]:
     """Every finger's pad at ``posture``, world: its points (F, 3) and its normals as segments
-    (F, 2, 3) ``length`` (m) long from the points; none for a robot without pads."""
-    if not robot.pads:
+    (F, 2, 3) ``length`` (m) long from the points; none for a robot without pads or whose pads
+    cannot be derived (a finger without collision geometry: the synthesis says so)."""
+    try:
+        pads = robot.pads
+    except ConfigError:
+        pads = {}
+    if not pads:
         return np.zeros((0, 3)), np.zeros((0, 2, 3))
     frames = robot.link_frames(posture)
     points, arrows = [], []
-    for name, pad in robot.pads.items():
+    for name, pad in pads.items():
         cfg = robot.cfg.fingers[name]
         T = frames[cfg.tip].copy()
         T[:3, 3] = T[:3, :3] @ np.asarray(cfg.tip_offset or (0.0, 0.0, 0.0)) + T[:3, 3]
