@@ -193,10 +193,17 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
+def _terminal_sigint() -> None:
+    """In the child: Ctrl-C as a terminal's command gets it (default disposition, not blocked),
+    whatever the test process's own (a test run's worker has been seen with SIGINT ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _serve(args: list[str]) -> subprocess.Popen:
     args = [*args, "--port", str(_free_port())]
     proc = subprocess.Popen([sys.executable, str(repo_root() / "scripts" / "view.py"), *args], text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_terminal_sigint)
     for line in proc.stdout:  # viser's banner, then "viewing ... at http://...": the page is served
         if line.startswith("viewing "):
             return proc
@@ -257,12 +264,13 @@ def test_a_ctrl_c_that_a_library_turns_into_another_error_is_still_one_line(caps
         finally:
             raise AttributeError("'NoneType' object has no attribute '_invalidate_flags_cache'")
 
+    before = signal.getsignal(signal.SIGINT)  # pytest's own Ctrl-C
     with pytest.raises(SystemExit) as exit_info:
         run_cli(composing, SolveGraspJobCfg, argv=["task=glass3"])
     err = capsys.readouterr().err
     assert exit_info.value.code == 130 and len(err.strip().splitlines()) == 1, err
     assert err.startswith("interrupted (Ctrl-C) before the job started"), err
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # pytest's own Ctrl-C is back
+    assert signal.getsignal(signal.SIGINT) is before  # is back
 
 
 def test_a_ctrl_c_that_a_library_swallows_before_the_job_still_stops_it(capsys):
