@@ -90,10 +90,10 @@ class ContactSet:
         return iter((self.contacts, self.normals, self.posture))
 
 
-def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray]:
-    """The palm's front axis (palm frame, unit), its face's offset along it (m) and where in the
-    palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates
-    :func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
+def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """The palm's front axis (palm frame, unit), its face's offset along it (m), where in the
+    palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates) and
+    that plane (:func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
     cylinders, spheres, meshes): the front is the side the fingers close toward
     (:func:`~graspnet_torch.robot.opposition.hand_axes`), the face the palm's surface farthest
     along it; the object within the fingertips' reach over their joint limits. A palm without
@@ -115,12 +115,13 @@ def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nd
         mid = tips_all[rows].mean(axis=0) @ plane
         off_axis = (tips_all[rows] - tips_all[rows].mean(axis=0)) @ plane
         spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
-        return front, face, np.stack([mid - spread, mid + spread])
+        return front, face, np.stack([mid - spread, mid + spread]), plane
     front = hand_axes(robot).front
     face = max(support(s, s.origin, front) for s in palm)
     tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
-    reach = tips_at @ _palm_plane(front)
-    return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)])
+    plane = _palm_plane(front)
+    reach = tips_at @ plane
+    return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)]), plane
 
 
 def _leader(robot: Robot, fingers: Sequence[str]) -> tuple[int, list[int]]:
@@ -231,11 +232,10 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
                         reachable: Callable[[np.ndarray], np.ndarray] | None = None) -> Iterator[list[ContactSet]]:
     """The drafts of each batch of ``BATCH`` palm poses (module docstring), batch after batch, until
     ``max_tries`` palm poses were drawn. ``stats`` (updated after every batch) receives ``tried``,
-    ``touching`` (palm poses whose every chosen pad reached the surface; with ``reachable``,
-    ``reached`` too) and ``drafts``. ``orientations(rng, B)``: (B, 3, 3) palm orientations in place of uniform
-    ones; ``reachable(T)``: which palm poses (B, 4, 4) to keep (a hand on an arm: those the arm
-    reaches). The robot and fingers are checked at the call (:func:`check_pad_fingers`), the drafts
-    drawn as the iterator is read."""
+    ``touching`` (palm poses whose every chosen pad reached the surface; with ``reachable``, ``reached``
+    too) and ``drafts``. ``orientations(rng, B)``: (B, 3, 3) palm orientations in place of uniform ones;
+    ``reachable(T)``: which palm poses (B, 4, 4) to keep (a hand on an arm: those the arm reaches).
+    The robot and fingers are checked at the call (:func:`check_pad_fingers`), the drafts drawn as read."""
     check_pad_fingers(robot, contact_fingers(robot.finger_names, list(fingers), robot.cfg.name, "fingers"))
     rng = np.random.default_rng(seed)
     finger_names = list(robot.fingers)
@@ -243,8 +243,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     lead, rest = _leader(robot, fingers)
-    front, face, reach = _palm_front(robot, rows)
-    plane = _palm_plane(front)  # (3, 2) the palm's plane
+    palm = _palm_front(robot, rows)  # front, face, reach and the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     F = len(finger_names)
@@ -260,18 +259,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             B = min(BATCH, max_tries - counts["tried"])
             counts["tried"] += B
             R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
-            lateral = reach[0] + rng.random((B, 2)) * (reach[1] - reach[0])
-            gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
-            d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
-            # the object's centre in the palm frame
-            c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front
-            span = hi - lo
-            T = np.tile(np.eye(4), (B, 1, 1))
-            T[:, :3, :3] = R
-            T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
-            if landed:  # a share of the batch near the palm poses that touched
-                near = int(B * NEAR_SHARE)
-                T[:near] = _near(np.stack(landed)[rng.integers(0, len(landed), near)], rng)
+            T = _palm_poses(R, rng, palm, verts, centre, landed)
             if reachable is not None:
                 T = T[reachable(T)]
                 B = len(T)
@@ -281,14 +269,13 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
                     continue
             head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))  # (B, 6)
             heads = head.repeat_interleave(LINES, dim=0)  # (B M, 6): LINES closing lines per palm
-            q_open, q_close = closing_lines(robot, lo, span, rng, B * LINES)
+            q_open, q_close = closing_lines(robot, lo, hi - lo, rng, B * LINES)
             q_touch, touched = close_lines(robot, obj, heads, q_open, q_close, depth, rows)
             k = len(rows)
             q = home.expand(B, -1, -1)  # (B, F, n): the fingers not chosen at home, as the solver holds them
             hit = touched[:, rows].reshape(B, LINES, k)
-            # only a palm pose whose every chosen finger touched on some line can make a draft: the others'
-            # lines are not measured further (their clearance, their exact touch)
-            v = np.flatnonzero(hit.any(axis=1).all(axis=1))
+            # only a palm pose whose every chosen finger touched on some line can make a draft (the others' lines
+            v = np.flatnonzero(hit.any(axis=1).all(axis=1))  # are not measured further: clearance, exact touch)
             lines = (v[:, None] * LINES + np.arange(LINES)).reshape(-1)  # their lines' rows
             sel = torch.as_tensor(lines)
             clear, home_clear = np.zeros((B, LINES, F), dtype=bool), np.zeros((B, F), dtype=bool)
@@ -308,29 +295,70 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
                                                                          maybe.reshape(B * LINES, k)[lines])
             angles, inward, points = (a.reshape(B, LINES, k, *a.shape[2:]) for a in (angles, inward, points))
             good = hit & clear[:, :, rows] & (angles <= cone_deg)
-            # (B, k) each: random good lines
-            picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
-            if len(rows) > 1:  # the first set's opposing finger: its good line most opposed to the others' normals
-                others = inward[np.arange(B)[:, None], picks[0][:, rest], rest].mean(axis=1)  # (B, 3)
-                oppose = -np.einsum("bmi,bi->bm", inward[:, :, lead], others)
-                picks[0][:, lead] = np.argmax(np.where(good[:, :, lead], oppose, -np.inf), axis=1)
-            q_touch = q_touch.view(B, LINES, *lo.shape)
+            picks = _picks(good, inward, rng, lead, rest)
             ok = good.any(axis=1).all(axis=1) & home_clear[:, others_rows].all(axis=1)
             counts["touching"] += int(ok.sum())
             landed.extend(T[ok])
-            batch: list[ContactSet] = []
-            for b in np.flatnonzero(ok):
-                for pick in dict.fromkeys(tuple(p[b].tolist()) for p in picks):  # distinct line choices, in order
-                    fingers_q = q[b].clone()
-                    for i, row in enumerate(rows):
-                        fingers_q[row] = q_touch[b, pick[i], row]
-                    posture = Posture(palm_pose=head[b], fingers=fingers_q, body=torch.zeros(0, dtype=torch.float64))
-                    batch.append(ContactSet(tuple(fingers), points[b, pick, range(k)], inward[b, pick, range(k)],
-                                            posture, angles[b, pick, range(k)]))
+            batch = _contact_sets(ok, picks, tuple(fingers), rows, head, q, q_touch.view(B, LINES, *lo.shape),
+                                  (points, inward, angles))
             counts["drafts"] += len(batch)
             yield batch
 
     return batches()
+
+
+def _palm_poses(R: np.ndarray, rng: np.random.Generator, palm: tuple, verts: np.ndarray, centre: np.ndarray,
+                landed: list[np.ndarray]) -> np.ndarray:
+    """A batch's palm poses (B, 4, 4), world (module docstring, step 1): orientations R (B, 3, 3),
+    the object's centre at a random point of the palm's plane within reach and a random gap from
+    its face; a share near the palm poses ``landed`` that touched. ``palm``: (front, face, reach,
+    plane) of :func:`_palm_front` and :func:`_palm_plane`; the object's vertices (V, 3) and centre (3,)."""
+    front, face, reach, plane = palm
+    B = len(R)
+    lateral = reach[0] + rng.random((B, 2)) * (reach[1] - reach[0])
+    gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
+    d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
+    c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front  # the centre, palm frame
+    T = np.tile(np.eye(4), (B, 1, 1))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = centre - np.einsum("bij,bj->bi", R, c_palm)
+    if landed:  # a share of the batch near the palm poses that touched
+        near = int(B * NEAR_SHARE)
+        T[:near] = _near(np.stack(landed)[rng.integers(0, len(landed), near)], rng)
+    return T
+
+
+def _picks(good: np.ndarray, inward: np.ndarray, rng: np.random.Generator, lead: int, rest: list[int]
+           ) -> list[np.ndarray]:
+    """``COMBOS`` line choices (B, k) each among the good lines ``good`` (B, M, k): at random, the
+    first's opposing finger (column ``lead``) on its good line whose inward normal (``inward``
+    (B, M, k, 3)) best opposes the others' mean (force closure needs opposition)."""
+    picks = [np.argmax(good + rng.random(good.shape), axis=1) for _ in range(COMBOS)]
+    if rest:
+        B = len(good)
+        others = inward[np.arange(B)[:, None], picks[0][:, rest], rest].mean(axis=1)  # (B, 3)
+        oppose = -np.einsum("bmi,bi->bm", inward[:, :, lead], others)
+        picks[0][:, lead] = np.argmax(np.where(good[:, :, lead], oppose, -np.inf), axis=1)
+    return picks
+
+
+def _contact_sets(ok: np.ndarray, picks: list[np.ndarray], fingers: tuple[str, ...], rows: list[int],
+                  head: torch.Tensor, q: torch.Tensor, q_touch: torch.Tensor, touch: tuple) -> list[ContactSet]:
+    """The drafts of the palm poses ``ok`` (B,): one per distinct line choice of ``picks``, in order.
+    head (B, 6), q (B, F, n) the fingers at home, q_touch (B, M, F, n) the touching joints; ``touch``:
+    the lines' touch points, inward normals (B, M, k, 3) and pad angles (B, M, k)."""
+    points, inward, angles = touch
+    k = len(rows)
+    out: list[ContactSet] = []
+    for b in np.flatnonzero(ok):
+        for pick in dict.fromkeys(tuple(p[b].tolist()) for p in picks):  # distinct line choices, in order
+            fingers_q = q[b].clone()
+            for i, row in enumerate(rows):
+                fingers_q[row] = q_touch[b, pick[i], row]
+            posture = Posture(palm_pose=head[b], fingers=fingers_q, body=torch.zeros(0, dtype=torch.float64))
+            out.append(ContactSet(fingers, points[b, pick, range(k)], inward[b, pick, range(k)], posture,
+                                  angles[b, pick, range(k)]))
+    return out
 
 
 def _near(T: np.ndarray, rng: np.random.Generator) -> np.ndarray:
