@@ -8,8 +8,9 @@ The oracle is pytorch-kinematics' chain built with its origins in float64
 (tests/robot/test_link_frames.pk_chain64): its parser rounds origins and axes to float32, ~1e-8 m
 off on these hands' fractional millimetres, which a 1e-9 m check would read as a kinematics error.
 
-Skipped, with the reason: a config whose URDF the user fetches (schunk_svh: GPL-3.0, not shipped)
-until it is there, and a config whose URDF is in a Python package that is not installed."""
+Skipped, with the reason: a config whose URDF the user fetches (scripts/fetch_hands.py: schunk_svh,
+ability_hand, inspire_hand, not shipped) until it is there, and a config whose URDF is in a Python
+package that is not installed."""
 
 from __future__ import annotations
 
@@ -28,7 +29,11 @@ from tests.robot.test_link_frames import oracle_joints, pk_chain64, random_joint
 EXAMPLES = repo_root() / "examples"
 FETCHED = {  # config file name -> why its URDF is not in a fresh clone
     "schunk_svh_right.yaml": "its URDF (dex-urdf, GPL-3.0) is fetched by the user, not shipped: "
-                             "examples/schunk_svh/schunk_svh_right.yaml says how",
+                             "run scripts/fetch_hands.py",
+    "ability_hand_right.yaml": "its URDF (dex-urdf; a licence that grants no redistribution) is fetched by the "
+                               "user, not shipped: run scripts/fetch_hands.py",
+    "inspire_hand_right.yaml": "its URDF (dex-urdf; a licence that grants no redistribution) is fetched by the "
+                               "user, not shipped: run scripts/fetch_hands.py",
 }
 
 
