@@ -18,6 +18,7 @@ proposal     posture proposals: what they cost and buy (beyond the paper)   :cla
 reach        reach motions to every arm and MANUS grasp (beyond the paper)  :class:`ReachExperimentCfg`
 contact      pads on the surface beside the point model, in MuJoCo (beyond)  :class:`ContactCfg`
 synthesis    grasps synthesized for objects, beside a baseline (beyond)     :class:`SynthesisExperimentCfg`
+hands        synthesis on many public hands, everyday objects (beyond)      :class:`HandsCfg`
 ===========  =============================================================  ======================
 
 Each is a Hydra experiment config, ``configs/experiment/<name>.yaml``::
@@ -38,6 +39,7 @@ from typing import Any
 from graspnet_torch.experiments.arm import ArmCfg, run_arm
 from graspnet_torch.experiments.contact import ContactCfg, run_contact
 from graspnet_torch.experiments.fig3 import NoiseStudyCfg, run_noise_study
+from graspnet_torch.experiments.hands import HandsCfg, run_hands
 from graspnet_torch.experiments.manus import ManusCfg, run_manus
 from graspnet_torch.experiments.objects import ObjectsCfg, run_objects
 from graspnet_torch.experiments.obstacles import Fig10Cfg, ObstaclesCfg, run_fig10, run_tables
@@ -53,11 +55,11 @@ from graspnet_torch.experiments.tradeoff import TradeoffCfg, run_tradeoff
 from graspnet_torch.settings import DefaultsFile
 
 __all__ = ["DEFAULTS_FILES", "EXPERIMENTS", "ArmCfg", "ContactCfg", "Experiment", "ExperimentReport", "Fig10Cfg",
-           "Figure", "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg", "ProxyCfg",
-           "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "SynthesisExperimentCfg", "Table2Cfg", "TradeoffCfg",
-           "run_arm", "run_contact", "run_fig10", "run_manus", "run_noise_study", "run_objects", "run_proposal",
-           "run_proxy", "run_random_hand", "run_reach", "run_solvers", "run_synthesis", "run_table2", "run_tables",
-           "run_tradeoff"]
+           "Figure", "HandsCfg", "ManusCfg", "NoiseStudyCfg", "ObjectsCfg", "ObstaclesCfg", "ProposalExperimentCfg",
+           "ProxyCfg", "RandomHandCfg", "ReachExperimentCfg", "SolversCfg", "SynthesisExperimentCfg", "Table2Cfg",
+           "TradeoffCfg", "run_arm", "run_contact", "run_fig10", "run_hands", "run_manus", "run_noise_study",
+           "run_objects", "run_proposal", "run_proxy", "run_random_hand", "run_reach", "run_solvers",
+           "run_synthesis", "run_table2", "run_tables", "run_tradeoff"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +77,8 @@ _TABLE = (  # name, settings, run: in the order `make reproduce` runs them (the 
     ("objects", ObjectsCfg, run_objects), ("arm", ArmCfg, run_arm), ("random_hand", RandomHandCfg, run_random_hand),
     ("tradeoff", TradeoffCfg, run_tradeoff), ("proxy", ProxyCfg, run_proxy),
     ("proposal", ProposalExperimentCfg, run_proposal), ("reach", ReachExperimentCfg, run_reach),
-    ("contact", ContactCfg, run_contact), ("synthesis", SynthesisExperimentCfg, run_synthesis))
+    ("contact", ContactCfg, run_contact), ("synthesis", SynthesisExperimentCfg, run_synthesis),
+    ("hands", HandsCfg, run_hands))
 EXPERIMENTS: dict[str, Experiment] = {name: Experiment(name, cfg, run) for name, cfg, run in _TABLE}
 
 # configs/experiment/<name>.yaml lists its experiment's settings; their values are written from the

@@ -42,22 +42,18 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.collision.convex import convex_pieces
-from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
-from graspnet_torch.paths import repo_root
+from graspnet_torch.experiments.grasp_checks import decompose_s, depth_mm, holds_text, map_jobs, robot_of
+from graspnet_torch.experiments.report import ExperimentReport, Figure
 from graspnet_torch.physics import check_until_failure
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.settings import setting
-from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.synthesize import START
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
@@ -114,17 +110,8 @@ def pick_objects(n: int, seed: int) -> list[tuple[str, Shape]]:
     return [(f"blob{k:03d}", centred_mesh(root / f"{k:03d}" / f"{k:03d}.obj", SCALE)) for k in picked]
 
 
-def _depth_mm(robot, grasp) -> float:
-    """The deepest any link of a reported grasp lies inside the object (FCL, no link exempt)."""
-    posture = trial_posture(robot, grasp.result.best)
-    report = CollisionScene(robot, grasp.problem, object_tolerance=0.0, touching=False).check(posture)
-    return max(report.object_links.values(), default=0.0) * 1000
-
-
-@lru_cache(maxsize=4)
 def _robot(name: str) -> gt.Robot:
-    config = ROBOTS[name][0]
-    return gt.load_robot(repo_root() / config if config.endswith(".yaml") else config)
+    return robot_of(ROBOTS[name][0])
 
 
 def _one(name: str, obj: Shape, method: str, cfg: SynthesisExperimentCfg, seed: int) -> dict:
@@ -154,30 +141,8 @@ def _one(name: str, obj: Shape, method: str, cfg: SynthesisExperimentCfg, seed: 
     wall = time.perf_counter() - t0
     holds = [g.holds for g in grasps]
     return {"grasps": grasps, "holds": holds, "wall": wall, "first_s": first[0], "stats": stats,
-            "depth_mm": [_depth_mm(robot, g) for g in grasps],
+            "depth_mm": [depth_mm(robot, g) for g in grasps],
             "epsilon": [float(g.quality.epsilon) for g in grasps] if method == "synthesis" else []}
-
-
-def _decompose(obj: Shape) -> float:
-    """The seconds an object's convex decomposition takes (CoACD, cached on disk: 0 where it was;
-    a primitive has none)."""
-    if obj.kind != "mesh":
-        return 0.0
-    t0 = time.perf_counter()
-    convex_pieces(obj.mesh, obj.scale)
-    return time.perf_counter() - t0
-
-
-def _map(fn, args: list[tuple], jobs: int, desc: str | None = None) -> list:
-    """``fn(*a)`` for each of ``args``, in order: in this process, or in ``jobs`` joblib processes;
-    with a progress bar where ``desc`` is given."""
-    if jobs == 1:
-        calls = (fn(*a) for a in args)
-    else:
-        from joblib import Parallel, delayed
-
-        calls = Parallel(n_jobs=jobs, return_as="generator")(delayed(fn)(*a) for a in args)
-    return list(calls if desc is None else progress(calls, total=len(args), desc=desc, unit="object"))
 
 
 def _run(name: str, method: str, objs: list[tuple[str, Shape]], cfg: SynthesisExperimentCfg
@@ -186,7 +151,7 @@ def _run(name: str, method: str, objs: list[tuple[str, Shape]], cfg: SynthesisEx
     the wall time of the whole set."""
     args = [(name, obj, method, cfg, cfg.seed + k) for k, (_, obj) in enumerate(objs)]
     t0 = time.perf_counter()
-    rows = _map(_one, args, cfg.jobs, f"synthesis: {name}, {method}")
+    rows = map_jobs(_one, args, cfg.jobs, f"synthesis: {name}, {method}")
     return rows, time.perf_counter() - t0
 
 
@@ -226,7 +191,7 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
     """The sections of the module docstring, the issue's targets as ``checks`` and a picture of the
     best synthesized grasp of the first objects."""
     objs = pick_objects(cfg.objects, cfg.seed)
-    prepared = _map(_decompose, [(obj,) for _, obj in objs], cfg.jobs)  # before the timed runs, cached on disk
+    prepared = map_jobs(decompose_s, [(obj,) for _, obj in objs], cfg.jobs)  # before the timed runs, cached on disk
     results, summaries, rows, numbers, timings, checks = {}, {}, [], {}, {}, []
     for name in cfg.robots:
         for method in METHODS if name in cfg.baseline else METHODS[:1]:
@@ -316,9 +281,7 @@ def _picture(results: dict, objs: list, cfg: SynthesisExperimentCfg, out: Path) 
     panels = []
     for label, grasp in shown:
         panel = posture_panels(robot, grasp.problem, grasp.result)[0]
-        holds = "not checked" if grasp.physics is None else "holds 6/6" if grasp.physics.held_all else \
-            f"fails push {len(grasp.physics.directions)}"
-        panels.append(replace(panel, caption=f"{label}: {holds}, epsilon {grasp.quality.epsilon:.4f}"))
+        panels.append(replace(panel, caption=f"{label}: {holds_text(grasp)}, epsilon {grasp.quality.epsilon:.4f}"))
     if not panels:  # no object got a grasp: the first object and the hand at home
         panels = [Panel(f"{objs[0][0]}: no grasp", robot.home_posture(), meshes=(objs[0][1].trimesh(),))]
     render_robot(robot, panels, out / "synthesis_grasps.png")
