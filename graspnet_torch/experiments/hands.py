@@ -8,8 +8,8 @@ Per hand and object (object k with seed ``seed`` + k, ``candidates`` contact set
 on a run's time, as the sampler draws at most 50 palm poses per set asked for): the top-1 grasp
 checked in MuJoCo with the pinned protocol (:func:`gt.check_until_failure`: holds 6/6 pushes), as the
 experiment ``synthesis`` checks it; each reported grasp's deepest link inside the object recomputed
-(FCL, no link exempt) and, where a grasp says which links touch (``contact_links``), the farthest of
-them from the object (trimesh). Per hand: the share of objects whose top-1 grasp holds 6/6, over all
+(FCL, no link exempt) and, where a grasp says which links touch (``links``), the farthest of them
+from the object (trimesh). Per hand: the share of objects whose top-1 grasp holds 6/6, over all
 and over the long ones; the grasps' types (a grasp's ``type``; one without it: precision); the
 median and longest time per object; the objects missed, by cause: no grasp found (the reason,
 summarized), found but the top-1 does not hold, or a reported grasp deeper than 1 mm; a picture of
@@ -114,7 +114,7 @@ def _one(hand: str, obj: Shape, cfg: HandsCfg, seed: int) -> dict:
     except GraspnetError as exc:  # a hand the synthesis refuses (pads that cannot oppose): said in one line
         grasps, reason = [], f"refused: {exc}"
     wall = time.perf_counter() - t0
-    links = [getattr(g, "contact_links", None) for g in grasps]
+    links = [tuple(getattr(g, "links", ()) or ()) for g in grasps]
     return {"grasps": grasps, "holds": [g.holds for g in grasps], "wall": wall, "reason": reason,
             "types": [getattr(g, "type", None) or "precision" for g in grasps],
             "depth_mm": [depth_mm(robot, g) for g in grasps],
