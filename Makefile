@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-hands report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -122,6 +122,11 @@ report-contact: $(STAMP)  ## the experiment contact as in reports/contact.md (50
 
 report-synthesis: $(STAMP)  ## the experiment synthesis as in reports/synthesis.md (100 objects; hand, TriFinger, arm + hand; the baseline): MuJoCo, checks (~20 min)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis
+
+report-hands: $(STAMP)  ## the experiment hands (-> reports/hands.md): synthesis on every example hand over 40 everyday objects at real scale, MuJoCo, checks (~1 h; scripts/fetch_hands.py first for schunk, ability, inspire)
+	rm -f outputs/experiment/hands/REPRODUCTION.md; $(PY) scripts/reproduce.py check=true out=outputs/experiment/hands hydra.run.dir=outputs/experiment/hands +experiment=hands; \
+	status=$$?; test -f outputs/experiment/hands/REPRODUCTION.md && cp outputs/experiment/hands/REPRODUCTION.md reports/hands.md \
+	&& cp outputs/experiment/hands/hands_*.png reports/; exit $$status
 
 report-arm: $(STAMP)  ## the experiments table3, fig10, arm: Tables 3-4, ANOVA, Figs. 6/8/9/10, CMA-ES, the product (~6 min)
 	$(call EXPERIMENT_RUN,table3)
