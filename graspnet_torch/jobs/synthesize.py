@@ -52,7 +52,7 @@ __all__ = ["COLUMNS", "OBJECT_CENTRE", "SynthesizeGraspsJobCfg", "find_meshes", 
            "prepare_auto", "prepare_synthesize", "solve_auto_problem", "synthesize_objects"]
 
 CANDIDATES_PER_GRASP = 16  # contacts: auto: contact sets drawn per grasp asked for (at least 64)
-COLUMNS = ("object", "grasps", "best_holds", "top1_holds_all", "top5_any_holds_all", "best_epsilon",
+COLUMNS = ("object", "grasps", "top1_type", "best_holds", "top1_holds_all", "top5_any_holds_all", "best_epsilon",
            "deepest_penetration_mm", "seconds", "reason")
 
 
@@ -72,6 +72,8 @@ class SynthesizeGraspsJobCfg:
     trials: int = setting(8, lo=1, hi=10_000)  # learners per solved contact set (start=random, proposal)
     start: str = setting("sampled", choices=START)  # sampled: each set's solve from its sampled posture; random,
     # proposal: the search from random starts or the robot's learned posture proposals
+    power: bool = True  # where the pads' grasps do not hold: power grasps too (the palm on the object, any link
+    # touching)
     seed: int = setting(0, lo=0, hi=MAX_SEED)
     verify: str = setting("physics", choices=("none", "physics"))  # physics: each grasp in MuJoCo until a push
     # fails (gt.check_until_failure)
@@ -174,7 +176,8 @@ def _row(name: str, grasps: list[dict], seconds: float, reason: str | None) -> d
     checked = bool(holds) and len(holds) == len(grasps)
     pen = [g.get("penetration_mm") for g in grasps]
     pen = [p for p in pen if p is not None]
-    return {"object": name, "grasps": len(grasps), "best_holds": max(holds) if holds else None,
+    return {"object": name, "grasps": len(grasps), "top1_type": grasps[0].get("type") if grasps else None,
+            "best_holds": max(holds) if holds else None,
             "top1_holds_all": (grasps[0]["holds"] == full[0]) if checked else None,
             "top5_any_holds_all": any(h == n for h, n in zip(holds[:5], full[:5], strict=True)) if checked else None,
             "best_epsilon": max(g["quality"]["epsilon"] for g in grasps) if grasps else None,
@@ -188,7 +191,8 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
     stats: dict = {}
     data: dict = {"object": {"file": str(path.resolve()), "scale": job.scale, "pose": None}, "robot": robot.name,
                   "settings": {"fingers": list(job.fingers or ()), "grasps": job.grasps, "candidates": job.candidates,
-                               "trials": job.trials, "start": job.start, "seed": job.seed, "verify": job.verify},
+                               "trials": job.trials, "start": job.start, "power": job.power, "seed": job.seed,
+                               "verify": job.verify},
                   "stats": stats, "grasps": [], "reason": None}
     grasps: list[dict] = []
     found: list = []
@@ -197,7 +201,7 @@ def _synthesize_one(robot: Robot, path: Path, job: SynthesizeGraspsJobCfg, physi
         data["object"]["pose"] = obj.to_mapping()["pose"]  # m and degrees, as a problem file's
         found = synthesize_grasps(robot, obj, n_grasps=job.grasps, fingers=job.fingers,
                                   candidates=job.candidates, seed=job.seed, trials=job.trials, physics=physics,
-                                  stats=stats, start=job.start)
+                                  stats=stats, start=job.start, power=job.power)
         grasps = [g.to_dict() for g in found]
         if not grasps:
             data["reason"] = no_grasp_reason(stats)

@@ -9,12 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.meshes import sample_even
 from graspnet_torch.robot.chain import UrdfModel, origin_matrix, origin_pose
 from graspnet_torch.robot.meshes import load_link_mesh
-from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.shape import Shape, primitive_mesh
 from graspnet_torch.robot.transforms import matrix_to_pose_np
 
-__all__ = ["LinkShape", "link_shapes", "support"]
+__all__ = ["LinkShape", "link_shapes", "support", "surface_points"]
 
 GREY = (0.6, 0.6, 0.6, 1.0)
 
@@ -123,3 +124,12 @@ def support(s: LinkShape, P: np.ndarray, n: np.ndarray) -> float:
     if s.kind == "cylinder":
         return c + s.size[0] * math.hypot(d[0], d[1]) + s.size[1] / 2 * abs(d[2])
     return c + s.size[0]
+
+
+def surface_points(s: LinkShape, P: np.ndarray, count: int) -> np.ndarray:
+    """(N, 3) points over the surface of a shape placed by ``P`` (4, 4): its mesh's vertices (a
+    primitive's: a fine triangulation's) and up to ``count`` more spread evenly over it (the same
+    points on every call), in the frame ``P`` maps into (m)."""
+    mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
+    points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), sample_even(mesh, count)])
+    return points @ P[:3, :3].T + P[:3, 3]

@@ -42,11 +42,9 @@ import numpy as np
 import torch
 
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.meshes import sample_even
 from graspnet_torch.robot.config import PadCfg, RobotCfg
 from graspnet_torch.robot.fingers import FingerKernel
-from graspnet_torch.robot.geometry import link_shapes, support
-from graspnet_torch.robot.shape import primitive_mesh
+from graspnet_torch.robot.geometry import link_shapes, support, surface_points
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
 __all__ = ["SHIFT_M", "TIE", "Pad", "centred_config", "closing_sense", "derived_pad", "finger_pads"]
@@ -236,7 +234,7 @@ def _derived(robot: _Robot, name: str, tip_in_link: np.ndarray, normal: np.ndarr
     exits = [t for t in (_line_exit(s, P, normal, height) for s, P in placed) if t is not None]
     if exits and max(exits) >= height - TIE:
         return Pad(distal, max(exits) * normal, normal)
-    points = np.concatenate([_surface_points(s, P) for s, P in placed])
+    points = np.concatenate([surface_points(s, P, SAMPLES) for s, P in placed])
     band = points[points @ normal >= height - TIE]
     lateral = np.linalg.norm(band - np.outer(band @ normal, normal), axis=1)
     return Pad(distal, band[int(np.argmin(lateral))], normal)
@@ -287,10 +285,3 @@ def _line_exit(s: Any, P: np.ndarray, n: np.ndarray, height: float) -> float | N
         return None
     lo, hi = max(p[0] for p in parts), min(p[1] for p in parts)
     return hi if lo <= hi else None
-
-
-def _surface_points(s: Any, P: np.ndarray) -> np.ndarray:
-    """(N, 3) points spread densely over a shape's surface (vertices included), placed by ``P``."""
-    mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
-    points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), sample_even(mesh, SAMPLES)])
-    return points @ P[:3, :3].T + P[:3, 3]

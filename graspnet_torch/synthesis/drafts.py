@@ -6,7 +6,7 @@ Drafts are made in batches of ``BATCH`` palm poses, in three steps:
 
 1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
    front, the side its fingers close toward: :func:`~graspnet_torch.robot.opposition.hand_axes`;
-   :func:`_palm_front`) at a random point of the plane of the
+   :func:`palm_front`) at a random point of the plane of the
    palm within the fingertips' reach, and at a random gap (``GAP_M``) from the palm's face, i.e.
    the palm looks at the object from a random direction, at a random roll. Once some palm pose
    has touched (step 2), ``NEAR_SHARE`` of each batch are instead drawn near those that have
@@ -47,7 +47,7 @@ from scipy.spatial.transform import Rotation
 from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.collision.surface import surface_distance_near, touch_points
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.robot.geometry import link_shapes, support
+from graspnet_torch.robot.geometry import link_shapes, support, surface_points
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -55,7 +55,8 @@ from graspnet_torch.robot.transforms import matrix_to_pose
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
-__all__ = ["BATCH", "COMBOS", "GAP_M", "LINES", "TOUCH_M", "ContactSet", "check_pad_fingers", "iter_contact_drafts"]
+__all__ = ["BATCH", "COMBOS", "GAP_M", "LINES", "TOUCH_M", "ContactSet", "check_pad_fingers", "iter_contact_drafts",
+           "palm_front", "palm_poses"]
 
 GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
@@ -65,6 +66,7 @@ HOLDER_SPREAD = 0.2  # a palm without a box: how far off the fingers' mean axis 
 # of the home fingertips' distance from it)
 NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
 NEAR_DEG, NEAR_M = 10.0, 0.005  # how near (standard deviations of the turn and the shift)
+PAD_POINTS = 256  # points spread over a pad link's mesh where the sampler measures its clearance
 COMBOS = 4  # line choices (contact sets) tried per palm pose whose every chosen finger touches
 
 
@@ -90,7 +92,7 @@ class ContactSet:
         return iter((self.contacts, self.normals, self.posture))
 
 
-def _palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """The palm's front axis (palm frame, unit), its face's offset along it (m), where in the
     palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates) and
     that plane (:func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
@@ -162,11 +164,18 @@ def _finger_spheres(robot: Robot) -> list[tuple[int, str, np.ndarray, np.ndarray
 def _line_spheres(robot: Robot, spheres: list[tuple[int, str, np.ndarray, np.ndarray, bool]],
                   fingers: Sequence[str], rows: list[int]) -> list[tuple[int, str, np.ndarray, np.ndarray, bool]]:
     """The spheres (:func:`_finger_spheres`) a closing line's clearance is measured on: the chosen
-    fingers' (``rows``), less a touching pad's tip link (its spheres may bound it loosely) and the
-    meshes of the link that carries its pad (so may theirs); the set check's FCL has them all."""
-    tips = {robot.cfg.fingers[f].tip for f in fingers}
-    pads = {robot.pads[f].link for f in fingers}
-    return [sp for sp in spheres if sp[0] in rows and sp[1] not in tips and not (sp[1] in pads and sp[4])]
+    fingers' (``rows``), but the links that carry their pads or tips as points spread over their
+    collision surfaces (spheres of radius 0, ``PAD_POINTS`` more per shape than its vertices):
+    spheres bound a shape loosely (a mesh's stand out of it by a share of its thickness) or
+    leave its corners out (a box's), and a pad's link touches the object by construction."""
+    links = {robot.cfg.fingers[f].tip for f in fingers} | {robot.pads[f].link for f in fingers}
+    row = {sp[1]: sp[0] for sp in spheres}
+    out = [sp for sp in spheres if sp[0] in rows and sp[1] not in links]
+    for shape in link_shapes(robot.urdf):
+        if shape.link in links and shape.link in row:
+            points = surface_points(shape, shape.origin, PAD_POINTS)
+            out.append((row[shape.link], shape.link, points, np.zeros(len(points)), shape.kind == "mesh"))
+    return out
 
 
 def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
@@ -243,7 +252,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     depth = np.array([robot.pads[f].depth if f in robot.pads else 0.0 for f in finger_names])
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     lead, rest = _leader(robot, fingers)
-    palm = _palm_front(robot, rows)  # front, face, reach and the palm's plane
+    palm = palm_front(robot, rows)  # front, face, reach and the palm's plane
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     F = len(finger_names)
@@ -259,7 +268,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             B = min(BATCH, max_tries - counts["tried"])
             counts["tried"] += B
             R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
-            T = _palm_poses(R, rng, palm, verts, centre, landed)
+            T = palm_poses(R, rng, palm, verts, centre, landed)
             if reachable is not None:
                 T = T[reachable(T)]
                 B = len(T)
@@ -307,16 +316,17 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     return batches()
 
 
-def _palm_poses(R: np.ndarray, rng: np.random.Generator, palm: tuple, verts: np.ndarray, centre: np.ndarray,
-                landed: list[np.ndarray]) -> np.ndarray:
+def palm_poses(R: np.ndarray, rng: np.random.Generator, palm: tuple, verts: np.ndarray, centre: np.ndarray,
+               landed: list[np.ndarray], gap_m: tuple[float, float] = GAP_M) -> np.ndarray:
     """A batch's palm poses (B, 4, 4), world (module docstring, step 1): orientations R (B, 3, 3),
     the object's centre at a random point of the palm's plane within reach and a random gap from
-    its face; a share near the palm poses ``landed`` that touched. ``palm``: (front, face, reach,
-    plane) of :func:`_palm_front` and :func:`_palm_plane`; the object's vertices (V, 3) and centre (3,)."""
+    its face (uniform in ``gap_m``, m); a share near the palm poses ``landed`` that touched.
+    ``palm``: (front, face, reach, plane) of :func:`palm_front`; the object's vertices (V, 3) and
+    centre (3,)."""
     front, face, reach, plane = palm
     B = len(R)
     lateral = reach[0] + rng.random((B, 2)) * (reach[1] - reach[0])
-    gap = GAP_M[0] + rng.random(B) * (GAP_M[1] - GAP_M[0])
+    gap = gap_m[0] + rng.random(B) * (gap_m[1] - gap_m[0])
     d = -np.einsum("bij,j->bi", R, front)  # world: from the object toward the palm
     c_palm = lateral @ plane.T + (face + _support(verts, centre, d) + gap)[:, None] * front  # the centre, palm frame
     T = np.tile(np.eye(4), (B, 1, 1))

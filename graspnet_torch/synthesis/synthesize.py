@@ -13,7 +13,6 @@ import functools
 import heapq
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +37,10 @@ from graspnet_torch.synthesis.candidates import (
     placeholder_problem,
 )
 from graspnet_torch.synthesis.drafts import iter_contact_drafts
+from graspnet_torch.synthesis.grasp import SynthesizedGrasp
 from graspnet_torch.synthesis.pairs import SAMPLES as SAMPLES_OF_PAIRS
 from graspnet_torch.synthesis.pairs import WIDTH_TOL_M, PointPair, antipodal_pairs, jaw_width
+from graspnet_torch.synthesis.power import power_grasps
 from graspnet_torch.synthesis.reach import arm_palms, carried_hand, reach_sets
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -54,63 +55,6 @@ LOOK_AHEAD = 2  # start="sampled": sampler batches drawn before a solve while no
 def _rank_key(q: GraspQuality) -> tuple:
     """:func:`rank_sets`' order as a sort key: force closure, then epsilon, then the least singular value."""
     return (-q.force_closure, -q.epsilon, -q.min_singular_value)
-
-
-@dataclass
-class SynthesizedGrasp:
-    """One grasp of an object.
-
-    Attributes:
-        problem: the grasp problem the contact set made (contacts in the object frame).
-        candidate: the contact set and the sampled posture that touches it.
-        quality: its grasp quality (epsilon, least singular value, force closure).
-        result: the surface-model solve of ``problem``.
-        physics: the physics check of ``result`` (a :class:`gt.PhysicsReport`; None: not asked for).
-    """
-
-    problem: GraspProblem
-    candidate: ContactSet
-    quality: GraspQuality
-    result: GraspResult
-    physics: Any = None
-
-    @property
-    def contacts(self) -> np.ndarray:
-        """(k, 3) the contacts, world."""
-        return self.candidate.contacts
-
-    @property
-    def success(self) -> bool:
-        return bool(self.result.success)
-
-    @property
-    def holds(self) -> int | None:
-        """Of the physics check's pushes, how many held (None: not checked)."""
-        return None if self.physics is None else sum(self.physics.directions.values())
-
-    def to_dict(self) -> dict:
-        """The grasp as JSON: every field of its solve's result (:meth:`GraspResult.to_dict` without
-        the other trials: the reported trial's fields at the top, a surface grasp's pregrasp and
-        squeeze included; ``trials_run``: how many trials the solve ran), then its ``fingers``, its
-        ``contacts`` (object frame, as a problem file lists them) and ``contacts_world`` (m), its
-        ``quality``, ``holds`` and the physics check's ``report.to_dict()["physics"]`` (None: not
-        checked); a gripper's: its ``fingers`` the marked points, ``points`` (object frame) in place of
-        ``contacts``; ``normal_angles_deg``: each pad's (a gripper: the line between its points')
-        angle to the inward normal."""
-        data = {k: v for k, v in self.result.to_dict().items() if k != "trials"}
-        physics = None if self.physics is None else self.physics.to_dict().get("physics")
-        points = self.problem.points
-        data.update({"trials_run": len(self.result.trials), "fingers": list(self.candidate.fingers),
-                     "contacts": [{"finger": c.finger, "position": np.asarray(c.position, dtype=np.float64).tolist()}
-                                  for c in self.problem.contacts],
-                     **({} if points is None else {"points": np.asarray(points, dtype=np.float64).tolist()}),
-                     "normal_angles_deg": np.asarray(self.candidate.angles_deg, dtype=np.float64).tolist(),
-                     "contacts_world": np.asarray(self.contacts, dtype=np.float64).tolist(),
-                     "quality": {"epsilon": float(self.quality.epsilon),
-                                 "min_singular_value": float(self.quality.min_singular_value),
-                                 "force_closure": bool(self.quality.force_closure)},
-                     "success": self.success, "holds": self.holds, "physics": physics})
-        return data
 
 
 def rank_sets(sets: Sequence[ContactSet], obj: Shape, friction: float = FRICTION
@@ -129,7 +73,7 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
                       fingers: Sequence[str] | None = None, candidates: int = 64, seed: int = 0,
                       physics: Callable[..., Any] | None = None, solve_top: int | None = None, trials: int = 8,
                       solver: dict | None = None, stats: dict | None = None, start: str = "sampled",
-                      obstacles: Sequence[Shape] = ()) -> list[SynthesizedGrasp]:
+                      obstacles: Sequence[Shape] = (), power: bool = True) -> list[SynthesizedGrasp]:
     """Up to ``n_grasps`` grasps of ``obj`` by ``robot``'s ``fingers``, best first (``robot``: a
     built robot, a shipped robot's name, a robot config or its YAML path; ``fingers`` None: the
     hand's opposing finger and its two nearest neighbours, found from its kinematics,
@@ -164,6 +108,12 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
     ``solver`` settings given win over what ``start`` sets.
 
+    ``power``: where the pads' grasps leave fewer than ``n_grasps`` that hold every push (without
+    physics: that succeed), a free hand's power grasps are drawn too
+    (:func:`~graspnet_torch.synthesis.power.power_grasps`: the palm on the object, the fingers
+    wrapped around it, any link touching) and checked the same way; each grasp says its ``type``
+    ("precision" / "power") and the ``links`` that touch.
+
     A hand on an arm (its config names its free ``hand``) draws its sets with that hand and keeps
     those the arm reaches (:mod:`~graspnet_torch.synthesis.reach`). A gripper with two marked points
     (MANUS) grasps antipodal point pairs as wide as its jaws (:mod:`~graspnet_torch.synthesis.pairs`,
@@ -176,7 +126,8 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
     ``solve_s``, ``physics_s``; ``held_physics_s``: the part of ``physics_s`` spent on the checks
     that held every push; ``first_s``: to the first grasp that holds every push, None if none),
-    ``solved``, ``succeeded`` and ``held``.
+    ``solved``, ``succeeded`` and ``held`` (power grasps' included), and the power search's counts
+    (``power_tried``, ...: :func:`~graspnet_torch.synthesis.power.power_grasps`).
     """
     if n_grasps < 1 or candidates < 1:
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
@@ -197,6 +148,9 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
                "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
+    if power and not gripper and not robot.has_body and t["held" if physics is not None else "succeeded"] < n_grasps:
+        grasps += power_grasps(robot, obj, n_grasps - t["held" if physics is not None else "succeeded"], seed,
+                               physics=None if physics is None else _timed(physics, t), obstacles=obstacles, stats=t)
     if physics is not None:
         grasps.sort(key=lambda g: -(g.holds or 0))  # stable: rank order within a count
     if stats is not None:
@@ -229,17 +183,32 @@ def no_grasp_reason(stats: dict) -> str:
 
 def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None, t: dict) -> None:
     """Check a grasp in physics (where asked), timed, counted in ``t["held"]`` where it holds every push."""
-    if physics is None:
-        return
-    t1 = time.perf_counter()
-    g.physics = physics(g.problem, g.result, robot=robot)
-    spent = time.perf_counter() - t1
-    t["physics_s"] += spent
-    if g.holds == g.physics.of:
-        t["held"] += 1
-        t["held_physics_s"] += spent
-        if t["first_s"] is None:
-            t["first_s"] = time.perf_counter() - t["t0"]
+    if physics is not None:
+        g.physics = _timed(physics, t)(g.problem, g.result, robot=robot)
+
+
+def _pad_links(hand: Robot, fingers: Sequence[str]) -> tuple[str, ...]:
+    """The links that carry ``fingers``' pads, in order, each once."""
+    return tuple(dict.fromkeys(hand.pads[f].link for f in fingers))
+
+
+def _timed(physics: Callable[..., Any], t: dict) -> Callable[..., Any]:
+    """``physics`` timed into ``t["physics_s"]``, a check that holds every push counted in
+    ``t["held"]`` (and ``t["held_physics_s"]``, ``t["first_s"]``)."""
+
+    def check(problem: GraspProblem, result: GraspResult, robot: Robot) -> Any:
+        t1 = time.perf_counter()
+        report = physics(problem, result, robot=robot)
+        spent = time.perf_counter() - t1
+        t["physics_s"] += spent
+        if sum(report.directions.values()) == report.of:
+            t["held"] += 1
+            t["held_physics_s"] += spent
+            if t["first_s"] is None:
+                t["first_s"] = time.perf_counter() - t["t0"]
+        return report
+
+    return check
 
 
 def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], candidates: int, seed: int,
@@ -301,7 +270,7 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
         if not result.success:
             continue
         t["succeeded"] += 1
-        g = SynthesizedGrasp(problem, s, q, result)
+        g = SynthesizedGrasp(problem, s, q, result, links=_pad_links(hand, fingers))
         grasps.append(g)
         _check(g, robot, physics, t)
         if (t["held"] if physics is not None else t["succeeded"]) >= n_grasps:
@@ -324,7 +293,8 @@ def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], c
     t2 = time.perf_counter()
     results = _solve(problems, trials, seed, settings)
     t.update(generate_s=t1 - t0, rank_s=t2 - t1, solve_s=time.perf_counter() - t2, solved=len(problems))
-    grasps = [SynthesizedGrasp(p, s, q, r) for p, (s, q), r in zip(problems, ranked, results, strict=True)
+    links = _pad_links(carried_hand(robot), fingers)
+    grasps = [SynthesizedGrasp(p, s, q, r, links=links) for p, (s, q), r in zip(problems, ranked, results, strict=True)
               if r.success]
     t["succeeded"] = len(grasps)
     for g in grasps:
