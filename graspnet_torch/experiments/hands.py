@@ -4,8 +4,10 @@ TriFinger and every public hand of ``examples/`` on everyday objects at real sca
 (:mod:`~graspnet_torch.experiments.household`: primitives at household sizes and pybullet_data
 meshes, long ones among them), each object placed as the synthesis experiment places one.
 
-Per hand and object (object k with seed ``seed`` + k, ``candidates`` contact sets at most: the cap
-on a run's time, as the sampler draws at most 50 palm poses per set asked for): the top-1 grasp
+Per hand and object (object k with seed ``seed`` + k, ``candidates`` contact sets at most, the
+sampler drawing at most 50 palm poses per set asked for; a run still going after ``max_s`` seconds is
+stopped and counted apart, since a hand that finds no touching palm pose can draw them for many
+minutes): the top-1 grasp
 checked in MuJoCo with the pinned protocol (:func:`gt.check_until_failure`: holds 6/6 pushes), as the
 experiment ``synthesis`` checks it; each reported grasp's deepest link inside the object recomputed
 (FCL, no link exempt) and, where a grasp says which links touch (``links``), the farthest of them
@@ -26,8 +28,12 @@ from __future__ import annotations
 import importlib.util
 import math
 import re
+import signal
+import threading
 import time
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -66,6 +72,7 @@ HANDS = {  # name -> robot config (a shipped robot's name or a YAML path under t
     "schunk": "examples/schunk_svh/schunk_svh_right.yaml", "ability": "examples/ability_hand/ability_hand_right.yaml",
     "inspire": "examples/inspire_hand/inspire_hand_right.yaml"}
 SHIPPED = "hand"
+CAPPED = "stopped at the"  # a run past max_s: its reason starts so
 TOP1_PCT, LONG_PCT, LONG_HANDS, DEPTH_MM = 80.0, 80.0, 3, 1.0  # the issue's targets
 
 
@@ -76,7 +83,8 @@ class HandsCfg:
     hands: tuple[str, ...] = setting(tuple(HANDS))  # names of HANDS, or robot configs (a name or a YAML path)
     objects: int | tuple[str, ...] = setting(len(OBJECTS), lo=1, hi=len(OBJECTS), choices=object_names())  # n
     # spread over the household table, or names
-    candidates: int = setting(64, lo=1, hi=100_000)  # contact sets solved at most per object (the time cap)
+    candidates: int = setting(64, lo=1, hi=100_000)  # contact sets solved at most per object (50 palm poses each)
+    max_s: float = setting(120.0, lo=0.0, hi=86_400.0)  # a hand-object run is stopped after this (0: never)
     grasps: int = setting(1, lo=1, hi=100)  # grasps reported per object (the top-1 is the one counted)
     seed: int = setting(2026, lo=0, hi=2**31 - 1)  # object k is synthesized with seed + k
     physics: bool = True  # the MuJoCo check (without it nothing counts as holding)
@@ -103,16 +111,43 @@ def hand_status(hand: str) -> str | None:
     return None if (path.parent / urdf).is_file() else "not fetched: run scripts/fetch_hands.py"
 
 
+class _OverTime(BaseException):
+    """A run past its time cap (a BaseException: no ``except Exception`` inside the run swallows it)."""
+
+
+@contextmanager
+def _time_cap(seconds: float) -> Iterator[None]:
+    """Raise :class:`_OverTime` in this thread once ``seconds`` of wall time have passed (SIGALRM;
+    no cap where there is no such signal or off the main thread, and for 0)."""
+    if seconds <= 0 or not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def expire(signum, frame):
+        raise _OverTime
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
 def _one(hand: str, obj: Shape, cfg: HandsCfg, seed: int) -> dict:
     """One hand on one object (in a worker process where ``cfg.jobs`` > 1; one torch thread)."""
     torch.set_num_threads(1)
     robot, stats, t0 = robot_of(_config(hand)), {}, time.perf_counter()
     try:
-        grasps = gt.synthesize_grasps(robot, obj, n_grasps=cfg.grasps, candidates=cfg.candidates, seed=seed,
-                                      physics=check_until_failure if cfg.physics else None, stats=stats)
+        with _time_cap(cfg.max_s):
+            grasps = gt.synthesize_grasps(robot, obj, n_grasps=cfg.grasps, candidates=cfg.candidates, seed=seed,
+                                          physics=check_until_failure if cfg.physics else None, stats=stats)
         reason = "" if grasps else no_grasp_reason(stats)
     except GraspnetError as exc:  # a hand the synthesis refuses (pads that cannot oppose): said in one line
         grasps, reason = [], f"refused: {exc}"
+    except _OverTime:  # what it had found is lost with the call: counted apart
+        grasps, reason = [], f"{CAPPED} {cfg.max_s:g} s cap"
     wall = time.perf_counter() - t0
     links = [tuple(getattr(g, "links", ()) or ()) for g in grasps]
     return {"grasps": grasps, "holds": [g.holds for g in grasps], "wall": wall, "reason": reason,
@@ -144,7 +179,8 @@ def summarize_hand(rows: list[dict], long: list[bool]) -> dict:
             if n_long else math.nan,
             "types": Counter(t for r in rows for t in r["types"]),
             "median s": float(np.median(walls)) if walls else 0.0, "max s": max(walls, default=0.0),
-            "no grasp": sum(not r["holds"] for r in rows),
+            "capped": sum(r["reason"].startswith(CAPPED) for r in rows),
+            "no grasp": sum(not r["holds"] and not r["reason"].startswith(CAPPED) for r in rows),
             "does not hold": sum(bool(r["holds"]) and not h for r, h in zip(rows, held, strict=True)),
             "deeper": sum(deep), "deepest mm": max((d for r in rows for d in r["depth_mm"]), default=0.0),
             "farthest contact link mm": max((d for r in rows for d in r["gap_mm"]), default=math.nan),
@@ -159,16 +195,16 @@ def _row(hand: str, s: dict) -> list[str]:
     types = ", ".join(f"{k} {v}" for k, v in sorted(s["types"].items())) or "-"
     gap = s["farthest contact link mm"]
     return [hand, str(s["objects"]), _pct(s["top-1 holds %"]), f"{_pct(s['long top-1 holds %'])} "
-            f"(of {s['long objects']})", types, f"{s['median s']:.1f}", f"{s['max s']:.1f}", str(s["no grasp"]),
-            str(s["does not hold"]), str(s["deeper"]), f"{s['deepest mm']:.2f}",
+            f"(of {s['long objects']})", types, f"{s['median s']:.1f}", f"{s['max s']:.1f}", str(s["capped"]),
+            str(s["no grasp"]), str(s["does not hold"]), str(s["deeper"]), f"{s['deepest mm']:.2f}",
             "-" if math.isnan(gap) else f"{gap:.2f}"]
 
 
 CHECKED = "checked in MuJoCo, the pinned protocol (6 pushes; a grasp is pushed until one fails)"
 NOT_CHECKED = "NOT checked (physics off: nothing counts as holding)"
 HEADERS = ["hand", "objects", "top-1 holds 6/6 %", "long objects: top-1 holds %", "grasp types", "median s per object",
-           "max s per object", "no grasp found", "found, top-1 does not hold", "deeper than 1 mm", "deepest mm",
-           "farthest contact link mm"]
+           "max s per object", "stopped at the time cap", "no grasp found", "found, top-1 does not hold",
+           "deeper than 1 mm", "deepest mm", "farthest contact link mm"]
 
 
 def _hand_rows(hand: str, objs: list[tuple[Household, Shape]], cfg: HandsCfg) -> list[dict]:
@@ -189,14 +225,14 @@ def run_hands(cfg: HandsCfg, out: Path) -> ExperimentReport:
             continue
         results[hand] = _hand_rows(hand, objs, cfg)
         s = summaries[hand] = summarize_hand(results[hand], long)
-        for key in ("top-1 holds %", "long top-1 holds %", "no grasp", "does not hold", "deeper", "deepest mm",
-                    "farthest contact link mm"):
+        for key in ("top-1 holds %", "long top-1 holds %", "capped", "no grasp", "does not hold", "deeper",
+                    "deepest mm", "farthest contact link mm"):
             if not math.isnan(s[key]):  # no long object, no grasp that says which links touch: no number
                 numbers[f"{hand}/{key}"] = float(s[key])
         timings[f"{hand}/median s"], timings[f"{hand}/max s"] = s["median s"], s["max s"]
         figures.append(_picture(hand, results[hand], objs, out))
     timings["decomposition max s"] = max(prepared, default=0.0)
-    rows = [_row(hand, summaries[hand]) if hand in summaries else [hand, missing[hand], *["-"] * 10]
+    rows = [_row(hand, summaries[hand]) if hand in summaries else [hand, missing[hand], *["-"] * 11]
             for hand in cfg.hands]
     body = "\n\n".join([_intro(cfg, objs, prepared), markdown_table(HEADERS, rows), _reasons(summaries),
                         _grid(results, objs)])
@@ -212,8 +248,9 @@ def _intro(cfg: HandsCfg, objs: list[tuple[Household, Shape]], prepared: list[fl
             f"meshes, pybullet_data meshes scaled to size; {n_long} long: at least 120 mm long, at most 60 mm across), "
             f"each with its bounding box centred 0.2 m above the origin: {', '.join(o.name for o, _ in objs)}. "
             f"`gt.synthesize_grasps` with its defaults (each hand's own default fingers), object k with seed "
-            f"{cfg.seed} + k, at most {cfg.candidates} contact sets solved per object (the cap on a run's time), the "
-            f"top {cfg.grasps} reported; the top-1 grasp {CHECKED if cfg.physics else NOT_CHECKED}. "
+            f"{cfg.seed} + k, at most {cfg.candidates} contact sets solved per object, a run stopped after "
+            f"{cfg.max_s:g} s (what it had found lost: counted apart; 0: never), the top {cfg.grasps} reported; "
+            f"the top-1 grasp {CHECKED if cfg.physics else NOT_CHECKED}. "
             "Deepest: recomputed here, the deepest link of any reported grasp inside the object (FCL, no link "
             "exempt); farthest contact link: of the links a grasp says touch (where it says so), the farthest from "
             "the object's surface (trimesh). Types: each grasp's `type` (none: precision). Time per object: the "

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 import runpy
+import signal
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +65,7 @@ def test_summary_of_rows():
             {"holds": [], "types": [], "wall": 9.0, "depth_mm": [], "gap_mm": [],
              "reason": "no grasp found: of 640 palm poses none put every chosen finger's pad on the object"}]
     s = summarize_hand(rows, [True, True, False])
+    assert s["capped"] == 0
     assert s["top-1 holds %"] == pytest.approx(100 / 3) and s["long top-1 holds %"] == pytest.approx(50)
     assert s["types"] == {"precision": 1, "power": 1} and s["median s"] == 4.0 and s["max s"] == 9.0
     assert (s["no grasp"], s["does not hold"], s["deeper"], s["deepest mm"]) == (1, 1, 1, 1.5)
@@ -94,6 +97,16 @@ def test_quick_protocol_on_one_hand_writes_the_table(tmp_path, monkeypatch):
     assert len(row["holds"]) <= 1 and report.numbers["hand/top-1 holds %"] == (100.0 if row["holds"] == [6] else 0.0)
     assert any("gone" in what and not ok for what, ok in report.checks)
     assert any("long objects: none" in what and not ok for what, ok in report.checks)
+
+
+@pytest.mark.slow
+def test_a_run_past_its_time_cap_is_stopped_and_counted_apart():
+    shape = household_objects(["apple"])[0][1]
+    t0 = time.perf_counter()
+    row = hands._one("hand", shape, HandsCfg(max_s=0.05), 0)
+    assert time.perf_counter() - t0 < 5 and row["holds"] == [] and row["reason"] == "stopped at the 0.05 s cap"
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)  # the alarm is off again
+    assert summarize_hand([row], [False])["capped"] == 1 and summarize_hand([row], [False])["no grasp"] == 0
 
 
 def _examples(tmp_path) -> Path:
