@@ -2,7 +2,7 @@
 (cached per process), the runs spread over processes, each object's convex decomposition made
 before the timed runs, and what is recomputed of a reported grasp independently of the synthesis:
 the deepest any link lies inside the object (FCL, no link exempt) and how far from the object the
-links it says touch are (trimesh)."""
+links it says touch are (FCL)."""
 
 from __future__ import annotations
 
@@ -15,12 +15,14 @@ import numpy as np
 
 import graspnet_torch as gt
 from graspnet_torch.collision.convex import convex_pieces
+from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry, mesh_bvh
 from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.experiments.report import progress
-from graspnet_torch.meshes import sample_even
+from graspnet_torch.meshes import mesh_path
 from graspnet_torch.paths import repo_root
 from graspnet_torch.robot.geometry import link_shapes
-from graspnet_torch.robot.shape import Shape, primitive_mesh
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.postures import trial_posture
 
 __all__ = ["decompose_s", "depth_mm", "holds_text", "link_gap_mm", "map_jobs", "robot_of"]
@@ -40,24 +42,22 @@ def depth_mm(robot: gt.Robot, grasp: Any) -> float:
 
 
 def link_gap_mm(robot: gt.Robot, grasp: Any, links: Sequence[str]) -> float:
-    """The farthest of ``links`` from the object's surface at the grasp's posture (mm; 0: touching or
-    inside): each link's collision shapes, placed by the robot's kinematics, sampled on their surface
-    (400 points a shape, and its vertices) against the object's mesh (trimesh)."""
-    import trimesh
+    """The farthest of ``links`` from the object at the grasp's posture (mm; 0: touching or inside):
+    each link's nearest collision shape, placed by the robot's kinematics, against the object (FCL
+    distance; a surface mesh crossing the object counts 0)."""
+    import fcl
 
-    obj = grasp.problem.object.trimesh()
+    obj = grasp.problem.object
+    geometry = mesh_bvh(mesh_path(obj.mesh), obj.scale) if obj.kind == "mesh" else fcl_geometry(obj.kind, obj.size)
+    target = fcl.CollisionObject(geometry, fcl_transform(pose_to_matrix_np(obj.pose)))
     names, frames = robot.link_frames_array([trial_posture(robot, grasp.result.best)])
     row = {name: k for k, name in enumerate(names)}
     gaps = {link: np.inf for link in links}
     for s in link_shapes(robot.urdf, "collision"):
-        if s.link not in gaps or s.link not in row:
-            continue
-        mesh = s.mesh if s.mesh is not None else primitive_mesh(s.kind, s.size)
-        points = np.concatenate([sample_even(mesh, 400), np.asarray(mesh.vertices)])
-        T = frames[0, row[s.link]] @ s.origin
-        world = points @ T[:3, :3].T + T[:3, 3]
-        outside = -trimesh.proximity.signed_distance(obj, world)  # trimesh: positive inside
-        gaps[s.link] = min(gaps[s.link], max(float(outside.min()), 0.0))
+        if s.link in gaps and s.link in row:
+            placed = fcl.CollisionObject(link_geometry(s), fcl_transform(frames[0, row[s.link]] @ s.origin))
+            d = fcl.distance(placed, target, fcl.DistanceRequest(), fcl.DistanceResult())
+            gaps[s.link] = min(gaps[s.link], max(float(d), 0.0))
     return max(gaps.values(), default=0.0) * 1000
 
 

@@ -11,7 +11,7 @@ minutes): the top-1 grasp
 checked in MuJoCo with the pinned protocol (:func:`gt.check_until_failure`: holds 6/6 pushes), as the
 experiment ``synthesis`` checks it; each reported grasp's deepest link inside the object recomputed
 (FCL, no link exempt) and, where a grasp says which links touch (``links``), the farthest of them
-from the object (trimesh). Per hand: the share of objects whose top-1 grasp holds 6/6, over all
+from the object (FCL distance). Per hand: the share of objects whose top-1 grasp holds 6/6, over all
 and over the long ones; the grasps' types (a grasp's ``type``; one without it: precision); the
 median and longest time per object; the objects missed, by cause: no grasp found (the reason,
 summarized), found but the top-1 does not hold, or a reported grasp deeper than 1 mm; a picture of
@@ -162,7 +162,7 @@ def _held(row: dict) -> bool:
 
 def _reason_key(reason: str) -> str:
     """A no-grasp reason without its counts, to group the objects that share it."""
-    return re.sub(r"\d+(\.\d+)?", "N", reason.removeprefix("no grasp found: "))
+    return reason if reason.startswith(CAPPED) else re.sub(r"\d+(\.\d+)?", "N", reason.removeprefix("no grasp found: "))
 
 
 def summarize_hand(rows: list[dict], long: list[bool]) -> dict:
@@ -253,7 +253,7 @@ def _intro(cfg: HandsCfg, objs: list[tuple[Household, Shape]], prepared: list[fl
             f"the top-1 grasp {CHECKED if cfg.physics else NOT_CHECKED}. "
             "Deepest: recomputed here, the deepest link of any reported grasp inside the object (FCL, no link "
             "exempt); farthest contact link: of the links a grasp says touch (where it says so), the farthest from "
-            "the object's surface (trimesh). Types: each grasp's `type` (none: precision). Time per object: the "
+            "the object (FCL distance). Types: each grasp's `type` (none: precision). Time per object: the "
             f"call's wall time, {cfg.jobs} process{'es' if cfg.jobs > 1 else ''} over the objects, one torch thread "
             "each. Not timed: each mesh object's convex decomposition (CoACD, cached on disk), made before the "
             f"runs: longest {max(prepared, default=0.0):.1f} s here (0 where cached).")
