@@ -126,10 +126,14 @@ def support(s: LinkShape, P: np.ndarray, n: np.ndarray) -> float:
     return c + s.size[0]
 
 
-def surface_points(s: LinkShape, P: np.ndarray, count: int) -> np.ndarray:
+def surface_points(s: LinkShape, P: np.ndarray, count: int, vertices: int | None = None) -> np.ndarray:
     """(N, 3) points over the surface of a shape placed by ``P`` (4, 4): its mesh's vertices (a
-    primitive's: a fine triangulation's) and up to ``count`` more spread evenly over it (the same
-    points on every call), in the frame ``P`` maps into (m)."""
+    primitive's: a fine triangulation's; at most ``vertices`` of them, evenly strided, where given)
+    and up to ``count`` more spread evenly over it (the same points on every call), in the frame
+    ``P`` maps into (m)."""
     mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
-    points = np.concatenate([np.asarray(mesh.vertices, dtype=np.float64), sample_even(mesh, count)])
+    corners = np.asarray(mesh.vertices, dtype=np.float64)
+    if vertices is not None and len(corners) > vertices:
+        corners = corners[:: math.ceil(len(corners) / vertices)]
+    points = np.concatenate([corners, sample_even(mesh, count)])
     return points @ P[:3, :3].T + P[:3, 3]

@@ -1,6 +1,8 @@
 """Grasp synthesis: contact sets chosen on an object so that the hand can touch them with its
 pads (:mod:`~graspnet_torch.synthesis.candidates`), ranked by grasp quality and solved
-(:mod:`~graspnet_torch.synthesis.synthesize`); beside it, a planner with no contact reasoning
+(:mod:`~graspnet_torch.synthesis.synthesize`), and power grasps where the pads' do not hold
+(:mod:`~graspnet_torch.synthesis.power`: the palm on the object, the fingers wrapped around it);
+beside it, a planner with no contact reasoning
 (:mod:`~graspnet_torch.synthesis.baseline`: random palm poses, fingers closed until they touch)."""
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ def finger_spheres(robot: Robot, surface: bool = False, points: int = 0
             c = local @ shape.origin[:3, :3].T + shape.origin[:3, 3]
             rad = np.concatenate([np.full(len(z), min(r, length / 2)), np.zeros(a.size)])
         elif surface and points and shape.kind in ("box", "mesh"):
-            c = surface_points(shape, shape.origin, points)
+            c = surface_points(shape, shape.origin, points, points)
             rad = np.zeros(len(c))
         else:
             c, rad = shape_spheres(shape)
@@ -198,7 +198,8 @@ def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -
     for shape in link_shapes(robot.urdf):
         if shape.link not in names:
             continue
-        points = surface_points(shape, frames[0, names.index(shape.link)] @ shape.origin, LINK_POINTS)
+        points = surface_points(shape, frames[0, names.index(shape.link)] @ shape.origin, LINK_POINTS,
+                                LINK_POINTS)
         gap = surface_distance(obj, points)
         i = int(np.argmin(gap))
         if gap[i] <= within_m and gap[i] < nearest.get(shape.link, (np.inf, None))[0]:

@@ -20,7 +20,7 @@ whatever the fingers meet is the grasp. One candidate, every candidate of a call
    line; a finger stops where any of its links first meets the object's surface
    (:func:`~graspnet_torch.collision.surface.surface_distance_near`, the sampler's fast distance,
    of its collision shapes as spheres and, around a cylinder's ends, points of its surface:
-   :func:`finger_spheres`), found by
+   :func:`~graspnet_torch.synthesis.autograsp.finger_spheres`), found by
    bisection, or one sample before a link meets another finger's link
    (:func:`~graspnet_torch.collision.spheres.shape_spheres`, the pairs of
    :func:`~graspnet_torch.collision.scene.finger_pairs`), or at the line's end (touching nothing).

@@ -66,7 +66,7 @@ HOLDER_SPREAD = 0.2  # a palm without a box: how far off the fingers' mean axis 
 # of the home fingertips' distance from it)
 NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
 NEAR_DEG, NEAR_M = 10.0, 0.005  # how near (standard deviations of the turn and the shift)
-PAD_POINTS = 256  # points spread over a pad link's mesh where the sampler measures its clearance
+PAD_POINTS = 128  # points spread over a pad link's mesh where the sampler measures its clearance
 COMBOS = 4  # line choices (contact sets) tried per palm pose whose every chosen finger touches
 
 
@@ -165,7 +165,7 @@ def _line_spheres(robot: Robot, spheres: list[tuple[int, str, np.ndarray, np.nda
                   fingers: Sequence[str], rows: list[int]) -> list[tuple[int, str, np.ndarray, np.ndarray, bool]]:
     """The spheres (:func:`_finger_spheres`) a closing line's clearance is measured on: the chosen
     fingers' (``rows``), but the links that carry their pads or tips as points spread over their
-    collision surfaces (spheres of radius 0, ``PAD_POINTS`` more per shape than its vertices):
+    collision surfaces (spheres of radius 0: up to ``PAD_POINTS`` vertices and ``PAD_POINTS`` more per shape):
     spheres bound a shape loosely (a mesh's stand out of it by a share of its thickness) or
     leave its corners out (a box's), and a pad's link touches the object by construction."""
     links = {robot.cfg.fingers[f].tip for f in fingers} | {robot.pads[f].link for f in fingers}
@@ -173,7 +173,7 @@ def _line_spheres(robot: Robot, spheres: list[tuple[int, str, np.ndarray, np.nda
     out = [sp for sp in spheres if sp[0] in rows and sp[1] not in links]
     for shape in link_shapes(robot.urdf):
         if shape.link in links and shape.link in row:
-            points = surface_points(shape, shape.origin, PAD_POINTS)
+            points = surface_points(shape, shape.origin, PAD_POINTS, PAD_POINTS)
             out.append((row[shape.link], shape.link, points, np.zeros(len(points)), shape.kind == "mesh"))
     return out
 

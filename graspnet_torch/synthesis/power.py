@@ -4,22 +4,31 @@ alone do not hold: objects larger or longer than the fingertips span.
 
 A batch of ``BATCH`` palm poses at a time:
 
-1. *Palm*: a uniformly random palm orientation, the object's centre at a random point of the
-   palm's plane within the fingertips' reach and the object a gap of ``GAP_M`` from the palm's
-   face (:func:`~graspnet_torch.synthesis.drafts.palm_poses`: the palm's front from the hand's
-   kinematics, any palm geometry).
-2. *Fingers*: every finger starts open (``OPEN``: a random fraction of each joint's range above its
-   lower limit) and closes until one of its links meets the object
-   (:func:`~graspnet_torch.synthesis.autograsp.close_fingers`).
+1. *Palm*: ``ACROSS_SHARE`` of the palm orientations put the object's long axis (its vertices'
+   principal axis) across the palm (normal to its front and to the fingers' direction), turned
+   about that axis at random and by ``JITTER_DEG`` about a random one; the rest are uniform. The
+   object's centre lies at a random point of the palm's plane over the half of the palm's face
+   toward the fingers (:func:`~graspnet_torch.synthesis.drafts.palm_poses`: the palm's front from
+   the hand's kinematics, any palm geometry), and the hand is moved along its front until, its
+   fingers open (``OPEN``: a random fraction of each joint's range above its lower limit), its
+   nearest point lies ``GAP_M`` from the object (:func:`_seated`): the object rests on the palm,
+   or on what stands out of it.
+2. *Fingers*: every finger closes until one of its links meets the object
+   (:func:`~graspnet_torch.synthesis.autograsp.close_fingers`, its boxes and meshes as
+   ``LINK_POINTS`` points of their surfaces), then, ``WRAP_PHASES`` times, the joints beyond each
+   touching link close on while those up to it hold (GraspIt!'s autograsp: the finger wraps;
+   :func:`_wrap`). Fingers passing through each other are left to the check.
 3. *Check*: kept where at least ``MIN_TOUCHING`` fingers touch, the FCL scene (every link, the
-   fingers apart) finds no link deeper than ``PENETRATION_M`` in the object and the contacts (each
-   touching finger's nearest point, the palm's where it lies within ``TOUCH_M``; the object's
+   fingers apart) finds no link deeper than ``PENETRATION_M`` in the object and no two fingers
+   through each other, and the contacts (each touching link's nearest point of the object, the
+   palm's among them: :func:`~graspnet_torch.synthesis.autograsp.link_contacts`; the object's
    inward normals there) are in force closure (friction ``FRICTION``).
 
 Kept grasps are ranked by Ferrari-Canny epsilon and checked in physics in that order, the grasp's
-squeeze closing every closing joint ``SQUEEZE_DEG`` further. A grasp's ``links`` are the links
-within ``TOUCH_M`` of the object (FCL distances), the palm's among them where it touches; its
-``type`` is "power" where the palm or a link other than a pad's touches, else "precision".
+squeeze closing every closing joint ``SQUEEZE_DEG`` further. A grasp's ``links`` are those
+touching links; its ``type`` is "power" where the palm or a link other than a pad's touches, else
+"precision"; its ``candidate`` lists every contact (``fingers``: the finger of each, the palm
+link's name for the palm's), its ``problem`` one contact per touching finger (the first).
 Everything is drawn from one ``numpy`` generator seeded by ``seed``.
 """
 
@@ -59,7 +68,7 @@ __all__ = ["BATCH", "GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_D
 
 BATCH = 64  # palm poses drawn at once
 GAP_M = (0.0, 0.001)  # the object's gap to the palm's face: it rests on the palm
-OPEN = (0.0, 0.2)  # a finger's open posture: this fraction of each joint's range above its lower limit
+OPEN = (0.0, 0.05)  # a finger's open posture: this fraction of each joint's range above its lower limit
 MIN_TOUCHING = 2  # fingers that must touch
 PENETRATION_M = 1e-3  # no link deeper than this in the object
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
@@ -75,7 +84,9 @@ PALM_POINTS = 256  # points spread over each palm shape where its distance to th
 def _palm_points(robot: Robot) -> np.ndarray:
     """(P, 3) points over the palm's collision surface, palm frame."""
     shapes = [s for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link]
-    return np.concatenate([surface_points(s, s.origin, PALM_POINTS) for s in shapes]) if shapes else np.zeros((0, 3))
+    if not shapes:
+        return np.zeros((0, 3))
+    return np.concatenate([surface_points(s, s.origin, PALM_POINTS, PALM_POINTS) for s in shapes])
 
 
 def _palm_contact(obj: Shape, posture: Posture, palm: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -1,0 +1,108 @@
+"""Power grasps (the palm on the object, the fingers wrapped around it): independent re-checks of
+what :func:`power_grasps` and :func:`gt.synthesize_grasps` return."""
+
+from __future__ import annotations
+
+import json
+
+import fcl
+import numpy as np
+import pytest
+
+import graspnet_torch as gt
+from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry
+from graspnet_torch.collision.scene import CollisionScene
+from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import pose_to_matrix_np
+from graspnet_torch.synthesis.power import power_grasps
+
+SLACK_M = 1e-5  # FCL's distance against the search's points of the same surfaces
+
+
+@pytest.fixture(scope="module")
+def robot() -> gt.Robot:
+    return gt.load_robot("hand")
+
+
+def bottle() -> Shape:
+    """A 5 x 18 cm cylinder, tilted: longer than the fingertips span around it."""
+    return Shape("cylinder", (0.025, 0.18), np.array([0.0, 0.0, 0.2, 0.3, 0.2, 0.0]))
+
+
+@pytest.fixture(scope="module")
+def wraps(robot: gt.Robot) -> tuple[list, dict]:
+    stats: dict = {}
+    return power_grasps(robot, bottle(), 3, seed=0, max_tries=64, stats=stats), stats
+
+
+def link_distances(robot: gt.Robot, obj: Shape, posture: gt.Posture) -> dict[str, float]:
+    """Each link's distance (m) from the object: FCL between its collision shapes and the object's."""
+    frames = robot.link_frames(posture)
+    target = fcl.CollisionObject(fcl_geometry(obj.kind, obj.size), fcl_transform(pose_to_matrix_np(obj.pose)))
+    out: dict[str, float] = {}
+    for s in link_shapes(robot.urdf, "collision"):
+        link = fcl.CollisionObject(link_geometry(s), fcl_transform(frames[s.link] @ s.origin))
+        d = max(float(fcl.distance(link, target, fcl.DistanceRequest(), fcl.DistanceResult())), 0.0)
+        out[s.link] = min(out.get(s.link, np.inf), d)
+    return out
+
+
+def test_links_touch_and_nothing_is_inside(robot: gt.Robot, wraps) -> None:
+    grasps, stats = wraps
+    assert len(grasps) == 3, stats
+    obj = bottle()
+    for g in grasps:
+        posture = g.candidate.posture
+        gaps = link_distances(robot, obj, posture)
+        assert len(g.links) >= 2
+        for link in g.links:  # every link said to touch lies within 1 mm of the object
+            assert gaps[link] <= 1e-3 + SLACK_M, (link, gaps[link])
+        # none deeper than 1 mm in it, no two fingers through each other: a fresh FCL scene
+        report = CollisionScene(robot, g.problem, object_tolerance=0.001, touching=False,
+                                fingers_apart=True).check(posture)
+        assert report.count == 0, report
+
+
+def test_contacts_are_on_the_surface_and_in_force_closure(wraps) -> None:
+    grasps, _ = wraps
+    obj = bottle()
+    T = pose_to_matrix_np(obj.pose)
+    r, length = obj.size
+    for g in grasps:
+        local = (g.contacts - T[:3, 3]) @ T[:3, :3]
+        radial, height = np.linalg.norm(local[:, :2], axis=1), np.abs(local[:, 2])
+        on_side = np.isclose(radial, r, atol=1e-6) & (height <= length / 2 + 1e-6)
+        on_cap = np.isclose(height, length / 2, atol=1e-6) & (radial <= r + 1e-6)
+        assert np.all(on_side | on_cap), local
+        q = gt.grasp_quality(g.contacts, g.candidate.normals, obj.pose[:3], 0.6)
+        assert q.force_closure and g.quality.force_closure
+        assert q.epsilon == pytest.approx(g.quality.epsilon, abs=1e-9)
+
+
+def test_type_says_whether_more_than_pads_touch(robot: gt.Robot, wraps) -> None:
+    grasps, _ = wraps
+    pads = {p.link for p in robot.pads.values()}
+    for g in grasps:
+        assert g.type == ("power" if set(g.links) - pads else "precision")
+    assert any(g.type == "power" and robot.cfg.palm_link in g.links for g in grasps)
+
+
+def test_result_json_says_type_and_links(wraps) -> None:
+    g = wraps[0][0]
+    data = json.loads(json.dumps(g.to_dict()))
+    assert data["type"] == g.type and data["links"] == list(g.links)
+    assert data["normal_angles_deg"] == [None] * len(g.contacts)  # no pad aimed
+    assert data["success"] and data["holds"] is None
+    assert len(data["contacts"]) == len(set(data["contacts"][i]["finger"] for i in range(len(data["contacts"]))))
+
+
+def test_synthesis_adds_power_grasps_where_pads_leave_too_few(robot: gt.Robot) -> None:
+    pads_only = gt.synthesize_grasps(robot, bottle(), n_grasps=3, candidates=1, seed=0, power=False)
+    both = gt.synthesize_grasps(robot, bottle(), n_grasps=3, candidates=1, seed=0)
+    assert len(pads_only) <= 1 and {g.type for g in pads_only} <= {"precision"}
+    assert len(both) == 3 and [g.type for g in both[: len(pads_only)]] == ["precision"] * len(pads_only)
+    assert {g.type for g in both[len(pads_only):]} <= {"power", "precision"}
+    assert any(g.type == "power" for g in both)
+    for g in pads_only:
+        assert g.links == tuple(dict.fromkeys(robot.pads[f].link for f in g.candidate.fingers))
