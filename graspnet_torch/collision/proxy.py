@@ -362,7 +362,8 @@ class CollisionProxy:
                          if a in self.links and b in self.links]
             C = self._cluster_local.shape[0]
             local = self._cluster_local.transpose(1, 2).reshape(C * CLUSTER, 4)[:, :3]
-            self._finger_overlaps = FingerOverlaps(self.sphere_links(), self._radii.reshape(-1), local, pairs)
+            self._finger_overlaps = FingerOverlaps(self.sphere_links(), self._radii.reshape(-1), local, pairs,
+                                                   CLUSTER)
         return self._finger_overlaps
 
     def link_depths(self, penetrations: Tensor, spheres: Tensor | None = None) -> Tensor:
