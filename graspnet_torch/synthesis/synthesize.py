@@ -164,7 +164,18 @@ START = ("sampled", "random", "proposal")
 def no_grasp_reason(stats: dict) -> str:
     """Why :func:`synthesize_grasps` found no grasp, one line, from its ``stats``: no palm pose
     touched with every chosen pad (a hand on an arm: or none that the arm reached), none of those
-    that did faced it with nothing inside the object, or the sets drawn were solved and none landed."""
+    that did faced it with nothing inside the object, or the sets drawn were solved and none landed;
+    and, where power grasps were drawn, what became of them."""
+    reason = _pads_reason(stats)
+    if "power_tried" not in stats:
+        return reason
+    return (f"{reason}; power grasps: of {stats['power_tried']} palm poses on the object {stats['power_touching']} "
+            f"touched with 2 fingers or more, {stats['power_clean']} of those with nothing inside it, none in force "
+            f"closure")
+
+
+def _pads_reason(stats: dict) -> str:
+    """:func:`no_grasp_reason` for the pads' grasps."""
     tried, touching, clean = stats.get("tried", 0), stats.get("touching", 0), stats.get("clean", 0)
     if stats.get("pairs") == 0:
         return (f"no grasp found: no antipodal pair {stats['width_mm']:.1f} mm apart (within "
