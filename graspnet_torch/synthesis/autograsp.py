@@ -192,7 +192,8 @@ def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -
     """The links (palm and fingers, in the URDF's order) with a point of their collision surface
     within ``within_m`` of ``obj`` at ``posture`` (``LINK_POINTS`` points per shape and its vertices:
     a link listed lies that near; one that touches between its points may be left out), and for
-    each the object's surface point nearest it (k, 3), world."""
+    each the point of the object's surface (its triangulation, ``obj.trimesh()``) nearest its
+    nearest point (k, 3), world."""
     names, frames = robot.link_frames_of(None, posture.fingers[None], posture.palm_pose[None])
     nearest: dict[str, tuple[float, np.ndarray]] = {}
     for shape in link_shapes(robot.urdf):
@@ -206,5 +207,7 @@ def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -
             nearest[shape.link] = (float(gap[i]), points[i])
     if not nearest:
         return (), np.zeros((0, 3))
+    import trimesh
+
     at = np.stack([p for _, p in nearest.values()])
-    return tuple(nearest), at - surface_distance(obj, at)[:, None] * surface_normals(obj, at)
+    return tuple(nearest), np.asarray(trimesh.proximity.closest_point(obj.trimesh(), at)[0], dtype=np.float64)

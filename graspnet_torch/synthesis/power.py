@@ -10,10 +10,12 @@ A batch of ``BATCH`` palm poses at a time:
    object's centre lies at a random point of the palm's plane over the half of the palm's face
    toward the fingers (:func:`~graspnet_torch.synthesis.drafts.palm_poses`: the palm's front from
    the hand's kinematics, any palm geometry), and the hand is moved along its front until, its
-   fingers open (``OPEN``: a random fraction of each joint's range above its lower limit), its
-   nearest point lies ``GAP_M`` from the object (:func:`_seated`): the object rests on the palm,
-   or on what stands out of it.
-2. *Fingers*: every finger closes until one of its links meets the object
+   fingers open (``OPEN``: a random fraction of each joint's range from the limit away from
+   closing), the palm lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a random gap
+   up to the open fingertips' reach) or the fingers as near as they allow (:func:`_seated`).
+2. *Fingers*: every finger closes (each joint that, at mid-range, moves its pad forward, along the
+   pad's normal, by a cosine of ``FORWARD`` or more, toward the limit that does, from near the
+   other; the others held) until one of its links meets the object
    (:func:`~graspnet_torch.synthesis.autograsp.close_fingers`, its boxes and meshes as
    ``LINK_POINTS`` points of their surfaces), then, ``WRAP_PHASES`` times, the joints beyond each
    touching link close on while those up to it hold (GraspIt!'s autograsp: the finger wraps;
@@ -54,13 +56,13 @@ from graspnet_torch.synthesis.autograsp import (
     TOUCH_M,
     close_fingers,
     closed_result,
-    closing_signs,
     finger_gaps,
     finger_spheres,
     link_contacts,
     placed_spheres,
 )
 from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, placeholder_problem
+from graspnet_torch.synthesis.closing import FORWARD, pad_forward
 from graspnet_torch.synthesis.drafts import palm_front, palm_poses
 from graspnet_torch.synthesis.grasp import SynthesizedGrasp
 
@@ -68,7 +70,7 @@ __all__ = ["BATCH", "GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_D
 
 BATCH = 64  # palm poses drawn at once
 GAP_M = (0.0, 0.001)  # the object's gap to the palm's face: it rests on the palm
-OPEN = (0.0, 0.05)  # a finger's open posture: this fraction of each joint's range above its lower limit
+OPEN = (0.0, 0.05)  # a finger's open posture: this fraction of each joint's range from the limit away from closing
 MIN_TOUCHING = 2  # fingers that must touch
 PENETRATION_M = 1e-3  # no link deeper than this in the object
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
@@ -76,6 +78,8 @@ FACE_M = 0.01  # the palm's face: its surface within this of its farthest point 
 SEAT_STEPS = 3  # moves of the palm toward the object until it rests on it
 ACROSS_SHARE = 0.75  # of each batch: palm poses with the object's long axis across the palm
 JITTER_DEG = 15.0  # how far those turn from it (standard deviation)
+ON_PALM = 0.5  # of each batch: the object resting on the palm; the rest a random gap up to the open fingertips'
+# reach in front of it (fingers that stand out of the palm, as a Barrett hand's, close on it from there)
 WRAP_PHASES = 3  # closings after the first: the joints beyond the touching links close on
 LINK_POINTS = 64  # points spread over each finger link's box or mesh where the closing measures it
 PALM_POINTS = 256  # points spread over each palm shape where its distance to the object is measured
@@ -156,11 +160,16 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     R = _across(rng, B, verts, front, tips)
-    q_open = lo + rng.uniform(*OPEN, (B, *lo.shape)) * (hi - lo)
+    forward = pad_forward(robot, ((lo + hi) / 2)[None])[0]  # (F, n): at mid-range, how each joint moves its pad
+    direction = np.where(forward >= FORWARD, 1.0, np.where(forward <= -FORWARD, -1.0, 0.0))  # closing: forward
+    opened = rng.uniform(*OPEN, (B, *lo.shape)) * (hi - lo)
+    q_open = np.where(direction < 0, hi - opened, lo + opened)  # open: the limit away from closing
+    reach = robot.fingertips_palm(torch.as_tensor(q_open)).numpy() @ front - face  # (B, F): the open tips' reach
+    palm_gap = np.where(rng.random(B) < ON_PALM, sum(GAP_M) / 2, rng.random(B) * np.maximum(reach.max(axis=1), 0.0))
     T = _seated(robot, obj, palm_poses(R, rng, palm, verts, centre, [], GAP_M), torch.as_tensor(q_open), palm_pts,
-                front, spheres[0])
+                front, spheres[0], palm_gap)
     head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))
-    direction = closing_signs(robot, q_open, front)
+    direction = np.broadcast_to(direction, q_open.shape)
     q_close = np.where(direction > 0, hi, np.where(direction < 0, lo, q_open))
     q, gaps = _wrap(robot, obj, head, torch.as_tensor(q_open), torch.as_tensor(q_close), spheres)
     touch = (gaps <= TOUCH_M) & (gaps >= -PENETRATION_M)
@@ -255,20 +264,21 @@ def _across(rng: np.random.Generator, B: int, verts: np.ndarray, front: np.ndarr
 
 
 def _seated(robot: Robot, obj: Shape, T: np.ndarray, q_open: torch.Tensor, palm_pts: np.ndarray, front: np.ndarray,
-            model: tuple) -> np.ndarray:
-    """Palm poses (B, 4, 4) moved along their front axis (palm frame ``front``) until the hand at
-    its open postures q_open (B, F, n), its palm as the points ``palm_pts`` (P, 3) and its fingers
-    as ``model`` (:func:`~graspnet_torch.synthesis.autograsp.finger_spheres`), lies ``GAP_M``'s
-    middle from the object at its nearest (``SEAT_STEPS`` moves by the gap found: exact for a
-    face parallel to the object's nearest face)."""
+            model: tuple, palm_gap: np.ndarray) -> np.ndarray:
+    """Palm poses (B, 4, 4) moved along their front axis (palm frame ``front``) until the palm's
+    nearest point ``palm_pts`` (P, 3) lies ``palm_gap`` (B,) from the object, or, where the hand's
+    fingers at their open postures q_open (B, F, n) (as ``model``,
+    :func:`~graspnet_torch.synthesis.autograsp.finger_spheres`) would then come nearer than
+    ``GAP_M``'s middle, as near as they allow (``SEAT_STEPS`` moves by the gap found: exact for
+    a face parallel to the object's nearest face)."""
     T = T.copy()
     d = np.einsum("bij,j->bi", T[:, :3, :3], front)  # world: the palm's front
     for _ in range(SEAT_STEPS):
         world = np.einsum("bij,pj->bpi", T[:, :3, :3], palm_pts) + T[:, None, :3, 3]
-        gap = surface_distance(obj, world.reshape(-1, 3)).reshape(len(T), -1).min(axis=1)
+        palm = surface_distance(obj, world.reshape(-1, 3)).reshape(len(T), -1).min(axis=1)
         head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))
-        gap = np.minimum(gap, _sphere_gaps(robot, obj, head, q_open, model).min(axis=1))
-        T[:, :3, 3] += (gap - sum(GAP_M) / 2)[:, None] * d
+        fingers = _sphere_gaps(robot, obj, head, q_open, model).min(axis=1)
+        T[:, :3, 3] += np.minimum(palm - palm_gap, fingers - sum(GAP_M) / 2)[:, None] * d
     return T
 
 
