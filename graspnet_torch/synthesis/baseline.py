@@ -134,9 +134,7 @@ def baseline_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps: 
     fingers, then pushes held (the unchecked ones dropped). ``stats``, if given, receives ``tried``
     (palm poses), ``touching`` (enough fingers touch), ``clean`` (and FCL-clean: the grasps kept),
     ``checked``, ``held`` (of those, holding every push) and the timings ``close_s``, ``check_s``,
-    ``physics_s`` and ``held_physics_s`` (s; the part spent on the checks that held). Measured on the shipped
-    hand, 64 candidates, seed 0, one thread, with ``gt.simulate_grasp``: see the report of the
-    commit that added this module.
+    ``physics_s`` and ``held_physics_s`` (s; the part spent on the checks that held).
     """
     robot = as_robot(robot)
     if robot.has_body or robot.shared.n:

@@ -108,26 +108,22 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
 
     ``solver`` settings given win over what ``start`` sets.
 
-    ``power``: where the pads' grasps leave fewer than ``n_grasps`` that hold every push (without
-    physics: that succeed), a free hand's power grasps are drawn too
-    (:func:`~graspnet_torch.synthesis.power.power_grasps`: the palm on the object, the fingers
-    wrapped around it, any link touching) and checked the same way; each grasp says its ``type``
-    ("precision" / "power") and the ``links`` that touch.
+    ``power``: where the pads' grasps leave fewer than ``n_grasps`` holding every push (without
+    physics: succeeding), a free hand's power grasps too (:mod:`~graspnet_torch.synthesis.power`),
+    checked the same way; each grasp says its ``type`` and the ``links`` that touch.
 
     A hand on an arm (its config names its free ``hand``) draws its sets with that hand and keeps
     those the arm reaches (:mod:`~graspnet_torch.synthesis.reach`). A gripper with two marked points
     (MANUS) grasps antipodal point pairs as wide as its jaws (:mod:`~graspnet_torch.synthesis.pairs`,
     at most ``candidates``), the best ``solve_top`` (default ``2 n_grasps``) solved by the search
-    (``trials`` learners each, whatever ``start``) among ``obstacles`` (a table); its jaws do not
-    move, so there is nothing to squeeze in physics: ``physics`` is refused. ``obstacles`` (a table
-    under the object): a set whose links meet one is dropped as it is drawn, and each solve counts
-    them as collisions (the physics check leaves them out, as DexGraspBench's has no table).
+    (``trials`` learners each) among ``obstacles`` (a table); its jaws do not move: ``physics`` is
+    refused. ``obstacles`` (a table under the object): a set whose links meet one is dropped as it
+    is drawn, each solve counts them as collisions (the physics check leaves them out).
 
     ``stats``, if given, receives the sampler's counts, the timings (s: ``generate_s``, ``rank_s``,
     ``solve_s``, ``physics_s``; ``held_physics_s``: the part of ``physics_s`` spent on the checks
     that held every push; ``first_s``: to the first grasp that holds every push, None if none),
-    ``solved``, ``succeeded`` and ``held`` (power grasps' included), and the power search's counts
-    (``power_tried``, ...: :func:`~graspnet_torch.synthesis.power.power_grasps`).
+    ``solved``, ``succeeded``, ``held`` (power grasps' included) and the power search's ``power_*``.
     """
     if n_grasps < 1 or candidates < 1:
         raise ProblemError(f"synthesize_grasps: n_grasps {n_grasps} and candidates {candidates} must be >= 1")
@@ -138,19 +134,16 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     if gripper and physics is not None:
         raise ProblemError(f"synthesize_grasps: robot {robot.name}: its jaws do not move (fixed marked points): "
                            f"there is no squeeze to check in physics; pass physics=None")
-    settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
-    run = functools.partial(_sampled if start == "sampled" else _random, obstacles=tuple(obstacles))
-    if gripper:
-        settings = dict(solver or {})
-        run = functools.partial(_pairs, obstacles=tuple(obstacles))
+    run, settings = _search(gripper, start, solver, tuple(obstacles))
     if fingers is None:
         fingers = () if gripper else default_fingers(carried_hand(robot))
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
                "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
-    if power and not gripper and not robot.has_body and t["held" if physics is not None else "succeeded"] < n_grasps:
-        grasps += power_grasps(robot, obj, n_grasps - t["held" if physics is not None else "succeeded"], seed,
-                               physics=None if physics is None else _timed(physics, t), obstacles=obstacles, stats=t)
+    done = t["held" if physics is not None else "succeeded"]
+    if power and not gripper and not robot.has_body and done < n_grasps:
+        check = None if physics is None else _timed(physics, t)
+        grasps += power_grasps(robot, obj, n_grasps - done, seed, physics=check, obstacles=obstacles, stats=t)
     if physics is not None:
         grasps.sort(key=lambda g: -(g.holds or 0))  # stable: rank order within a count
     if stats is not None:
@@ -196,6 +189,16 @@ def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None
     """Check a grasp in physics (where asked), timed, counted in ``t["held"]`` where it holds every push."""
     if physics is not None:
         g.physics = _timed(physics, t)(g.problem, g.result, robot=robot)
+
+
+def _search(gripper: bool, start: str, solver: dict | None, obstacles: tuple[Shape, ...]
+            ) -> tuple[Callable[..., list[SynthesizedGrasp]], dict]:
+    """The search of :func:`synthesize_grasps` (a gripper's pairs, the sampled or the searched
+    solves) and its solver settings."""
+    if gripper:
+        return functools.partial(_pairs, obstacles=obstacles), dict(solver or {})
+    settings = {"contact_model": "surface", **({} if start == "sampled" else {"start": start}), **(solver or {})}
+    return functools.partial(_sampled if start == "sampled" else _random, obstacles=obstacles), settings
 
 
 def _pad_links(hand: Robot, fingers: Sequence[str]) -> tuple[str, ...]:
