@@ -115,9 +115,12 @@ def power_grasps(robot: Robot, obj: Shape, n_grasps: int, seed: int = 0, max_tri
     from at most ``max_tries`` palm poses: with ``physics`` (a check ``physics(problem, result,
     robot=robot)``, i.e. ``gt.simulate_grasp``), the grasps of each batch checked in rank order
     (at most ``checks`` in all) until ``n_grasps`` hold every push, every checked one returned in
-    the order checked; without, the best ``n_grasps`` by epsilon. ``stats`` receives
+    the order checked; without, the best ``n_grasps`` by epsilon. A hand whose palm has no
+    collision geometry has none (``[]``, ``stats`` untouched). ``stats`` receives
     ``power_tried``, ``power_touching`` (enough fingers touch), ``power_kept`` (FCL-clean, in force
     closure), ``power_checked`` and ``power_held``."""
+    if not len(_palm_points(robot)):  # a holder with no palm to rest the object on (TriFinger's)
+        return []
     rng = np.random.default_rng([seed, 1])
     counts = stats if stats is not None else {}
     counts.update(power_tried=0, power_touching=0, power_clean=0, power_kept=0, power_checked=0, power_held=0)

@@ -103,3 +103,9 @@ def test_synthesis_adds_power_grasps_where_pads_leave_too_few(robot: gt.Robot) -
     assert any(g.type == "power" for g in both)
     for g in pads_only:
         assert g.links == tuple(dict.fromkeys(robot.pads[f].link for f in g.candidate.fingers))
+
+
+def test_a_hand_without_a_palm_has_no_power_grasps() -> None:
+    trifinger = gt.load_robot("examples/trifinger/trifinger.yaml")  # fingers hanging from a holder
+    stats: dict = {}
+    assert power_grasps(trifinger, bottle(), 1, stats=stats) == [] and stats == {}
