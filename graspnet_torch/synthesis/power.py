@@ -52,6 +52,7 @@ from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np
+from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.autograsp import (
     TOUCH_M,
     close_fingers,
@@ -65,6 +66,7 @@ from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, placeholde
 from graspnet_torch.synthesis.closing import FORWARD, pad_forward
 from graspnet_torch.synthesis.drafts import palm_front, palm_poses
 from graspnet_torch.synthesis.grasp import SynthesizedGrasp
+from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["BATCH", "GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_DEG", "power_grasps"]
 
@@ -192,8 +194,10 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
         first = {f: i for i, f in reversed(list(enumerate(cset.fingers))) if f in robot.fingers}
         problem = placeholder_problem(robot, obj, tuple(first), cset.contacts[list(first.values())], obstacles)
         kind = "power" if any(link not in pads for link in links) else "precision"
-        out.append(SynthesizedGrasp(problem, cset, quality, closed_result(robot, posture, squeeze, seed),
-                                    links=links, type=kind))
+        result = closed_result(robot, posture, squeeze, seed)
+        if _deepest(robot, problem, trial_posture(robot, result.best)) > PENETRATION_M:
+            continue
+        out.append(SynthesizedGrasp(problem, cset, quality, result, links=links, type=kind))
     counts["power_kept"] += len(out)
     return sorted(out, key=lambda g: -g.quality.epsilon)
 
@@ -283,6 +287,13 @@ def _seated(robot: Robot, obj: Shape, T: np.ndarray, q_open: torch.Tensor, palm_
         fingers = _sphere_gaps(robot, obj, head, q_open, model).min(axis=1)
         T[:, :3, 3] += np.minimum(palm - palm_gap, fingers - sum(GAP_M) / 2)[:, None] * d
     return T
+
+
+def _deepest(robot: Robot, problem: GraspProblem, posture: Posture) -> float:
+    """The deepest any link of ``posture`` lies in the problem's object (m; FCL, every link, each
+    depth measured in full: the scene that counts links beyond a tolerance may stop short of it)."""
+    report = scene_for(robot, problem, 0.0, False).check(posture)
+    return max(report.object_links.values(), default=0.0)
 
 
 def _owners(robot: Robot) -> dict[str, str]:
