@@ -15,7 +15,7 @@ from graspnet_torch.robot.meshes import load_link_mesh
 from graspnet_torch.robot.shape import Shape, primitive_mesh
 from graspnet_torch.robot.transforms import matrix_to_pose_np
 
-__all__ = ["LinkShape", "link_shapes", "support", "surface_points"]
+__all__ = ["LinkShape", "link_shapes", "palm_shapes", "support", "surface_points"]
 
 GREY = (0.6, 0.6, 0.6, 1.0)
 
@@ -137,3 +137,17 @@ def surface_points(s: LinkShape, P: np.ndarray, count: int, vertices: int | None
         corners = corners[:: math.ceil(len(corners) / vertices)]
     points = np.concatenate([corners, sample_even(mesh, count)])
     return points @ P[:3, :3].T + P[:3, 3]
+
+
+def palm_shapes(model: UrdfModel, palm: str) -> list[tuple[LinkShape, np.ndarray]]:
+    """The palm's collision shapes, each with its placement (4, 4) in the palm link's frame: the
+    palm link's and those of the links fixed to it (a hand's base under a wrist frame)."""
+    fixed = {palm}
+    grew = True
+    while grew:
+        grew = False
+        for child, joint in model.parent_joint.items():
+            if joint.parent in fixed and joint.type == "fixed" and child not in fixed:
+                fixed.add(child)
+                grew = True
+    return [(s, model.fixed_transform(palm, s.link) @ s.origin) for s in link_shapes(model) if s.link in fixed]

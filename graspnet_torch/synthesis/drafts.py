@@ -47,7 +47,7 @@ from scipy.spatial.transform import Rotation
 from graspnet_torch.collision.spheres import shape_spheres
 from graspnet_torch.collision.surface import surface_distance_near, touch_points
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.robot.geometry import link_shapes, support, surface_points
+from graspnet_torch.robot.geometry import link_shapes, palm_shapes, support, surface_points
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -107,7 +107,7 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
     tips_all = robot.fingertips_palm(home.fingers).numpy()
     tips = tips_all.mean(axis=0)
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
-    palm = [s for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link]
+    palm = palm_shapes(robot.urdf, robot.cfg.palm_link)
     if not palm:
         front = tips / np.linalg.norm(tips)
         grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
@@ -119,7 +119,7 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
         spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
         return front, face, np.stack([mid - spread, mid + spread]), plane
     front = hand_axes(robot).front
-    face = max(support(s, s.origin, front) for s in palm)
+    face = max(support(s, P, front) for s, P in palm)
     tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
     plane = _palm_plane(front)
     reach = tips_at @ plane

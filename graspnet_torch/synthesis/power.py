@@ -47,7 +47,7 @@ from scipy.spatial.transform import Rotation
 from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
 from graspnet_torch.quality import GraspQuality, grasp_quality
-from graspnet_torch.robot.geometry import link_shapes, surface_points
+from graspnet_torch.robot.geometry import palm_shapes, surface_points
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -89,10 +89,10 @@ PALM_POINTS = 256  # points spread over each palm shape where its distance to th
 
 def _palm_points(robot: Robot) -> np.ndarray:
     """(P, 3) points over the palm's collision surface, palm frame."""
-    shapes = [s for s in link_shapes(robot.urdf) if s.link == robot.cfg.palm_link]
+    shapes = palm_shapes(robot.urdf, robot.cfg.palm_link)
     if not shapes:
         return np.zeros((0, 3))
-    return np.concatenate([surface_points(s, s.origin, PALM_POINTS, PALM_POINTS) for s in shapes])
+    return np.concatenate([surface_points(s, P, PALM_POINTS, PALM_POINTS) for s, P in shapes])
 
 
 def _palm_contact(obj: Shape, posture: Posture, palm: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -127,3 +127,32 @@ def test_decimation_never_fails_without_fast_simplification(monkeypatch):
     box = trimesh.creation.box()
     assert decimate(box, 2000) is box
     assert len(decimate(sphere, 10).faces) <= 10  # clustering cannot go that low: subsampled
+
+
+def test_palm_shapes_include_links_fixed_to_the_palm(tmp_path):
+    """A wrist frame without geometry whose hand base hangs from it by a fixed joint: the palm's
+    shapes are the base's, placed as the URDF's fixed transform puts them (checked against
+    pytorch-kinematics); a link behind a movable joint is not the palm's."""
+    import pytorch_kinematics as pk
+
+    from graspnet_torch.robot.geometry import palm_shapes
+
+    path = tmp_path / "wrist.urdf"
+    path.write_text("""<robot name="wrist">
+  <link name="wrist"/>
+  <link name="base"><collision><origin xyz="0.01 0 0.02" rpy="0 0.3 0"/>
+    <geometry><box size="0.08 0.02 0.09"/></geometry></collision></link>
+  <link name="finger"><collision><geometry><sphere radius="0.01"/></geometry></collision>
+  </link>
+  <joint name="mount" type="fixed"><parent link="wrist"/><child link="base"/>
+    <origin xyz="0 0 0.05" rpy="0.2 0 0.1"/></joint>
+  <joint name="knuckle" type="revolute"><parent link="base"/><child link="finger"/><origin xyz="0 0 0.1"/>
+    <axis xyz="1 0 0"/><limit lower="0" upper="1.5" effort="1" velocity="1"/></joint>
+</robot>""")
+    model = UrdfModel(path)
+    shapes = palm_shapes(model, "wrist")
+    assert [s.link for s, _ in shapes] == ["base"]
+    chain = pk.build_chain_from_urdf(path.read_bytes())
+    base = chain.forward_kinematics({"knuckle": 0.0})["base"].get_matrix()[0].double().numpy()
+    np.testing.assert_allclose(shapes[0][1], base @ shapes[0][0].origin, atol=1e-12)
+    assert [s.link for s, _ in palm_shapes(model, "base")] == ["base"]
