@@ -144,6 +144,7 @@ def test_bad_settings_are_refused_before_any_work(tmp_path):
              ({"grasps": 0}, "grasps=0"),
              ({"verify": "mujoco"}, "verify"),
              ({"start": "warm"}, "start"),
+             ({"power": "maybe"}, r"power='maybe': expected true or false"),
              ({"scale": -1.0}, "scale=-1"),
              ({"out": str(folder / "box.stl")}, "not a folder"),
              ({"robot": "arm_hand"}, r"centre=\[x,y,z\] is required for robot arm_hand \(a hand on an arm\)"),
