@@ -122,13 +122,7 @@ def train_posture(robot: Robot, finger_ik: FingerIK | None, cfg: ProposalCfg, ru
 
     run_dir = Path(run_dir)
     state_path = run_dir / "state.pt"
-    state = None
-    if resume:
-        if state_path.is_file():
-            state = _load_state(state_path, robot, cfg, seed)
-            print(f"resuming {state_path} (step {state['trainer']['steps_done']})")
-        else:
-            print(f"nothing to resume at {state_path}; starting a new run")
+    state = _resumed(state_path, robot, cfg, seed) if resume else None
     kept = f"of step {state['trainer']['steps_done']}" if state is not None else None  # the state on disk
     try:
         t_start = time.perf_counter()
@@ -186,13 +180,28 @@ def train_posture(robot: Robot, finger_ik: FingerIK | None, cfg: ProposalCfg, ru
         raise
     except KeyboardInterrupt:  # Ctrl-C outside the steps (drawing data, evaluating) or a second one
         raise Interrupted(resume_hint(state_path, kept)) from None
+    _print_table(robot, cfg, table, elapsed, eval_problems)
+    return model, table
+
+
+def _resumed(state_path: Path, robot: Robot, cfg: ProposalCfg, seed: int) -> dict | None:
+    """The training state to resume from (None, said, where there is none)."""
+    if not state_path.is_file():
+        print(f"nothing to resume at {state_path}; starting a new run")
+        return None
+    state = _load_state(state_path, robot, cfg, seed)
+    print(f"resuming {state_path} (step {state['trainer']['steps_done']})")
+    return state
+
+
+def _print_table(robot: Robot, cfg: ProposalCfg, table: dict, elapsed: float, eval_problems: int) -> None:
+    """The closing table: the proposals' best of ``cfg.heads`` beside random starts' on fresh problems."""
     print(f"\nposture proposals of '{robot.name}' ({elapsed:.0f} s with the data), best of {cfg.heads} on "
           f"{eval_problems} fresh problems, no iteration:")
     print(format_table(["start", "median mm", "p90 mm"],
                        [[f"proposal (best of {cfg.heads})", table["median_mm"], table["p90_mm"]],
                         [f"random (best of {cfg.heads})", table["random_median_mm"], table["random_p90_mm"]]],
                        floatfmt=".3g"))
-    return model, table
 
 
 def prepare_train_posture(cfg: Mapping[str, Any] | TrainPostureJobCfg, run_dir: str | Path
