@@ -9,6 +9,7 @@ object's centre as the centre of mass), then by the grasp matrix's least singula
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import heapq
 import time
@@ -42,6 +43,7 @@ from graspnet_torch.synthesis.pairs import SAMPLES as SAMPLES_OF_PAIRS
 from graspnet_torch.synthesis.pairs import WIDTH_TOL_M, PointPair, antipodal_pairs, jaw_width
 from graspnet_torch.synthesis.power import power_grasps
 from graspnet_torch.synthesis.reach import arm_palms, carried_hand, reach_sets
+from graspnet_torch.synthesis.seat import SEATED_M, seat_pads
 from graspnet_torch.tasks.problem import GraspProblem
 
 __all__ = ["FRICTION", "START", "SynthesizedGrasp", "no_grasp_reason", "rank_sets", "synthesize_grasps"]
@@ -138,7 +140,7 @@ def synthesize_grasps(robot: Robot | RobotCfg | str | Path, obj: Shape, n_grasps
     if fingers is None:
         fingers = () if gripper else default_fingers(carried_hand(robot))
     t: dict = {"t0": time.perf_counter(), "generate_s": 0.0, "rank_s": 0.0, "solve_s": 0.0, "physics_s": 0.0,
-               "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0}
+               "held_physics_s": 0.0, "first_s": None, "solved": 0, "succeeded": 0, "held": 0, "unseated": 0}
     grasps = run(robot, obj, n_grasps, tuple(fingers), candidates, seed, physics, solve_top, trials, settings, t)
     done = t["held" if physics is not None else "succeeded"]
     if power and not gripper and not robot.has_body and done < n_grasps:
@@ -182,7 +184,10 @@ def _pads_reason(stats: dict) -> str:
     if not clean:
         return (f"no grasp found: {touching} of {tried} palm poses touched with every chosen pad, none with every pad "
                 f"within the cone and nothing inside the object")
-    return f"no grasp found: {stats.get('solved', 0)} contact sets solved, none landed on its contacts"
+    unseated = stats.get("unseated", 0)
+    return (f"no grasp found: {stats.get('solved', 0)} contact sets solved, none landed on its contacts"
+            + (f" with its pads on the surface ({unseated} landed with a pad link off it by over "
+               f"{SEATED_M * 1000:g} mm)" if unseated else ""))
 
 
 def _check(g: SynthesizedGrasp, robot: Robot, physics: Callable[..., Any] | None, t: dict) -> None:
@@ -281,10 +286,11 @@ def _sampled(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], 
         result = session.solve(problem, start=s.posture, search=False)
         t["solve_s"] += time.perf_counter() - t3
         t["solved"] += 1
-        if not result.success:
+        seated = _seated(robot, obj, fingers, obstacles, problem, result, session, t) if result.success else None
+        if seated is None:
             continue
         t["succeeded"] += 1
-        g = SynthesizedGrasp(problem, s, q, result, links=_pad_links(hand, fingers))
+        g = SynthesizedGrasp(seated[0], s, q, seated[1], links=_pad_links(hand, fingers))
         grasps.append(g)
         _check(g, robot, physics, t)
         if (t["held"] if physics is not None else t["succeeded"]) >= n_grasps:
@@ -308,12 +314,35 @@ def _random(robot: Robot, obj: Shape, n_grasps: int, fingers: tuple[str, ...], c
     results = _solve(problems, trials, seed, settings)
     t.update(generate_s=t1 - t0, rank_s=t2 - t1, solve_s=time.perf_counter() - t2, solved=len(problems))
     links = _pad_links(carried_hand(robot), fingers)
-    grasps = [SynthesizedGrasp(p, s, q, r, links=links) for p, (s, q), r in zip(problems, ranked, results, strict=True)
-              if r.success]
+    session = Solver(robot, trials=1, seed=seed, solver=settings)
+    seated = [_seated(robot, obj, fingers, obstacles, p, r, session, t) if r.success else None
+              for p, r in zip(problems, results, strict=True)]
+    grasps = [SynthesizedGrasp(pr[0], s, q, pr[1], links=links) for pr, (s, q) in zip(seated, ranked, strict=True)
+              if pr is not None]
     t["succeeded"] = len(grasps)
     for g in grasps:
         _check(g, robot, physics, t)
     return grasps
+
+
+def _seated(robot: Robot, obj: Shape, fingers: tuple[str, ...], obstacles: tuple[Shape, ...], problem: GraspProblem,
+            result: GraspResult, session: Solver, t: dict) -> tuple[GraspProblem, GraspResult] | None:
+    """A solved grasp with its pads seated on the surface (:func:`seat_pads`), or None (counted in
+    ``t["unseated"]``)."""
+    seated = seat_pads(robot, carried_hand(robot), obj, problem, result,
+                       lambda p, x: _evaluator(session).solve(p, start=x, search=False),
+                       lambda c: placeholder_problem(robot, obj, fingers, c, obstacles))
+    t["unseated"] += seated is None
+    return seated
+
+
+@functools.lru_cache(maxsize=4)
+def _evaluator(session: Solver) -> Solver:
+    """A solver of ``session``'s settings whose warm start is no step: its result is the start's
+    posture, measured (errors, FCL check, pre-grasp and squeeze) as a solve's is."""
+    polish = {**dataclasses.asdict(session.solver_cfg.polish), "iterations": 0}
+    return Solver(session.robot, trials=1, seed=session.seed,
+                  solver={**dataclasses.asdict(session.solver_cfg), "polish": polish})
 
 
 def _solve(problems: list[GraspProblem], trials: int, seed: int, settings: dict) -> list[GraspResult]:
