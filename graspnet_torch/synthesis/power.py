@@ -7,9 +7,10 @@ A batch of ``BATCH`` palm poses at a time:
 1. *Palm*: ``ACROSS_SHARE`` of the palm orientations put the object's long axis (its vertices'
    principal axis) across the palm (normal to its front and to the fingers' direction), turned
    about that axis at random and by ``JITTER_DEG`` about a random one; the rest are uniform. The
-   object's centre lies at a random point of the palm's plane over the half of the palm's face
-   toward the fingers (:func:`~graspnet_torch.synthesis.drafts.palm_poses`: the palm's front from
-   the hand's kinematics, any palm geometry), and the hand is moved along its front until, its
+   object's centre lies at a random point of the palm's plane from just short of the knuckles to
+   under the proximal phalanges (:func:`_band`; :func:`~graspnet_torch.synthesis.drafts.palm_poses`:
+   the palm's front from the hand's kinematics, any palm geometry), and the hand is moved along
+   its front until, its
    fingers open (``OPEN``: a random fraction of each joint's range from the limit away from
    closing), the palm lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a random gap
    up to the open fingertips' reach) or the fingers as near as they allow (:func:`_seated`).
@@ -76,6 +77,9 @@ OPEN = (0.0, 0.05)  # a finger's open posture: this fraction of each joint's ran
 MIN_TOUCHING = 2  # fingers that must touch
 PENETRATION_M = 1e-3  # no link deeper than this in the object
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
+SURE = 0.7  # a joint's cosine to its pad's forward direction from which its closing direction is sure
+BAND = 1.5  # the object's centre lies from this many of its half widths short of the knuckles
+FAR = 0.5  # to this share of the fingers' length past them
 FACE_M = 0.01  # the palm's face: its surface within this of its farthest point along the front
 SEAT_STEPS = 3  # moves of the palm toward the object until it rests on it
 ACROSS_SHARE = 0.75  # of each batch: palm poses with the object's long axis across the palm
@@ -155,26 +159,24 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
     names = list(robot.fingers)
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     palm_pts = _palm_points(robot)
-    front, face, _, plane = palm_front(robot, list(range(len(names))))
+    verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
+    front, face, _, _ = palm_front(robot, list(range(len(names))))
     opposing = hand_axes(robot).opposing
     tips = robot.fingertips_palm(robot.home_posture().fingers).numpy()[[f != opposing for f in names]].mean(axis=0)
-    on_face = palm_pts[palm_pts @ front >= face - FACE_M]  # the palm's face
-    on_face = on_face[on_face @ tips >= np.median(on_face @ tips)] @ plane  # its half toward the fingers
-    palm = (front, face, np.stack([on_face.min(axis=0), on_face.max(axis=0)]), plane)
+    plane, box = _band(robot, palm_pts[palm_pts @ front >= face - FACE_M], front, tips, verts)
+    palm = (front, face, box, plane)
     spheres = finger_spheres(robot, surface=True, points=LINK_POINTS), finger_spheres(robot)
-    verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     R = _across(rng, B, verts, front, tips)
     forward = pad_forward(robot, ((lo + hi) / 2)[None])[0]  # (F, n): at mid-range, how each joint moves its pad
-    direction = np.where(forward >= FORWARD, 1.0, np.where(forward <= -FORWARD, -1.0, 0.0))  # closing: forward
+    direction, held = _directions(forward, names.index(opposing), lo, hi, B, rng)
     opened = rng.uniform(*OPEN, (B, *lo.shape)) * (hi - lo)
-    q_open = np.where(direction < 0, hi - opened, lo + opened)  # open: the limit away from closing
+    q_open = np.where(direction < 0, hi - opened, np.where(np.isnan(held), lo + opened, held))  # away from closing
     reach = robot.fingertips_palm(torch.as_tensor(q_open)).numpy() @ front - face  # (B, F): the open tips' reach
     palm_gap = np.where(rng.random(B) < ON_PALM, sum(GAP_M) / 2, rng.random(B) * np.maximum(reach.max(axis=1), 0.0))
     T = _seated(robot, obj, palm_poses(R, rng, palm, verts, centre, [], GAP_M), torch.as_tensor(q_open), palm_pts,
                 front, spheres[0], palm_gap)
     head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))
-    direction = np.broadcast_to(direction, q_open.shape)
     q_close = np.where(direction > 0, hi, np.where(direction < 0, lo, q_open))
     q, gaps = _wrap(robot, obj, head, torch.as_tensor(q_open), torch.as_tensor(q_close), spheres)
     touch = (gaps <= TOUCH_M) & (gaps >= -PENETRATION_M)
@@ -200,6 +202,50 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
         out.append(SynthesizedGrasp(problem, cset, quality, result, links=links, type=kind))
     counts["power_kept"] += len(out)
     return sorted(out, key=lambda g: -g.quality.epsilon)
+
+
+def _directions(forward: np.ndarray, o: int, lo: np.ndarray, hi: np.ndarray, B: int, rng: np.random.Generator
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Each pose's closing direction of every joint (B, F, n) (+1 up, -1 down, 0 held) and where a
+    held joint is held (B, F, n; NaN: near its lower limit), from ``forward`` (F, n)
+    (:func:`pad_forward` at mid-range): a joint closes toward the side whose cosine reaches ``FORWARD``, else holds;
+    the opposing finger's (row ``o``) joints whose cosine is weaker than ``SURE`` (a thumb's
+    rotation, which turns the pad as much as it moves it) close up, down or hold anywhere in their
+    range, a third of the poses each."""
+    direction = np.where(forward >= FORWARD, 1.0, np.where(forward <= -FORWARD, -1.0, 0.0))
+    direction = np.repeat(direction[None], B, axis=0)
+    held = np.full(direction.shape, np.nan)  # NaN: near the lower limit, as the open postures draw it
+    weak = (np.abs(forward[o]) >= FORWARD) & (np.abs(forward[o]) < SURE)
+    if weak.any():  # no draw for a hand without such joints: its poses as before
+        direction[:, o, weak] = rng.integers(-1, 2, (B, int(weak.sum())))
+        held[:, o] = np.where(weak, lo[o] + rng.random((B, lo.shape[1])) * (hi[o] - lo[o]), np.nan)
+    return direction, held
+
+
+def _band(robot: Robot, face: np.ndarray, front: np.ndarray, tips: np.ndarray, verts: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Where the object's centre is drawn over the palm: the plane (3, 2) of the fingers' direction
+    (``tips``, the other fingers' mean home fingertip, without its ``front`` part) and across it,
+    and the box (2, 2) in it (low and high corner): along the fingers from ``BAND`` of the object's
+    half width (half its second principal extent, ``verts`` (V, 3)) short of the knuckles (the
+    other fingers' first movable joints) to ``FAR`` of the fingers' length past them (under the
+    proximal phalanges: fingers that fold on themselves wrap no nearer the palm), across the palm's
+    face ``face`` (P, 3)."""
+    along_dir = tips - (tips @ front) * front
+    along_dir /= np.linalg.norm(along_dir)
+    plane = np.stack([along_dir, np.cross(front, along_dir)], axis=1)
+    opposing = hand_axes(robot).opposing
+    names, frames = robot.link_frames_of(None, robot.home_posture().fingers[None] * 0,
+                                         torch.zeros(1, 6, dtype=torch.float64))
+    knuckles = [frames[0, names.index(next(j for j in robot.urdf.path_joints(f.chain.root, f.chain.tip)
+                                           if j.type != "fixed").child), :3, 3]
+                for name, f in robot.fingers.items() if name != opposing]
+    line = float(np.mean(np.asarray(knuckles) @ along_dir))
+    centred = verts - verts.mean(axis=0)
+    half = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][1])) / 2
+    across = face @ plane[:, 1]
+    box = np.array([[line - BAND * half, across.min()], [line + FAR * max(tips @ along_dir - line, 0.0), across.max()]])
+    return plane, box
 
 
 def _depths(robot: Robot, model: tuple) -> np.ndarray:
