@@ -56,7 +56,7 @@ from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
 __all__ = ["BATCH", "COMBOS", "GAP_M", "LINES", "TOUCH_M", "ContactSet", "check_pad_fingers", "iter_contact_drafts",
-           "palm_front", "palm_poses"]
+           "palm_front", "palm_plane", "palm_poses"]
 
 GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
 TOUCH_M = 1e-3  # a pad touches within this of the surface
@@ -95,7 +95,7 @@ class ContactSet:
 def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """The palm's front axis (palm frame, unit), its face's offset along it (m), where in the
     palm's plane the object's centre is drawn (2, 2: low and high corner, plane coordinates) and
-    that plane (:func:`_palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
+    that plane (:func:`palm_plane`), for the fingers ``rows``. A palm with collision geometry (boxes,
     cylinders, spheres, meshes): the front is the side the fingers close toward
     (:func:`~graspnet_torch.robot.opposition.hand_axes`), the face the palm's surface farthest
     along it; the object within the fingertips' reach over their joint limits. A palm without
@@ -113,7 +113,7 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
         grid = np.stack(np.meshgrid(*[[0.0, 0.5, 1.0]] * lo.shape[1], indexing="ij"), -1).reshape(-1, lo.shape[1])
         q = lo[None] + grid[:, None, :] * (hi - lo)[None]  # (G, F, n): every finger at each grid point
         face = float(np.median(robot.fingertips_palm(torch.as_tensor(q)).numpy() @ front))
-        plane = _palm_plane(front)
+        plane = palm_plane(front)
         mid = tips_all[rows].mean(axis=0) @ plane
         off_axis = (tips_all[rows] - tips_all[rows].mean(axis=0)) @ plane
         spread = HOLDER_SPREAD * float(np.linalg.norm(off_axis, axis=1).mean())
@@ -121,7 +121,7 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
     front = hand_axes(robot).front
     face = max(support(s, P, front) for s, P in palm)
     tips_at = np.concatenate([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, hi)])
-    plane = _palm_plane(front)
+    plane = palm_plane(front)
     reach = tips_at @ plane
     return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)]), plane
 
@@ -134,7 +134,7 @@ def _leader(robot: Robot, fingers: Sequence[str]) -> tuple[int, list[int]]:
     return lead, [i for i in range(len(fingers)) if i != lead]
 
 
-def _palm_plane(front: np.ndarray) -> np.ndarray:
+def palm_plane(front: np.ndarray) -> np.ndarray:
     """(3, 2) two unit axes of the plane normal to ``front``."""
     return np.linalg.svd(np.eye(3) - np.outer(front, front))[0][:, :2]
 

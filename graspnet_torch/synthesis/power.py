@@ -10,10 +10,10 @@ A batch of ``BATCH`` palm poses at a time:
    object's centre lies at a random point of the palm's plane from just short of the knuckles to
    under the proximal phalanges (:func:`_band`; :func:`~graspnet_torch.synthesis.drafts.palm_poses`:
    the palm's front from the hand's kinematics, any palm geometry), and the hand is moved along
-   its front until, its
-   fingers open (``OPEN``: a random fraction of each joint's range from the limit away from
-   closing), the palm lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a random gap
-   up to the open fingertips' reach) or the fingers as near as they allow (:func:`_seated`).
+   its front until, its fingers open (``OPEN``: a random fraction of each joint's range from the
+   limit away from closing, or from straight, 0, for a joint that bends either way), the palm
+   lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a random gap up to the open
+   fingertips' reach) or the fingers as near as they allow (:func:`_seated`).
 2. *Fingers*: every finger closes (each joint that, at mid-range, moves its pad forward, along the
    pad's normal, by a cosine of ``FORWARD`` or more, toward the limit that does, from near the
    other; the others held) until one of its links meets the object
@@ -65,7 +65,7 @@ from graspnet_torch.synthesis.autograsp import (
 )
 from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, placeholder_problem
 from graspnet_torch.synthesis.closing import FORWARD, pad_forward
-from graspnet_torch.synthesis.drafts import palm_front, palm_poses
+from graspnet_torch.synthesis.drafts import palm_front, palm_plane, palm_poses
 from graspnet_torch.synthesis.grasp import SynthesizedGrasp
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -79,6 +79,7 @@ PENETRATION_M = 1e-3  # no link deeper than this in the object
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
 SURE = 0.7  # a joint's cosine to its pad's forward direction from which its closing direction is sure
 BAND = 1.5  # the object's centre lies from this many of its half widths short of the knuckles
+CLAW = 0.3  # a hand whose fingers' mean direction leans from its front by less than this share is a claw
 FAR = 0.5  # to this share of the fingers' length past them
 FACE_M = 0.01  # the palm's face: its surface within this of its farthest point along the front
 SEAT_STEPS = 3  # moves of the palm toward the object until it rests on it
@@ -171,7 +172,7 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
     forward = pad_forward(robot, ((lo + hi) / 2)[None])[0]  # (F, n): at mid-range, how each joint moves its pad
     direction, held = _directions(forward, names.index(opposing), lo, hi, B, rng)
     opened = rng.uniform(*OPEN, (B, *lo.shape)) * (hi - lo)
-    q_open = np.where(direction < 0, hi - opened, np.where(np.isnan(held), lo + opened, held))  # away from closing
+    q_open = _opened(direction, held, lo, hi, opened, rng)
     reach = robot.fingertips_palm(torch.as_tensor(q_open)).numpy() @ front - face  # (B, F): the open tips' reach
     palm_gap = np.where(rng.random(B) < ON_PALM, sum(GAP_M) / 2, rng.random(B) * np.maximum(reach.max(axis=1), 0.0))
     T = _seated(robot, obj, palm_poses(R, rng, palm, verts, centre, [], GAP_M), torch.as_tensor(q_open), palm_pts,
@@ -222,6 +223,22 @@ def _directions(forward: np.ndarray, o: int, lo: np.ndarray, hi: np.ndarray, B: 
     return direction, held
 
 
+def _opened(direction: np.ndarray, held: np.ndarray, lo: np.ndarray, hi: np.ndarray, opened: np.ndarray,
+            rng: np.random.Generator) -> np.ndarray:
+    """The open postures (B, F, n): each closing joint ``opened`` (B, F, n) from the limit away from
+    its closing ``direction`` (B, F, n), each held joint from its lower limit (or at ``held`` where
+    that is not NaN); a joint that bends either way (its range across 0) from straight (0) instead,
+    except each finger's first closing joint, which opens anywhere from straight to its limit (a
+    claw's fingers spread)."""
+    straight = (lo < 0) & (hi > 0)
+    first = np.cumsum(direction != 0, axis=-1) == 1
+    away = np.where(direction < 0, hi, lo)
+    spread = np.where(first & (direction != 0), rng.random(direction.shape), 0.0) * away
+    start = np.where(straight, spread, away)
+    q_open = np.where(direction < 0, start - opened, np.where(direction > 0, start + opened, start + opened))
+    return np.where(np.isnan(held), np.where(direction == 0, np.where(straight, 0.0, lo) + opened, q_open), held)
+
+
 def _band(robot: Robot, face: np.ndarray, front: np.ndarray, tips: np.ndarray, verts: np.ndarray
           ) -> tuple[np.ndarray, np.ndarray]:
     """Where the object's centre is drawn over the palm: the plane (3, 2) of the fingers' direction
@@ -230,17 +247,24 @@ def _band(robot: Robot, face: np.ndarray, front: np.ndarray, tips: np.ndarray, v
     half width (half its second principal extent, ``verts`` (V, 3)) short of the knuckles (the
     other fingers' first movable joints) to ``FAR`` of the fingers' length past them (under the
     proximal phalanges: fingers that fold on themselves wrap no nearer the palm), across the palm's
-    face ``face`` (P, 3)."""
-    along_dir = tips - (tips @ front) * front
-    along_dir /= np.linalg.norm(along_dir)
-    plane = np.stack([along_dir, np.cross(front, along_dir)], axis=1)
+    face ``face`` (P, 3). A claw (the fingers' mean direction within ``CLAW`` of the front, as a
+    D'Claw's): the object's centre on the fingers' axis, within ``CLAW`` of their knuckles' mean
+    distance from it."""
     opposing = hand_axes(robot).opposing
     names, frames = robot.link_frames_of(None, robot.home_posture().fingers[None] * 0,
                                          torch.zeros(1, 6, dtype=torch.float64))
-    knuckles = [frames[0, names.index(next(j for j in robot.urdf.path_joints(f.chain.root, f.chain.tip)
-                                           if j.type != "fixed").child), :3, 3]
-                for name, f in robot.fingers.items() if name != opposing]
-    line = float(np.mean(np.asarray(knuckles) @ along_dir))
+    knuckles = np.asarray([frames[0, names.index(next(j for j in robot.urdf.path_joints(f.chain.root, f.chain.tip)
+                                                      if j.type != "fixed").child), :3, 3]
+                           for name, f in robot.fingers.items() if name != opposing])
+    along_dir = tips - (tips @ front) * front
+    if np.linalg.norm(along_dir) < CLAW * np.linalg.norm(tips):  # fingers along the front, around it: a claw
+        plane = palm_plane(front)
+        middle = knuckles.mean(axis=0) @ plane
+        spread = CLAW * float(np.linalg.norm(knuckles @ plane - middle, axis=1).mean())
+        return plane, np.stack([middle - spread, middle + spread])
+    along_dir /= np.linalg.norm(along_dir)
+    plane = np.stack([along_dir, np.cross(front, along_dir)], axis=1)
+    line = float(np.mean(knuckles @ along_dir))
     centred = verts - verts.mean(axis=0)
     half = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][1])) / 2
     across = face @ plane[:, 1]
