@@ -34,7 +34,7 @@ from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.tasks import GraspProblem
 
 __all__ = ["NEAR_ERROR_M", "ON_SURFACE", "pad_targets", "surface_distance", "surface_distance_near",
-           "surface_normals", "touch_points"]
+           "surface_distance_within", "surface_normals", "touch_points"]
 
 ON_SURFACE = 1e-7  # m: a mesh point this near its closest surface point takes that triangle's normal
 NEAR_ERROR_M = 1e-3  # m: surface_distance_near's bound on a mesh's error near its surface (measured: module tests)
@@ -139,6 +139,21 @@ def surface_distance_near(obj: Shape, points: np.ndarray) -> np.ndarray:
         return surface_distance(obj, points)
     p, _ = _local(obj, points)
     return distance_grid(obj)(p)
+
+
+def surface_distance_within(obj: Shape, points: np.ndarray, within_m: float) -> np.ndarray:
+    """(k,) :func:`surface_distance` where it is at most ``within_m`` (m), exact there; elsewhere a
+    value over ``within_m`` (:func:`surface_distance_near`'s, which is exact only for primitives):
+    a mesh's exact distance is measured only at the points whose near one lies within
+    ``within_m + 2 NEAR_ERROR_M``. For asking which of many points (a link's surface) lie near."""
+    near = surface_distance_near(obj, points)
+    if obj.kind != "mesh":
+        return near
+    close = near <= within_m + 2 * NEAR_ERROR_M
+    out = np.maximum(near, within_m + 1e-9)
+    if close.any():
+        out[close] = surface_distance(obj, points[close])
+    return out
 
 
 def touch_points(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,7 +15,12 @@ import torch
 
 from graspnet_torch.collision.scene import finger_pairs
 from graspnet_torch.collision.spheres import shape_spheres
-from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
+from graspnet_torch.collision.surface import (
+    surface_distance,
+    surface_distance_near,
+    surface_distance_within,
+    surface_normals,
+)
 from graspnet_torch.robot.geometry import link_shapes, surface_points
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -201,7 +206,7 @@ def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -
             continue
         points = surface_points(shape, frames[0, names.index(shape.link)] @ shape.origin, LINK_POINTS,
                                 LINK_POINTS)
-        gap = surface_distance(obj, points)
+        gap = surface_distance_within(obj, points, within_m)
         i = int(np.argmin(gap))
         if gap[i] <= within_m and gap[i] < nearest.get(shape.link, (np.inf, None))[0]:
             nearest[shape.link] = (float(gap[i]), points[i])

@@ -223,11 +223,13 @@ def _pad_touch(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, na
 
 def check_pad_fingers(robot: Robot, fingers: Sequence[str]) -> None:
     """What choosing contacts needs of the robot (:func:`pad_contact_sets`): a free hand (its palm is
-    placed: no arm, no shared joints) and a pad on each of ``fingers`` (checked by
-    :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers`); :class:`ProblemError` otherwise."""
-    if robot.has_body or robot.shared.n:
-        raise ProblemError(f"robot {robot.cfg.name}: contact sets are drawn with a free hand (no arm, no shared "
-                           f"joints; a hand on an arm: its config's 'hand'); the shipped one is robot=hand")
+    placed: no arm; joints that several fingers share held where the robot holds them,
+    :attr:`~graspnet_torch.robot.robot.Robot.shared_reference`, as the solvers hold them) and a pad
+    on each of ``fingers`` (checked by :func:`~graspnet_torch.tasks.auto_contacts.contact_fingers`);
+    :class:`ProblemError` otherwise."""
+    if robot.has_body:
+        raise ProblemError(f"robot {robot.cfg.name}: contact sets are drawn with a free hand (no arm; a hand on an "
+                           f"arm: its config's 'hand'); the shipped one is robot=hand")
     for f in fingers:
         if f not in robot.pads:
             raise ProblemError(f"fingers: {f} of robot {robot.cfg.name} has no pad (its config's fingers.{f}.pad), "

@@ -46,7 +46,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
-from graspnet_torch.collision.surface import surface_distance, surface_distance_near, surface_normals
+from graspnet_torch.collision.surface import surface_distance_near, surface_distance_within, surface_normals
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.geometry import palm_shapes, surface_points
 from graspnet_torch.robot.opposition import hand_axes
@@ -107,7 +107,7 @@ def _palm_contact(obj: Shape, posture: Posture, palm: np.ndarray) -> tuple[np.nd
         return None
     T = pose_to_matrix_np(posture.palm_pose.numpy())
     world = palm @ T[:3, :3].T + T[:3, 3]
-    gap = surface_distance(obj, world)
+    gap = surface_distance_within(obj, world, TOUCH_M)
     i = int(np.argmin(gap))
     if gap[i] > TOUCH_M:
         return None

@@ -25,7 +25,7 @@ from functools import lru_cache
 import numpy as np
 import torch
 
-from graspnet_torch.collision.surface import surface_distance, surface_normals
+from graspnet_torch.collision.surface import surface_distance_within, surface_normals
 from graspnet_torch.robot.geometry import link_shapes, surface_points
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
@@ -40,6 +40,7 @@ SEATED_M = 1e-3  # m: a pad link within this of the surface touches it
 AIM_M = 5e-4  # m: a seated contact is moved this much past the gap
 ROUNDS = 2  # warm solves at most
 POINTS = 256  # surface points per collision shape of a pad link
+MEASURED_M = 5e-3  # m: a gap up to this is measured exactly (beyond: the object's distance grid, within 1 mm)
 STEPS = 4  # damped least-squares steps of a tip's move
 DAMPING = 1e-4  # m: their damping
 TURN_M = 0.05  # m per unit of a pad normal's change, in those steps
@@ -55,7 +56,7 @@ def _link_points(robot: Robot, link: str) -> np.ndarray:
 
 def pad_gaps(robot: Robot, obj: Shape, posture: Posture, links: Sequence[str]) -> np.ndarray:
     """(k,) each of ``links``' least distance (m; negative: how deep) from ``obj``'s surface at
-    ``posture``: its collision surface's points (module docstring)."""
+    ``posture``: its collision surface's points (module docstring); exact up to ``MEASURED_M``."""
     body = posture.body[None] if robot.has_body else None
     names, frames = robot.link_frames_of(body, posture.fingers[None], posture.palm_pose[None])
     out = np.full(len(links), np.inf)
@@ -63,7 +64,7 @@ def pad_gaps(robot: Robot, obj: Shape, posture: Posture, links: Sequence[str]) -
         local = _link_points(robot, link)
         if len(local) and link in names:
             T = frames[0, names.index(link)]
-            out[k] = float(surface_distance(obj, local @ T[:3, :3].T + T[:3, 3]).min())
+            out[k] = float(surface_distance_within(obj, local @ T[:3, :3].T + T[:3, 3], MEASURED_M).min())
     return out
 
 
