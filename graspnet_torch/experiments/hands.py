@@ -20,7 +20,7 @@ in a Python package not installed) is reported as such and not run.
 
 Targets (``checks``, issue 59): each hand's top-1 holds on at least 80 % of the objects; on the long
 ones, at least 80 % for the shipped hand and for at least 3 public hands; no reported grasp deeper
-than 1 mm.
+than 1 mm, and no link a grasp says touches farther than 1 mm from the object.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ HANDS = {  # name -> robot config (a shipped robot's name or a YAML path under t
     "inspire": "examples/inspire_hand/inspire_hand_right.yaml"}
 SHIPPED = "hand"
 CAPPED = "stopped at the"  # a run past max_s: its reason starts so
-TOP1_PCT, LONG_PCT, LONG_HANDS, DEPTH_MM = 80.0, 80.0, 3, 1.0  # the issue's targets
+TOP1_PCT, LONG_PCT, LONG_HANDS, DEPTH_MM, GAP_MM = 80.0, 80.0, 3, 1.0, 1.0  # the issue's targets
 
 
 @dataclass(frozen=True)
@@ -297,6 +297,10 @@ def _checks(summaries: dict, missing: dict, cfg: HandsCfg, any_long: bool) -> li
     deepest = max((s["deepest mm"] for s in summaries.values()), default=0.0)
     checks.append((f"every reported grasp (every hand) at most {DEPTH_MM:g} mm deep: deepest {deepest:.2f} mm",
                    deepest <= DEPTH_MM and bool(summaries)))
+    gaps = [s["farthest contact link mm"] for s in summaries.values() if not math.isnan(s["farthest contact link mm"])]
+    farthest = max(gaps, default=0.0)
+    checks.append((f"every link a reported grasp says touches (every hand) within {GAP_MM:g} mm of the object: "
+                   f"farthest {farthest:.2f} mm", farthest <= GAP_MM and bool(gaps)))
     return checks
 
 
