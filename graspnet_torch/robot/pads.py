@@ -14,11 +14,10 @@ constant in the tip frame. Otherwise the pad is *derived* from the URDF:
 - the *distal link*: the nearest link at or above the tip, rigidly attached to it, that has
   collision geometry (none: refused in one line naming the finger and what to give);
 - the *normal*: the direction the tip moves when the finger's last free joint closes (the sense,
-  increasing or decreasing, whose limit puts the tip nearer the palm frame's origin, or, where
-  both do alike, nearer the hand's axis: :func:`closing_sense`), from the finger kernel's
-  Jacobian at the home posture, in the tip frame (for a revolute last joint
-  ``axis x (tip - joint origin)``, for a prismatic one its axis; constant in the tip frame when the
-  last free joint is the chain's last joint);
+  increasing or decreasing, whose limit puts the tip nearer the palm frame's origin:
+  :func:`closing_sense`), from the finger kernel's Jacobian at the home posture, in the tip frame
+  (for a revolute last joint ``axis x (tip - joint origin)``, for a prismatic one its axis;
+  constant in the tip frame when the last free joint is the chain's last joint);
 - the *point*: the distal link's support point in the normal's direction (the largest ``n . x``
   over its collision surface); points within ``TIE`` (0.5 mm) of the largest are ties, broken by
   the one nearest the tip's normal line (the line through the tip frame's origin along the
@@ -53,7 +52,6 @@ __all__ = ["SHIFT_M", "TIE", "Pad", "centred_config", "closing_sense", "derived_
 TIE = 5e-4  # m: support points within this of the largest n . x are ties
 SHIFT_M = 1e-6  # m: a pad point this far off its tip's normal line moves the tip onto that line (centred_config)
 SAMPLES = 4000  # surface points per shape where the normal line does not decide
-SENSE_TIE = 0.02  # a finger's two limits put its tip as near the palm origin within this share
 
 
 class _Robot(Protocol):  # what finger_pads reads of a Robot (robot/robot.py imports this module)
@@ -92,9 +90,6 @@ def finger_pads(robot: _Robot) -> dict[str, Pad]:
     if not robot.fingers:
         return {}
     home = robot.home_posture().fingers.numpy()
-    tips = np.mean([(f.base_in_palm @ f.chain.transform(home[k, :f.n_joints]))[:3, 3]
-                    for k, f in enumerate(robot.fingers.values())], axis=0)
-    axis = tips / max(float(np.linalg.norm(tips)), 1e-12)
     shapes = None
     out = {}
     for k, (name, finger) in enumerate(robot.fingers.items()):
@@ -107,7 +102,7 @@ def finger_pads(robot: _Robot) -> dict[str, Pad]:
             shapes = {}
             for s in link_shapes(robot.urdf, "collision"):
                 shapes.setdefault(s.link, []).append(s)
-        normal = _closing_direction(robot, name, finger, home[k, :finger.n_joints], axis)
+        normal = _closing_direction(robot, name, finger, home[k, :finger.n_joints])
         out[name] = _derived(robot, name, tip_in_link, normal, shapes)
     return out
 
@@ -192,35 +187,27 @@ def _given(robot: _Robot, name: str, pad: PadCfg, tip_in_link: np.ndarray) -> Pa
     return Pad(pad.link, point, normal / np.linalg.norm(normal))
 
 
-def closing_sense(finger: Any, q: np.ndarray, axis: np.ndarray | None = None) -> float:
+def closing_sense(finger: Any, q: np.ndarray) -> float:
     """+1 where the finger's last free joint closes it as it increases, -1 as it decreases: the
     sense whose limit puts the tip nearer the palm frame's origin (the other free joints at ``q``
     (n_f,), the home posture). A finger curls toward its palm; URDFs disagree on the sign (the
-    shipped hand closes positively, the Dexmate F5D6's fingers and TriFinger's negatively). Where
-    both limits lie as near (within ``SENSE_TIE`` of each other: a joint that bends as far either
-    way, as a D'Claw's) and ``axis`` (3,) is given (palm frame, unit: the hand's mean home
-    fingertip direction), the sense whose limit puts the tip nearer the line through the origin
-    along it: the fingers close toward the hand's middle."""
-    chain, tips = finger.chain, []
+    shipped hand closes positively, the Dexmate F5D6's fingers and TriFinger's negatively)."""
+    chain, near = finger.chain, []
     for limit in (chain.lower[-1], chain.upper[-1]):
         at = np.array(q, dtype=np.float64)
         at[-1] = limit
-        tips.append((finger.base_in_palm @ chain.transform(at))[:3, 3])
-    near = [float(np.linalg.norm(t)) for t in tips]
-    if axis is not None and abs(near[1] - near[0]) <= SENSE_TIE * max(near):
-        near = [float(np.linalg.norm(t - (t @ axis) * axis)) for t in tips]
+        near.append(float(np.linalg.norm((finger.base_in_palm @ chain.transform(at))[:3, 3])))
     return 1.0 if near[1] <= near[0] else -1.0
 
 
-def _closing_direction(robot: _Robot, name: str, finger: Any, q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+def _closing_direction(robot: _Robot, name: str, finger: Any, q: np.ndarray) -> np.ndarray:
     """(3,) unit direction, tip frame, in which the tip moves as the finger's last free joint
-    closes (:func:`closing_sense`, ``axis``: the hand's mean home fingertip direction), at the free
-    joints ``q`` (n_f,) (the home posture)."""
+    closes (:func:`closing_sense`), at the free joints ``q`` (n_f,) (the home posture)."""
     chain = finger.chain
     qt = torch.as_tensor(q, dtype=torch.float64)
     _, J = FingerKernel(chain).position_jacobian(qt)
     R = chain.transform(q)[:3, :3]  # the tip frame in the finger's base frame
-    v = closing_sense(finger, q, axis) * (R.T @ J[:, -1].numpy())
+    v = closing_sense(finger, q) * (R.T @ J[:, -1].numpy())
     norm = float(np.linalg.norm(v))
     if not norm > 1e-9:
         raise ConfigError(f"{robot.cfg.source}: fingers.{name}: its last free joint '{chain.joint_names[-1]}' does "
