@@ -13,6 +13,7 @@ from graspnet_torch.collision.surface import (
     pad_targets,
     surface_distance,
     surface_distance_near,
+    surface_distance_within,
     surface_normals,
     touch_points,
 )
@@ -162,6 +163,18 @@ def test_the_near_distance_is_within_its_bound_of_the_exact_one(tmp_path):
     assert np.all(np.abs(near[~close]) >= np.abs(exact[~close]) - NEAR_ERROR_M)
     box = Shape("box", (0.04, 0.05, 0.06), POSE)
     np.testing.assert_array_equal(surface_distance_near(box, pts), surface_distance(box, pts))
+
+
+def test_the_distance_within_a_bound_is_exact_there_and_over_it_elsewhere(tmp_path):
+    """surface_distance_within on a mesh: the exact distance wherever that is within the bound,
+    a value over the bound everywhere else (points spread from inside to 3 cm out)."""
+    mesh = _mesh_file(tmp_path, trimesh.creation.capsule(height=0.05, radius=0.02, count=[12, 12]), "capsule")
+    pts = POSE[:3] + np.random.default_rng(5).normal(0.0, 0.03, (400, 3))
+    exact, within = surface_distance(mesh, pts), surface_distance_within(mesh, pts, 0.002)
+    inside = exact <= 0.002
+    assert inside.sum() > 20 and (~inside).sum() > 20
+    np.testing.assert_array_equal(within[inside], exact[inside])
+    assert (within[~inside] > 0.002).all()
 
 
 @pytest.mark.parametrize("task", ["glass3", "glass4"])
