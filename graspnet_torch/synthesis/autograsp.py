@@ -195,8 +195,9 @@ def closed_result(robot: Robot, posture: Posture, squeeze: np.ndarray, seed: int
 
 def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -> tuple[tuple[str, ...], np.ndarray]:
     """The links (palm and fingers, in the URDF's order) with a point of their collision surface
-    within ``within_m`` of ``obj`` at ``posture`` (``LINK_POINTS`` points per shape and its vertices:
-    a link listed lies that near; one that touches between its points may be left out), and for
+    within ``within_m`` of ``obj``'s surface, on either side of it, at ``posture`` (``LINK_POINTS``
+    points per shape and its vertices: a link listed lies that near; one that touches between its
+    points may be left out), and for
     each the point of the object's surface (its triangulation, ``obj.trimesh()``) nearest its
     nearest point (k, 3), world."""
     names, frames = robot.link_frames_of(None, posture.fingers[None], posture.palm_pose[None])
@@ -206,7 +207,7 @@ def link_contacts(robot: Robot, obj: Shape, posture: Posture, within_m: float) -
             continue
         points = surface_points(shape, frames[0, names.index(shape.link)] @ shape.origin, LINK_POINTS,
                                 LINK_POINTS)
-        gap = surface_distance_within(obj, points, within_m)
+        gap = np.abs(surface_distance_within(obj, points, within_m))  # either side: a mesh's inside test can err
         i = int(np.argmin(gap))
         if gap[i] <= within_m and gap[i] < nearest.get(shape.link, (np.inf, None))[0]:
             nearest[shape.link] = (float(gap[i]), points[i])

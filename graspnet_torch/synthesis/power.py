@@ -10,10 +10,13 @@ A batch of ``BATCH`` palm poses at a time:
    object's centre lies at a random point of the palm's plane from just short of the knuckles to
    under the proximal phalanges (:func:`_band`; :func:`~graspnet_torch.synthesis.drafts.palm_poses`:
    the palm's front from the hand's kinematics, any palm geometry), and the hand is moved along
-   its front until, its fingers open (``OPEN``: a random fraction of each joint's range from the
-   limit away from closing, or from straight, 0, for a joint that bends either way), the palm
-   lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a random gap up to the open
-   fingertips' reach) or the fingers as near as they allow (:func:`_seated`).
+   its front until, its fingers open (:mod:`~graspnet_torch.synthesis.opening`: a random fraction
+   of each joint's range from the limit away from closing, or from straight, 0, for a joint that
+   bends either way), the palm lies ``GAP_M`` from the object (``ON_PALM`` of them; the rest a
+   random gap up to the open fingertips' reach) or the fingers as near as they allow
+   (:func:`_seated`); where a finger (a thumb over the palm) keeps the palm more than
+   ``SEAT_TOL_M`` from that gap, up to ``REDRAWS`` other open postures are tried and the one
+   that lets the palm nearest is kept.
 2. *Fingers*: every finger closes (each joint that, at mid-range, moves its pad forward, along the
    pad's normal, by a cosine of ``FORWARD`` or more, toward the limit that does, from near the
    other; the others held) until one of its links meets the object
@@ -39,6 +42,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -46,13 +50,13 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from graspnet_torch.collision.cache import scene_for
-from graspnet_torch.collision.surface import surface_distance_near, surface_distance_within, surface_normals
+from graspnet_torch.collision.surface import surface_distance_near, surface_normals
 from graspnet_torch.quality import GraspQuality, grasp_quality
 from graspnet_torch.robot.geometry import palm_shapes, surface_points
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_matrix_np
+from graspnet_torch.robot.transforms import matrix_to_pose
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.autograsp import (
     TOUCH_M,
@@ -64,20 +68,19 @@ from graspnet_torch.synthesis.autograsp import (
     placed_spheres,
 )
 from graspnet_torch.synthesis.candidates import FRICTION, ContactSet, placeholder_problem
-from graspnet_torch.synthesis.closing import FORWARD, pad_forward
+from graspnet_torch.synthesis.closing import pad_forward
 from graspnet_torch.synthesis.drafts import palm_front, palm_plane, palm_poses
 from graspnet_torch.synthesis.grasp import SynthesizedGrasp
+from graspnet_torch.synthesis.opening import draw_open
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["BATCH", "GAP_M", "MIN_TOUCHING", "OPEN", "PENETRATION_M", "SQUEEZE_DEG", "power_grasps"]
+__all__ = ["BATCH", "GAP_M", "MIN_TOUCHING", "PENETRATION_M", "SQUEEZE_DEG", "power_grasps"]
 
 BATCH = 64  # palm poses drawn at once
 GAP_M = (0.0, 0.001)  # the object's gap to the palm's face: it rests on the palm
-OPEN = (0.0, 0.05)  # a finger's open posture: this fraction of each joint's range from the limit away from closing
 MIN_TOUCHING = 2  # fingers that must touch
 PENETRATION_M = 1e-3  # no link deeper than this in the object
 SQUEEZE_DEG = 5.0  # the squeeze: each closing joint this much further
-SURE = 0.7  # a joint's cosine to its pad's forward direction from which its closing direction is sure
 BAND = 1.5  # the object's centre lies from this many of its half widths short of the knuckles
 CLAW = 0.3  # a hand whose fingers' mean direction leans from its front by less than this share is a claw
 FAR = 0.5  # to this share of the fingers' length past them
@@ -90,6 +93,8 @@ ON_PALM = 0.5  # of each batch: the object resting on the palm; the rest a rando
 WRAP_PHASES = 3  # closings after the first: the joints beyond the touching links close on
 LINK_POINTS = 64  # points spread over each finger link's box or mesh where the closing measures it
 PALM_POINTS = 256  # points spread over each palm shape where its distance to the object is measured
+REDRAWS = 3  # new open postures tried for a palm pose whose fingers keep the palm from its gap
+SEAT_TOL_M = 0.002  # by more than this
 
 
 def _palm_points(robot: Robot) -> np.ndarray:
@@ -98,21 +103,6 @@ def _palm_points(robot: Robot) -> np.ndarray:
     if not shapes:
         return np.zeros((0, 3))
     return np.concatenate([surface_points(s, P, PALM_POINTS, PALM_POINTS) for s, P in shapes])
-
-
-def _palm_contact(obj: Shape, posture: Posture, palm: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The object's point nearest the palm and its inward normal (3,), (3,), where the palm lies
-    within ``TOUCH_M`` of it; else None. ``palm``: (P, 3) palm points, palm frame."""
-    if not len(palm):
-        return None
-    T = pose_to_matrix_np(posture.palm_pose.numpy())
-    world = palm @ T[:3, :3].T + T[:3, 3]
-    gap = surface_distance_within(obj, world, TOUCH_M)
-    i = int(np.argmin(gap))
-    if gap[i] > TOUCH_M:
-        return None
-    outward = surface_normals(obj, world[i:i + 1])[0]
-    return world[i] - gap[i] * outward, -outward
 
 
 def power_grasps(robot: Robot, obj: Shape, n_grasps: int, seed: int = 0, max_tries: int = 4 * BATCH,
@@ -170,13 +160,12 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     R = _across(rng, B, verts, front, tips)
     forward = pad_forward(robot, ((lo + hi) / 2)[None])[0]  # (F, n): at mid-range, how each joint moves its pad
-    direction, held = _directions(forward, names.index(opposing), lo, hi, B, rng)
-    opened = rng.uniform(*OPEN, (B, *lo.shape)) * (hi - lo)
-    q_open = _opened(direction, held, lo, hi, opened, rng)
+    draw = partial(draw_open, forward, names.index(opposing), lo, hi, rng=rng)
+    direction, q_open = draw(B)
     reach = robot.fingertips_palm(torch.as_tensor(q_open)).numpy() @ front - face  # (B, F): the open tips' reach
     palm_gap = np.where(rng.random(B) < ON_PALM, sum(GAP_M) / 2, rng.random(B) * np.maximum(reach.max(axis=1), 0.0))
-    T = _seated(robot, obj, palm_poses(R, rng, palm, verts, centre, [], GAP_M), torch.as_tensor(q_open), palm_pts,
-                front, spheres[0], palm_gap)
+    T = palm_poses(R, rng, palm, verts, centre, [], GAP_M)
+    T, direction, q_open = _seated_best(robot, obj, T, (direction, q_open), draw, palm_pts, front, spheres[0], palm_gap)
     head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))
     q_close = np.where(direction > 0, hi, np.where(direction < 0, lo, q_open))
     q, gaps = _wrap(robot, obj, head, torch.as_tensor(q_open), torch.as_tensor(q_close), spheres)
@@ -203,40 +192,6 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
         out.append(SynthesizedGrasp(problem, cset, quality, result, links=links, type=kind))
     counts["power_kept"] += len(out)
     return sorted(out, key=lambda g: -g.quality.epsilon)
-
-
-def _directions(forward: np.ndarray, o: int, lo: np.ndarray, hi: np.ndarray, B: int, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Each pose's closing direction of every joint (B, F, n) (+1 up, -1 down, 0 held) and where a
-    held joint is held (B, F, n; NaN: near its lower limit), from ``forward`` (F, n)
-    (:func:`pad_forward` at mid-range): a joint closes toward the side whose cosine reaches ``FORWARD``, else holds;
-    the opposing finger's (row ``o``) joints whose cosine is weaker than ``SURE`` (a thumb's
-    rotation, which turns the pad as much as it moves it) close up, down or hold anywhere in their
-    range, a third of the poses each."""
-    direction = np.where(forward >= FORWARD, 1.0, np.where(forward <= -FORWARD, -1.0, 0.0))
-    direction = np.repeat(direction[None], B, axis=0)
-    held = np.full(direction.shape, np.nan)  # NaN: near the lower limit, as the open postures draw it
-    weak = (np.abs(forward[o]) >= FORWARD) & (np.abs(forward[o]) < SURE)
-    if weak.any():  # no draw for a hand without such joints: its poses as before
-        direction[:, o, weak] = rng.integers(-1, 2, (B, int(weak.sum())))
-        held[:, o] = np.where(weak, lo[o] + rng.random((B, lo.shape[1])) * (hi[o] - lo[o]), np.nan)
-    return direction, held
-
-
-def _opened(direction: np.ndarray, held: np.ndarray, lo: np.ndarray, hi: np.ndarray, opened: np.ndarray,
-            rng: np.random.Generator) -> np.ndarray:
-    """The open postures (B, F, n): each closing joint ``opened`` (B, F, n) from the limit away from
-    its closing ``direction`` (B, F, n), each held joint from its lower limit (or at ``held`` where
-    that is not NaN); a joint that bends either way (its range across 0) from straight (0) instead,
-    except each finger's first closing joint, which opens anywhere from straight to its limit (a
-    claw's fingers spread)."""
-    straight = (lo < 0) & (hi > 0)
-    first = np.cumsum(direction != 0, axis=-1) == 1
-    away = np.where(direction < 0, hi, lo)
-    spread = np.where(first & (direction != 0), rng.random(direction.shape), 0.0) * away
-    start = np.where(straight, spread, away)
-    q_open = np.where(direction < 0, start - opened, np.where(direction > 0, start + opened, start + opened))
-    return np.where(np.isnan(held), np.where(direction == 0, np.where(straight, 0.0, lo) + opened, q_open), held)
 
 
 def _band(robot: Robot, face: np.ndarray, front: np.ndarray, tips: np.ndarray, verts: np.ndarray
@@ -338,6 +293,36 @@ def _across(rng: np.random.Generator, B: int, verts: np.ndarray, front: np.ndarr
     jitter = Rotation.from_rotvec(rng.normal(size=(n, 3)) * math.radians(JITTER_DEG) / math.sqrt(3)).as_matrix()
     R[:n] = jitter @ world @ palm_axes.T
     return R
+
+
+def _palm_gap(obj: Shape, T: np.ndarray, palm_pts: np.ndarray) -> np.ndarray:
+    """(B,) the palm's gap to the object (m) at palm poses ``T`` (B, 4, 4); ``palm_pts`` (P, 3), palm frame."""
+    world = np.einsum("bij,pj->bpi", T[:, :3, :3], palm_pts) + T[:, None, :3, 3]
+    return surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(T), -1).min(axis=1)
+
+
+def _seated_best(robot: Robot, obj: Shape, T: np.ndarray, drawn: tuple[np.ndarray, np.ndarray], draw: Callable,
+                 palm_pts: np.ndarray, front: np.ndarray, model: tuple, palm_gap: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The palm poses ``T`` (B, 4, 4) seated (:func:`_seated`) with their open postures ``drawn``
+    (closing directions, open postures: (B, F, n) each); where a finger stops the palm more than
+    ``SEAT_TOL_M`` short of its ``palm_gap`` (B,) (a thumb lying over the palm), up to ``REDRAWS``
+    new open postures (``draw(n)``) are seated too and the one whose palm comes nearest its gap is
+    kept. Returned: the poses, closing directions and open postures."""
+    direction, q_open = (a.copy() for a in drawn)
+    seated = _seated(robot, obj, T, torch.as_tensor(q_open), palm_pts, front, model, palm_gap)
+    miss = _palm_gap(obj, seated, palm_pts) - palm_gap
+    for _ in range(REDRAWS):
+        rows = np.flatnonzero(miss > SEAT_TOL_M)
+        if not len(rows):
+            break
+        d, q = draw(len(rows))
+        again = _seated(robot, obj, T[rows], torch.as_tensor(q), palm_pts, front, model, palm_gap[rows])
+        gap = _palm_gap(obj, again, palm_pts) - palm_gap[rows]
+        better = gap < miss[rows]
+        keep = rows[better]
+        seated[keep], direction[keep], q_open[keep], miss[keep] = again[better], d[better], q[better], gap[better]
+    return seated, direction, q_open
 
 
 def _seated(robot: Robot, obj: Shape, T: np.ndarray, q_open: torch.Tensor, palm_pts: np.ndarray, front: np.ndarray,

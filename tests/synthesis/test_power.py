@@ -4,18 +4,27 @@ what :func:`power_grasps` and :func:`gt.synthesize_grasps` return."""
 from __future__ import annotations
 
 import json
+from functools import partial
 
 import fcl
 import numpy as np
 import pytest
+import torch
 import trimesh
+from scipy.spatial.transform import Rotation
 
 import graspnet_torch as gt
 from graspnet_torch.collision.geometry import fcl_geometry, fcl_transform, link_geometry
 from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
+from graspnet_torch.synthesis import power
+from graspnet_torch.synthesis.autograsp import finger_spheres
+from graspnet_torch.synthesis.closing import pad_forward
+from graspnet_torch.synthesis.drafts import palm_front
+from graspnet_torch.synthesis.opening import draw_open
 from graspnet_torch.synthesis.power import power_grasps
 
 SLACK_M = 1e-5  # FCL's distance against the search's points of the same surfaces
@@ -109,3 +118,28 @@ def test_a_hand_without_a_palm_has_no_power_grasps() -> None:
     trifinger = gt.load_robot("examples/trifinger/trifinger.yaml")  # fingers hanging from a holder
     stats: dict = {}
     assert power_grasps(trifinger, bottle(), 1, stats=stats) == [] and stats == {}
+
+
+
+def test_redrawn_open_fingers_let_the_palm_rest_nearer(robot: gt.Robot) -> None:
+    """Palm poses facing a large ball, seated with their fingers open: where a finger keeps the palm
+    off the ball, the redrawn open postures bring it nearer for some poses and farther for none
+    (the ball's exact distance to the palm's surface points)."""
+    ball = Shape("sphere", (0.045,), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
+    B, rng = 48, np.random.default_rng(0)
+    lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
+    forward = pad_forward(robot, ((lo + hi) / 2)[None])[0]
+    draw = partial(draw_open, forward, list(robot.fingers).index(hand_axes(robot).opposing), lo, hi, rng=rng)
+    direction, q_open = draw(B)
+    front = palm_front(robot, list(range(len(robot.fingers))))[0]
+    T = np.repeat(np.eye(4)[None], B, axis=0)
+    T[:, :3, :3] = Rotation.random(B, random_state=0).as_matrix()
+    T[:, :3, 3] = ball.pose[:3] - 0.1 * T[:, :3, :3] @ front  # the palm's front toward the ball, 10 cm off
+    palm, spheres, gap = power._palm_points(robot), finger_spheres(robot, surface=True, points=power.LINK_POINTS), \
+        np.full(B, 0.0005)
+    plain = power._palm_gap(ball, power._seated(robot, ball, T, torch.as_tensor(q_open), palm, front, spheres, gap),
+                            palm)
+    best = power._seated_best(robot, ball, T, (direction, q_open), draw, palm, front, spheres, gap)[0]
+    redrawn = power._palm_gap(ball, best, palm)
+    assert np.all(redrawn <= plain + 1e-9)
+    assert np.sum(redrawn < plain - power.SEAT_TOL_M) >= 1, (plain, redrawn)
