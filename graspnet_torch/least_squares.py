@@ -181,20 +181,85 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     """
     B, m = x.shape
     goal = goal.expand(B, -1) if goal.dim() == 1 else goal
+    k = goal.shape[1]
     if prior is not None:
-        k, model = goal.shape[1], f
-        centre, weight = prior[0].expand(B, m), prior[1]
-        tikhonov = torch.diag(weight)
-
-        def f(xx: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
-            v, J = model(xx, rows)
-            return (torch.cat([v, weight * (xx - centre[rows])], 1),
-                    torch.cat([J, tikhonov.expand(xx.shape[0], m, m)], 1))
-
-        goal = torch.cat([goal, goal.new_zeros(B, m)], 1)
+        f, goal = _with_prior(f, goal, prior, m)
     lo, hi = (b.expand(B, m) if b.dim() == 1 else b for b in (lo, hi))
     x = torch.minimum(torch.maximum(x, lo), hi).clone()
     all_rows = torch.arange(B, device=x.device)
+    s = _first_state(f, count, goal, x, all_rows, lam)
+    checks = tol > 0 or done is not None or converged is not None  # else only a settled row stops
+    fixed = lam == lam_min == lam_max  # a fixed damping: lambda never changes
+    for it in range(iterations):
+        stopped = _stopped(s, goal, tol, converged, done) if checks else s.settled
+        chosen = _rows_to_step(stopped, s.stalled, all_rows)
+        if chosen is None:  # every row stopped, or nothing changes any more: the rows run the budget out
+            if not bool(stopped.all()):
+                s.steps += (~stopped).long() * (iterations - it)
+                if trace is not None:
+                    trace.extend(s.err.clone() for _ in range(iterations - it))
+            break
+        rows, ids, running = chosen
+        part = _Rows(s.x[rows], s.value[rows], s.jac[rows], goal[rows], lo[rows], hi[rows], s.lams[rows])
+        dx = _damped_step(part, edge, active_set)
+        _accept_or_reject(f, count, s, part, rows, ids, dx, min_gain=min_gain, lam_min=lam_min, lam_max=lam_max,
+                          fixed=fixed)
+        s.steps += 1 if running is None else running.long()  # a stalled row counts the steps it would repeat
+        if trace is not None:
+            trace.append(s.err.clone())
+    value, err = s.value, s.err
+    if prior is not None:  # the model's residuals alone
+        value = value[:, :k]
+        err = (goal[:, :k] - value).norm(dim=-1)
+    return LMResult(x=s.x, err=err, value=value, count=s.counts, steps=s.steps)
+
+
+@dataclass
+class _LMState:
+    """Every row's state during :func:`levenberg_marquardt`, updated in place by its steps.
+
+    Attributes:
+        x: (B, m) the configurations.
+        value: (B, k) f(x); jac: (B, k, m) its Jacobian.
+        err: (B,) |g - f(x)|.
+        lams: (B,) each row's damping lambda.
+        counts: (B,) the collision count at x, or None without a count.
+        steps: (B,) iterations each row has run.
+        stalled: (B,) bool: the row's step was refused at lambda = lam_max (it would be refused again).
+        settled: (B,) bool: the row's kept step gained less than ``min_gain``.
+    """
+
+    x: Tensor
+    value: Tensor
+    jac: Tensor
+    err: Tensor
+    lams: Tensor
+    counts: Tensor | None
+    steps: Tensor
+    stalled: Tensor
+    settled: Tensor
+
+
+def _with_prior(f: Model, goal: Tensor, prior: tuple[Tensor, Tensor], m: int) -> tuple[Model, Tensor]:
+    """The model with the prior's m residuals ``weight * (x - centre)`` appended (Jacobian rows
+    diag(weight)) and the goal (B, k) with m zeros appended: (B, k + m)."""
+    B = goal.shape[0]
+    centre, weight = prior[0].expand(B, m), prior[1]
+    tikhonov = torch.diag(weight)
+
+    def with_prior(xx: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+        v, J = f(xx, rows)
+        return (torch.cat([v, weight * (xx - centre[rows])], 1),
+                torch.cat([J, tikhonov.expand(xx.shape[0], m, m)], 1))
+
+    return with_prior, torch.cat([goal, goal.new_zeros(B, m)], 1)
+
+
+def _first_state(f: Model, count: Callable[[Tensor, Tensor], Tensor] | None, goal: Tensor, x: Tensor,
+                 all_rows: Tensor, lam: float) -> _LMState:
+    """Every row at its start x (B, m): the model's value and Jacobian there, |e|, the damping
+    ``lam``, the collision count, no steps yet."""
+    B = x.shape[0]
     value, jac = f(x, all_rows)
     value, jac = value.clone(), jac.clone()
     err = (goal - value).norm(dim=-1)
@@ -203,60 +268,84 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
     steps = torch.zeros(B, dtype=torch.long, device=x.device)
     stalled = torch.zeros(B, dtype=torch.bool, device=x.device)
     settled = torch.zeros(B, dtype=torch.bool, device=x.device)
-    checks = tol > 0 or done is not None or converged is not None  # else only a settled row stops
-    fixed = lam == lam_min == lam_max  # a fixed damping: lambda never changes
-    for it in range(iterations):
-        stopped = settled
-        if checks:
-            stopped = err < tol if converged is None else converged(goal - value)
-            if done is not None:
-                stopped = stopped | done(stopped)
-            stopped = stopped | settled
-        moving = ~(stopped | stalled)
-        running = None  # every row
-        if bool(moving.all()):  # every row: views of the whole tensors, no gather and scatter
-            rows, ids = slice(None), all_rows
-        else:
-            if bool(stopped.all()):
-                break
-            running = ~stopped
-            if not bool(moving.any()):  # nothing changes any more: the rows ran the budget out
-                steps += running.long() * (iterations - it)
-                if trace is not None:
-                    trace.extend(err.clone() for _ in range(iterations - it))
-                break
-            rows = ids = moving.nonzero().squeeze(1)
-        xr, vr, Jr, gr, lr, hr = x[rows], value[rows], jac[rows], goal[rows], lo[rows], hi[rows]
-        e = gr - vr
-        damping = lams[rows]
-        dx = damped_pinv_step(Jr, e, damping)
-        if active_set:
-            blocked = ((xr <= lr + edge) & (dx < 0)) | ((xr >= hr - edge) & (dx > 0))
-            again = blocked.any(1).nonzero().squeeze(1)
-        if active_set and again.numel():  # joints at a bound the step pushes outward leave the Jacobian
-            dx = dx.index_copy(0, again, damped_pinv_step(Jr[again] * (~blocked[again]).unsqueeze(1), e[again],
-                                                          damping[again]))
-        new = torch.minimum(torch.maximum(xr + dx, lr), hr)
-        new_value, new_jac = f(new, ids)
-        new_err = (gr - new_value).norm(dim=-1)
-        better = new_err < err[rows]
-        if counts is not None:  # never into a collision: a step may not raise the count
-            new_count = count(new, ids)
-            better &= new_count <= counts[rows]
-            counts[rows] = torch.where(better, new_count, counts[rows])
-        x[rows] = torch.where(better.unsqueeze(1), new, xr)
-        value[rows] = torch.where(better.unsqueeze(1), new_value, vr)
-        jac[rows] = torch.where(better.view(-1, 1, 1), new_jac, Jr)
-        if min_gain > 0:
-            settled[rows] = better & (new_err > err[rows] * (1 - min_gain))
-        err[rows] = torch.where(better, new_err, err[rows])
-        stalled[rows] = ~better & (damping >= lam_max)  # the same step again next time: rejected again
-        if not fixed:
-            lams[rows] = torch.where(better, damping / 3, damping * 4).clamp(lam_min, lam_max)
-        steps += 1 if running is None else running.long()  # a stalled row counts the steps it would repeat
-        if trace is not None:
-            trace.append(err.clone())
-    if prior is not None:  # the model's residuals alone
-        value = value[:, :k]
-        err = (goal[:, :k] - value).norm(dim=-1)
-    return LMResult(x=x, err=err, value=value, count=counts, steps=steps)
+    return _LMState(x=x, value=value, jac=jac, err=err, lams=lams, counts=counts, steps=steps, stalled=stalled,
+                    settled=settled)
+
+
+def _stopped(s: _LMState, goal: Tensor, tol: float, converged: Callable[[Tensor], Tensor] | None,
+             done: Callable[[Tensor], Tensor] | None) -> Tensor:
+    """(B,) bool: the rows that stop: converged (|e| < tol, or ``converged``), those ``done``
+    adds, and the settled ones."""
+    stopped = s.err < tol if converged is None else converged(goal - s.value)
+    if done is not None:
+        stopped = stopped | done(stopped)
+    return stopped | s.settled
+
+
+def _rows_to_step(stopped: Tensor, stalled: Tensor, all_rows: Tensor
+                  ) -> tuple[slice | Tensor, Tensor, Tensor | None] | None:
+    """The rows this step moves (neither stopped nor stalled; stopped, stalled: (B,) bool): their
+    index into the batch (a slice when every row moves: views of the whole tensors, no gather and
+    scatter), their indices (b,), and the rows still running (B,) bool (None: every row); None
+    when no row moves."""
+    moving = ~(stopped | stalled)
+    if bool(moving.all()):
+        return slice(None), all_rows, None
+    if not bool(moving.any()):
+        return None
+    ids = moving.nonzero().squeeze(1)
+    return ids, ids, ~stopped
+
+
+@dataclass
+class _Rows:
+    """The rows one step moves (b of them; views of the whole tensors when every row moves):
+    x (b, m), value (b, k), jac (b, k, m), goal (b, k), bounds lo, hi (b, m), damping (b,)."""
+
+    x: Tensor
+    value: Tensor
+    jac: Tensor
+    goal: Tensor
+    lo: Tensor
+    hi: Tensor
+    damping: Tensor
+
+
+def _damped_step(r: _Rows, edge: float, active_set: bool) -> Tensor:
+    """The damped step dx (b, m) of the rows ``r`` at their damping; with ``active_set``, the joints
+    at a bound that it pushes outward leave the Jacobian and their rows' step is solved again."""
+    e = r.goal - r.value
+    dx = damped_pinv_step(r.jac, e, r.damping)
+    if active_set:
+        blocked = ((r.x <= r.lo + edge) & (dx < 0)) | ((r.x >= r.hi - edge) & (dx > 0))
+        again = blocked.any(1).nonzero().squeeze(1)
+    if active_set and again.numel():  # joints at a bound the step pushes outward leave the Jacobian
+        dx = dx.index_copy(0, again, damped_pinv_step(r.jac[again] * (~blocked[again]).unsqueeze(1), e[again],
+                                                      r.damping[again]))
+    return dx
+
+
+def _accept_or_reject(f: Model, count: Callable[[Tensor, Tensor], Tensor] | None, s: _LMState, r: _Rows,
+                      rows: slice | Tensor, ids: Tensor, dx: Tensor, *, min_gain: float, lam_min: float,
+                      lam_max: float, fixed: bool) -> None:
+    """Evaluate the rows ``r`` (at ``rows`` of the batch, indices ``ids`` (b,)) at x + dx within
+    their bounds and keep each trial point where it lowers |e| (and does not raise the collision
+    count): then lambda / 3, else lambda * 4, within [lam_min, lam_max]; marks the settled rows
+    and the stalled ones (refused at lam_max)."""
+    new = torch.minimum(torch.maximum(r.x + dx, r.lo), r.hi)
+    new_value, new_jac = f(new, ids)
+    new_err = (r.goal - new_value).norm(dim=-1)
+    better = new_err < s.err[rows]
+    if s.counts is not None:  # never into a collision: a step may not raise the count
+        new_count = count(new, ids)
+        better &= new_count <= s.counts[rows]
+        s.counts[rows] = torch.where(better, new_count, s.counts[rows])
+    s.x[rows] = torch.where(better.unsqueeze(1), new, r.x)
+    s.value[rows] = torch.where(better.unsqueeze(1), new_value, r.value)
+    s.jac[rows] = torch.where(better.view(-1, 1, 1), new_jac, r.jac)
+    if min_gain > 0:
+        s.settled[rows] = better & (new_err > s.err[rows] * (1 - min_gain))
+    s.err[rows] = torch.where(better, new_err, s.err[rows])
+    s.stalled[rows] = ~better & (r.damping >= lam_max)  # the same step again next time: rejected again
+    if not fixed:
+        s.lams[rows] = torch.where(better, r.damping / 3, r.damping * 4).clamp(lam_min, lam_max)

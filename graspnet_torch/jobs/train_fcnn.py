@@ -9,7 +9,7 @@ import sys
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -33,6 +33,9 @@ from graspnet_torch.robot.config import RobotCfg, robot_cfg_from_setting
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.settings import build, clip
 from graspnet_torch.table import format_table
+
+if TYPE_CHECKING:  # pragma: no cover
+    from torch.utils.tensorboard import SummaryWriter
 
 __all__ = ["evaluate_ik", "prepare_train", "train_fcnn", "train_fcnn_job"]
 
@@ -147,7 +150,6 @@ def train_fcnn(
     with ``export``, the checkpoint the solver reads (:func:`robot_checkpoint`; or the given path).
     """
     from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
 
     run_dir = Path(run_dir)
     fingers = list(fingers) if fingers else list(robot.finger_names)
@@ -156,87 +158,132 @@ def train_fcnn(
     if export:
         check_output_path(str(robot_checkpoint(robot) if export is True else export), "export", ConfigError)
     state_path = run_dir / "state.pt"
-    state = None
-    if resume:
-        if os.path.lexists(state_path) and not state_path.is_file():
-            raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
-        if state_path.is_file():
-            state = _load_state(state_path, robot, cfg, seed)
-            print(f"resuming {state_path} (finished: {', '.join(state['finished']) or 'none'})")
-        else:
-            print(f"nothing to resume at {state_path}; starting a new run")
-    trainers: dict[str, FingerTrainer] = {}
+    state = _resume_state(state_path, robot, cfg, seed) if resume else None
     finished: list[str] = list(state["finished"]) if state else []
-    points: dict[str, int] = {}
-    kept = f"(finished: {', '.join(finished) or 'none'})" if state else None  # the state on disk
+    run = _TrainRun(trainers={}, finished=finished, points={},
+                    kept=f"(finished: {', '.join(finished) or 'none'})" if state else None)
     try:
         writer = SummaryWriter(str(run_dir / "tb"))
         t_start = time.perf_counter()
         try:
             for finger in fingers:
-                trainer = FingerTrainer(robot.fingers[finger].chain, cfg,
-                                        seed=seed + 101 * robot.finger_index(finger), name=finger)
-                if state and finger in state["fingers"]:
-                    try:
-                        trainer.load_state_dict(state["fingers"][finger])
-                    except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
-                        raise CheckpointError(f"{state_path}: cannot resume, the state of finger '{finger}' is "
-                                              f"malformed ({type(exc).__name__})") from None
-                trainers[finger] = trainer
-                bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
-                           disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
-                with stop_on_interrupt() as stop:  # Ctrl-C: stop after this epoch, keep the state, say so
-                    while trainer.epochs_done < cfg.epochs:
-                        stats = trainer.epoch()
-                        ep = trainer.epochs_done
-                        for e, loss in enumerate(stats.get("loss", [])):
-                            writer.add_scalar(f"{finger}/loss/expert_{e}", loss, ep)
-                        for e, count in enumerate(stats["points_per_expert"]):
-                            writer.add_scalar(f"{finger}/points/expert_{e}", count, ep)
-                        writer.add_scalar(f"{finger}/experts", stats["experts"], ep)
-                        writer.add_scalar(f"{finger}/unsolved_targets", stats["unsolved"], ep)
-                        postfix = {"experts": stats["experts"], "points": len(trainer.data)}
-                        if ep % cfg.val_every == 0 or ep == cfg.epochs:
-                            val = trainer.validate()
-                            writer.add_scalar(f"{finger}/val/median_mm", val["median_mm"], ep)
-                            writer.add_scalar(f"{finger}/val/p95_mm", val["p95_mm"], ep)
-                            postfix["val median mm"] = f"{val['median_mm']:.3f}"
-                        bar.set_postfix(postfix)
-                        bar.update(1)
-                        if ep % checkpoint_every == 0 or stop.requested:
-                            _save_state(state_path, robot, cfg, seed, trainers, finished)
-                            kept = f"at epoch {ep} of {cfg.epochs} of finger '{finger}'"
-                        if stop.requested:
-                            bar.close()
-                            raise Interrupted(resume_hint(state_path, kept))
-                bar.close()
-                if finger not in finished:
-                    finished.append(finger)
-                points[finger] = len(trainer.data)
-                _save_state(state_path, robot, cfg, seed, trainers, finished)
-                kept = f"(finished: {', '.join(finished)})"
+                _train_finger(run, robot, cfg, finger, seed, state, state_path, writer, progress, checkpoint_every)
         finally:
             writer.flush()
             writer.close()
         elapsed = time.perf_counter() - t_start
-        ik = FingerIK(robot, {f: t.experts for f, t in trainers.items()})
+        ik = FingerIK(robot, {f: t.experts for f, t in run.trainers.items()})
         rows = evaluate_ik(ik, n=eval_targets)
         info = {"seed": seed, "epochs": cfg.epochs, "train_seconds": round(elapsed, 1),
                 "heldout": {r["finger"]: {"competition": r["competition"], "refined": r["refined"]} for r in rows}}
         save_finger_ik(ik, run_dir / "fcnn.pt", info)
         if export:
-            target = robot_checkpoint(robot) if export is True else Path(export)
-            save_finger_ik(ik, target, info)
-            reads = Path(target).resolve() == robot_checkpoint(robot).resolve()
-            print(f"exported {target}" + (f" (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)"
-                                          if reads else ""))
+            _export(ik, robot, export, info)
     except Interrupted:
         raise
     except KeyboardInterrupt:  # Ctrl-C outside the epochs (evaluating, exporting) or a second one
-        raise Interrupted(resume_hint(state_path, kept)) from None
+        raise Interrupted(resume_hint(state_path, run.kept)) from None
     print(f"\nFCNN of '{robot.name}' ({elapsed:.0f} s of training); errors on {eval_targets} held-out targets:")
-    print(_closing_table(rows, points))
+    print(_closing_table(rows, run.points))
     return ik, rows
+
+
+@dataclasses.dataclass
+class _TrainRun:
+    """A training run so far: each started finger's trainer, the fingers finished, their training
+    points, and what the state on disk holds (for the resume hint; None: nothing saved yet)."""
+
+    trainers: dict[str, FingerTrainer]
+    finished: list[str]
+    points: dict[str, int]
+    kept: str | None
+
+
+def _resume_state(state_path: Path, robot: Robot, cfg: FCNNTrainCfg, seed: int) -> dict | None:
+    """The checked training state at ``state_path`` to resume from, or None (said so) when there is none."""
+    if os.path.lexists(state_path) and not state_path.is_file():
+        raise CheckpointError(f"{state_path}: cannot resume, not a regular file")
+    if state_path.is_file():
+        state = _load_state(state_path, robot, cfg, seed)
+        print(f"resuming {state_path} (finished: {', '.join(state['finished']) or 'none'})")
+        return state
+    print(f"nothing to resume at {state_path}; starting a new run")
+    return None
+
+
+def _finger_trainer(robot: Robot, cfg: FCNNTrainCfg, finger: str, seed: int, state: dict | None,
+                    state_path: Path) -> FingerTrainer:
+    """The trainer of ``finger`` (seeded from ``seed`` and the finger's index), loaded from ``state``
+    where it holds the finger."""
+    trainer = FingerTrainer(robot.fingers[finger].chain, cfg, seed=seed + 101 * robot.finger_index(finger), name=finger)
+    if state and finger in state["fingers"]:
+        try:
+            trainer.load_state_dict(state["fingers"][finger])
+        except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
+            raise CheckpointError(f"{state_path}: cannot resume, the state of finger '{finger}' is "
+                                  f"malformed ({type(exc).__name__})") from None
+    return trainer
+
+
+def _train_finger(run: _TrainRun, robot: Robot, cfg: FCNNTrainCfg, finger: str, seed: int, state: dict | None,
+                  state_path: Path, writer: SummaryWriter, progress: bool, checkpoint_every: int) -> None:
+    """Train one finger's experts up to ``cfg.epochs`` (from ``state`` where it holds the finger),
+    with a progress bar; the state is saved every ``checkpoint_every`` epochs and at the end.
+    Ctrl-C: stop after this epoch, save the state and raise :class:`Interrupted`."""
+    from tqdm import tqdm
+
+    trainer = _finger_trainer(robot, cfg, finger, seed, state, state_path)
+    run.trainers[finger] = trainer
+    bar = tqdm(total=cfg.epochs, initial=min(trainer.epochs_done, cfg.epochs), desc=f"{finger:>7s}",
+               disable=None if progress else True, file=sys.stderr, dynamic_ncols=True, leave=True)
+    with stop_on_interrupt() as stop:  # Ctrl-C: stop after this epoch, keep the state, say so
+        while trainer.epochs_done < cfg.epochs:
+            postfix = _epoch(trainer, writer, finger, cfg)
+            ep = trainer.epochs_done
+            bar.set_postfix(postfix)
+            bar.update(1)
+            if ep % checkpoint_every == 0 or stop.requested:
+                _save_state(state_path, robot, cfg, seed, run.trainers, run.finished)
+                run.kept = f"at epoch {ep} of {cfg.epochs} of finger '{finger}'"
+            if stop.requested:
+                bar.close()
+                raise Interrupted(resume_hint(state_path, run.kept))
+    bar.close()
+    if finger not in run.finished:
+        run.finished.append(finger)
+    run.points[finger] = len(trainer.data)
+    _save_state(state_path, robot, cfg, seed, run.trainers, run.finished)
+    run.kept = f"(finished: {', '.join(run.finished)})"
+
+
+def _epoch(trainer: FingerTrainer, writer: SummaryWriter, finger: str, cfg: FCNNTrainCfg) -> dict[str, Any]:
+    """One training epoch of ``finger``, logged to TensorBoard (losses and points per expert, experts,
+    unsolved targets; the validation errors (mm) every ``cfg.val_every`` epochs and at the last);
+    returns the progress bar's postfix."""
+    stats = trainer.epoch()
+    ep = trainer.epochs_done
+    for e, loss in enumerate(stats.get("loss", [])):
+        writer.add_scalar(f"{finger}/loss/expert_{e}", loss, ep)
+    for e, count in enumerate(stats["points_per_expert"]):
+        writer.add_scalar(f"{finger}/points/expert_{e}", count, ep)
+    writer.add_scalar(f"{finger}/experts", stats["experts"], ep)
+    writer.add_scalar(f"{finger}/unsolved_targets", stats["unsolved"], ep)
+    postfix: dict[str, Any] = {"experts": stats["experts"], "points": len(trainer.data)}
+    if ep % cfg.val_every == 0 or ep == cfg.epochs:
+        val = trainer.validate()
+        writer.add_scalar(f"{finger}/val/median_mm", val["median_mm"], ep)
+        writer.add_scalar(f"{finger}/val/p95_mm", val["p95_mm"], ep)
+        postfix["val median mm"] = f"{val['median_mm']:.3f}"
+    return postfix
+
+
+def _export(ik: FingerIK, robot: Robot, export: bool | str | Path, info: dict) -> None:
+    """Save the trained checkpoint where ``export`` says (True: the robot's, which the solver reads)."""
+    target = robot_checkpoint(robot) if export is True else Path(export)
+    save_finger_ik(ik, target, info)
+    reads = Path(target).resolve() == robot_checkpoint(robot).resolve()
+    print(f"exported {target}" + (f" (the checkpoint `solve_grasp.py robot={robot.cfg.cli_name}` reads)"
+                                  if reads else ""))
 
 
 def prepare_train(cfg: Mapping[str, Any] | TrainFCNNJobCfg,

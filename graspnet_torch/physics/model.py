@@ -36,6 +36,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -44,7 +45,7 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.errors import ProblemError
 from graspnet_torch.physics.config import PhysicsCfg
 from graspnet_torch.robot.chain import joint_motion, origin_matrix
-from graspnet_torch.robot.geometry import link_shapes
+from graspnet_torch.robot.geometry import LinkShape, link_shapes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 
@@ -166,17 +167,7 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
     mimic = urdf.mimic_joints
     locked, posed = _locked(robot), posed_bodies(robot, start)
 
-    mj = ET.Element("mujoco", model=f"grasp_{robot.name}")
-    ET.SubElement(mj, "compiler", angle="radian", autolimits="true", balanceinertia="true", boundmass="1e-5",
-                  boundinertia="1e-10", inertiafromgeom="auto")
-    ET.SubElement(mj, "option", timestep=f"{cfg.timestep_s:.9g}", integrator="implicitfast", cone="elliptic",
-                  gravity="0 0 -9.81" if cfg.gravity else "0 0 0")
-    default = ET.SubElement(mj, "default")
-    ET.SubElement(default, "geom", condim="4", friction=_fmt([cfg.friction, cfg.torsional_friction, 0.0]))
-    asset = ET.SubElement(mj, "asset")
-    world = ET.SubElement(mj, "worldbody")
-    actuators = ET.SubElement(mj, "actuator")
-    equality = ET.SubElement(mj, "equality")
+    mj, asset, world, actuators, equality = _mjcf_skeleton(robot, cfg)
 
     shapes: dict[str, list] = {}
     for s in link_shapes(urdf, "collision"):
@@ -190,24 +181,8 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
     start_q, targets, meshes = {}, {}, [0]
 
     def fill(body: ET.Element, link: str) -> None:
-        ln = urdf.links[link]
-        inertial = getattr(ln, "inertial", None)
-        if inertial is not None and inertial.mass is not None and inertial.mass > 0:
-            i = inertial.inertia
-            T = origin_matrix(inertial.origin)
-            inertia = np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]]) \
-                if i is not None else np.eye(3) * 1e-9
-            inertia = T[:3, :3] @ inertia @ T[:3, :3].T  # in the body's axes: MuJoCo takes fullinertia or a quat
-            full = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
-            ET.SubElement(body, "inertial", mass=f"{inertial.mass:.9g}", fullinertia=_fmt(full), pos=_fmt(T[:3, 3]))
-        for s in shapes.get(link, []):
-            if s.kind == "mesh":
-                name = f"link_mesh_{meshes[0]}"
-                meshes[0] += 1
-                ET.SubElement(asset, "mesh", name=name, vertex=_fmt(s.mesh.convex_hull.vertices))
-                _geom(body, "mesh", None, s.origin, ROBOT_BITS, mesh=name)
-            else:
-                _geom(body, s.kind, _primitive_size(s.kind, s.size), s.origin, ROBOT_BITS)
+        _inertial(body, getattr(urdf.links[link], "inertial", None))
+        _link_geoms(body, asset, shapes.get(link, []), meshes)
         for j in children.get(link, []):
             T, axis, kind = _joint_frame(robot, j)
             movable = j.type in ("revolute", "continuous", "prismatic")
@@ -245,6 +220,49 @@ def grasp_mjcf(robot: Robot, obj, start: Posture, target: Posture, cfg: PhysicsC
     if not len(equality):
         mj.remove(equality)
     return GraspModel(ET.tostring(mj, encoding="unicode"), start_q, targets)
+
+
+def _mjcf_skeleton(robot: Robot, cfg: PhysicsCfg) -> tuple[ET.Element, ET.Element, ET.Element, ET.Element, ET.Element]:
+    """The model's root element with its compiler, option and default geom settings, and its empty
+    asset, worldbody, actuator and equality sections (returned in this order after the root)."""
+    mj = ET.Element("mujoco", model=f"grasp_{robot.name}")
+    ET.SubElement(mj, "compiler", angle="radian", autolimits="true", balanceinertia="true", boundmass="1e-5",
+                  boundinertia="1e-10", inertiafromgeom="auto")
+    ET.SubElement(mj, "option", timestep=f"{cfg.timestep_s:.9g}", integrator="implicitfast", cone="elliptic",
+                  gravity="0 0 -9.81" if cfg.gravity else "0 0 0")
+    default = ET.SubElement(mj, "default")
+    ET.SubElement(default, "geom", condim="4", friction=_fmt([cfg.friction, cfg.torsional_friction, 0.0]))
+    asset = ET.SubElement(mj, "asset")
+    world = ET.SubElement(mj, "worldbody")
+    actuators = ET.SubElement(mj, "actuator")
+    equality = ET.SubElement(mj, "equality")
+    return mj, asset, world, actuators, equality
+
+
+def _inertial(body: ET.Element, inertial: Any) -> None:
+    """A link's URDF ``<inertial>`` (mass in kg, inertia in kg m^2 about its origin) as the body's
+    ``inertial`` element, the inertia turned into the body's axes; nothing without a positive mass."""
+    if inertial is not None and inertial.mass is not None and inertial.mass > 0:
+        i = inertial.inertia
+        T = origin_matrix(inertial.origin)
+        inertia = np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]]) \
+            if i is not None else np.eye(3) * 1e-9
+        inertia = T[:3, :3] @ inertia @ T[:3, :3].T  # in the body's axes: MuJoCo takes fullinertia or a quat
+        full = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+        ET.SubElement(body, "inertial", mass=f"{inertial.mass:.9g}", fullinertia=_fmt(full), pos=_fmt(T[:3, 3]))
+
+
+def _link_geoms(body: ET.Element, asset: ET.Element, shapes: list[LinkShape], meshes: list[int]) -> None:
+    """A link's collision shapes as the body's geoms: primitives as primitives, a mesh by its
+    convex hull (an asset named by the running count ``meshes[0]``, which it advances)."""
+    for s in shapes:
+        if s.kind == "mesh":
+            name = f"link_mesh_{meshes[0]}"
+            meshes[0] += 1
+            ET.SubElement(asset, "mesh", name=name, vertex=_fmt(s.mesh.convex_hull.vertices))
+            _geom(body, "mesh", None, s.origin, ROBOT_BITS, mesh=name)
+        else:
+            _geom(body, s.kind, _primitive_size(s.kind, s.size), s.origin, ROBOT_BITS)
 
 
 def _object(world: ET.Element, asset: ET.Element, obj, cfg: PhysicsCfg) -> None:

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -27,6 +29,9 @@ from graspnet_torch.solver.config import NoiseCfg, RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment, Evaluation
 from graspnet_torch.solver.loop import LoopOutcome
 from graspnet_torch.solver.tracker import Tracker
+
+if TYPE_CHECKING:  # pragma: no cover
+    from cmaes import CMA
 
 __all__ = ["run_cmaes"]
 
@@ -69,8 +74,7 @@ def run_cmaes(env: Environment, trials: int, seed: int, solver: SolverCfg | None
     opts = [make(t, o0[t].double().cpu().numpy(), 0) for t in range(T)]
     restarts = [0] * T
     budget, threshold = solver.max_iterations, solver.stop_threshold
-    problem_index = env.problem_index
-    pid = None if problem_index is None else problem_index.cpu()
+    pid = None if env.problem_index is None else env.problem_index.cpu()
     best = Tracker(T, reward_fn, budget, pid, solver.stop)  # kept in the normalised units o, float64 on the CPU
     best.start(o0.double().cpu())
     hist: dict[str, list] = {}
@@ -79,65 +83,111 @@ def run_cmaes(env: Environment, trials: int, seed: int, solver: SolverCfg | None
     with torch.inference_mode():
         while used < budget and bool(best.active.any()):
             idx = best.active.nonzero().squeeze(1)
-            A, k = idx.numel(), min(pop, budget - used)
+            k = min(pop, budget - used)
             asked = [[opts[int(t)].ask() for _ in range(pop)] for t in idx]
-            o = torch.as_tensor(np.asarray(asked)[:, :k], dtype=dtype, device=device)  # (A, k, n)
-            rows = idx.repeat_interleave(k).to(device)
-            lo = lower[rows] if lower.dim() == 2 else lower
-            config = torch.addcmul(lo, (upper[rows] if upper.dim() == 2 else upper) - lo, o.reshape(A * k, n))
-            ev = env.evaluate(config, rows if problem_index is not None else None)
-            if ev.config is not config:  # the environment settled the proposals: search from where they went
-                o = ((ev.config - lo) / ((upper[rows] if upper.dim() == 2 else upper) - lo)).reshape(A, k, n)
-            i = used + torch.arange(1, k + 1, device=device).repeat(A)
-            r = reward_fn(ev, i).double().cpu()
-            observed = add_noise(r.to(dtype), noise.sigma, gen).double().cpu() if noise.sigma > 0 else r
-            obs_ak, r_ak = observed.view(A, k), r.view(A, k)
-            j = obs_ak.argmax(dim=1)  # each trial's best candidate of this generation
-            pick = torch.arange(A) * k + j
-            gen_obs, gen_r = obs_ak[torch.arange(A), j], r_ak[torch.arange(A), j]
-            best.rescore(torch.full((T,), used + k, device=device))
-            part = Evaluation(**{name: v[pick] for name, v in ev.tensors().items() if name != "config"})
-            best.offer_rows(idx, o[torch.arange(A), j].double().cpu(), part, gen_r, gen_obs)
+            o, ev, obs_ak, r_ak = _generation(env, reward_fn, noise, gen, asked, idx, k, used)
+            _offer_generation(best, idx, o, ev, obs_ak, r_ak, used + k)
             if solver.history:
-                row = {"reinforcement": best.r.clone(), "observed": best.observed.clone(),
-                       "total": best.evaluation.error.double().cpu().clone(),
-                       "step_size": torch.tensor([float(getattr(opt, "_sigma", float("nan"))) for opt in opts])}
-                if best.evaluation.finger_errors is not None:
-                    row["errors"] = best.evaluation.finger_errors.double().cpu().clone()
-                if best.evaluation.collisions is not None:
-                    row["collisions"] = best.evaluation.collisions.double().cpu().clone()
-                for key, value in row.items():
-                    hist.setdefault(key, []).append(value)
-                hist.setdefault("time", []).append(time.perf_counter() - t0)
-                hist.setdefault("iteration", []).append(used + k)
+                _trace_row(hist, best, opts, t0, used + k)
             if k == pop:
-                obs_np = obs_ak.numpy()
-                for a, t in enumerate(idx.tolist()):
-                    opts[t].tell([(asked[a][c], -float(obs_np[a, c])) for c in range(pop)])
-                    if opts[t].should_stop():  # converged: restart around its best with the initial step size
-                        restarts[t] += 1
-                        opts[t] = make(t, best.config[t].numpy().clip(0, 1), restarts[t])
+                _tell(opts, make, restarts, best, idx, asked, obs_ak)
             if threshold is not None:
-                hit = obs_ak > threshold
-                done = torch.zeros(T, dtype=torch.bool)
-                done[idx] = hit.any(dim=1)
-                at = torch.full((T,), used + k, dtype=torch.long)  # a trial that hit: its first hit
-                at[idx] = torch.where(hit.any(dim=1), used + hit.float().argmax(dim=1) + 1, at[idx])
-                if bool(done.any()):
-                    best.finish(done, at)
+                _finish_hits(best, idx, obs_ak, threshold, used, k)
             if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
                 best.halt(used + k)
                 break
             used += k
     wall = time.perf_counter() - t0
     config = torch.addcmul(lower, span, best.config.to(dtype=dtype, device=device))
-    history = None
-    if solver.history and hist:
-        history = {key: torch.stack(v) for key, v in hist.items() if key not in ("time", "iteration")}
-        history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
-        history["iteration"] = torch.tensor(hist["iteration"], dtype=torch.long)
+    history = _history_tensors(hist) if solver.history and hist else None
     threshold_ok = best.observed > threshold if threshold is not None else torch.zeros(T, dtype=torch.bool)
     return LoopOutcome(config=config, evaluation=best.evaluation, reinforcement=best.r.to(dtype=dtype, device=device),
                        iterations=best.iterations.to(device), success=threshold_ok.to(device), wall_time_s=wall,
                        history=history, start=torch.addcmul(lower, span, o0))
 
+
+def _generation(env: Environment, reward_fn: Reward, noise: NoiseCfg, gen: torch.Generator, asked: list[list],
+                idx: Tensor, k: int, used: int) -> tuple[Tensor, Evaluation, Tensor, Tensor]:
+    """Evaluate the first ``k`` candidates that the A active trials ``idx`` (A,) were asked for, as
+    one batch: returns the candidates o (A, k, n) (normalised; where the environment settled them),
+    the evaluation (A k rows), and the observed and noise-free reinforcements (A, k) (float64, CPU;
+    candidate c of a generation is evaluation ``used + c + 1`` of its trial)."""
+    lower, upper = env.lower, env.upper
+    dtype, device = lower.dtype, lower.device
+    A, n = idx.numel(), env.n
+    o = torch.as_tensor(np.asarray(asked)[:, :k], dtype=dtype, device=device)  # (A, k, n)
+    rows = idx.repeat_interleave(k).to(device)
+    lo = lower[rows] if lower.dim() == 2 else lower
+    config = torch.addcmul(lo, (upper[rows] if upper.dim() == 2 else upper) - lo, o.reshape(A * k, n))
+    ev = env.evaluate(config, rows if env.problem_index is not None else None)
+    if ev.config is not config:  # the environment settled the proposals: search from where they went
+        o = ((ev.config - lo) / ((upper[rows] if upper.dim() == 2 else upper) - lo)).reshape(A, k, n)
+    i = used + torch.arange(1, k + 1, device=device).repeat(A)
+    r = reward_fn(ev, i).double().cpu()
+    observed = add_noise(r.to(dtype), noise.sigma, gen).double().cpu() if noise.sigma > 0 else r
+    return o, ev, observed.view(A, k), r.view(A, k)
+
+
+def _offer_generation(best: Tracker, idx: Tensor, o: Tensor, ev: Evaluation, obs_ak: Tensor, r_ak: Tensor,
+                      at: int) -> None:
+    """Offer each active trial's (``idx`` (A,)) best candidate of the generation (its highest
+    observed reinforcement in ``obs_ak`` (A, k)) to the tracker, rescored at evaluation ``at``."""
+    A, k = obs_ak.shape
+    j = obs_ak.argmax(dim=1)  # each trial's best candidate of this generation
+    pick = torch.arange(A) * k + j
+    gen_obs, gen_r = obs_ak[torch.arange(A), j], r_ak[torch.arange(A), j]
+    best.rescore(torch.full((best.active.shape[0],), at, device=o.device))
+    part = Evaluation(**{name: v[pick] for name, v in ev.tensors().items() if name != "config"})
+    best.offer_rows(idx, o[torch.arange(A), j].double().cpu(), part, gen_r, gen_obs)
+
+
+def _trace_row(hist: dict[str, list], best: Tracker, opts: list[CMA], t0: float, at: int) -> None:
+    """Append one generation's row to the history lists: each trial's best so far (reinforcement,
+    observed, error (m), finger errors and collisions where given), each CMA-ES's step size, the
+    seconds since ``t0`` and the evaluations used ``at``."""
+    row = {"reinforcement": best.r.clone(), "observed": best.observed.clone(),
+           "total": best.evaluation.error.double().cpu().clone(),
+           "step_size": torch.tensor([float(getattr(opt, "_sigma", float("nan"))) for opt in opts])}
+    if best.evaluation.finger_errors is not None:
+        row["errors"] = best.evaluation.finger_errors.double().cpu().clone()
+    if best.evaluation.collisions is not None:
+        row["collisions"] = best.evaluation.collisions.double().cpu().clone()
+    for key, value in row.items():
+        hist.setdefault(key, []).append(value)
+    hist.setdefault("time", []).append(time.perf_counter() - t0)
+    hist.setdefault("iteration", []).append(at)
+
+
+def _tell(opts: list[CMA], make: Callable[[int, np.ndarray, int], CMA], restarts: list[int], best: Tracker,
+          idx: Tensor, asked: list[list], obs_ak: Tensor) -> None:
+    """Tell each active trial's CMA-ES (``idx`` (A,)) its whole generation (``asked``, scored by
+    minus the observed reinforcement ``obs_ak`` (A, pop)); a converged one restarts around its
+    trial's best with the initial step size."""
+    pop = obs_ak.shape[1]
+    obs_np = obs_ak.numpy()
+    for a, t in enumerate(idx.tolist()):
+        opts[t].tell([(asked[a][c], -float(obs_np[a, c])) for c in range(pop)])
+        if opts[t].should_stop():  # converged: restart around its best with the initial step size
+            restarts[t] += 1
+            opts[t] = make(t, best.config[t].numpy().clip(0, 1), restarts[t])
+
+
+def _finish_hits(best: Tracker, idx: Tensor, obs_ak: Tensor, threshold: float, used: int, k: int) -> None:
+    """Stop the active trials (``idx`` (A,)) whose observed reinforcement (A, k) exceeded the
+    threshold this generation, each at its first such evaluation."""
+    T = best.active.shape[0]
+    hit = obs_ak > threshold
+    done = torch.zeros(T, dtype=torch.bool)
+    done[idx] = hit.any(dim=1)
+    at = torch.full((T,), used + k, dtype=torch.long)  # a trial that hit: its first hit
+    at[idx] = torch.where(hit.any(dim=1), used + hit.float().argmax(dim=1) + 1, at[idx])
+    if bool(done.any()):
+        best.finish(done, at)
+
+
+def _history_tensors(hist: dict[str, list]) -> dict[str, Tensor]:
+    """The history lists stacked: (G, T) per generation and trial; 'time' (G,) seconds, 'iteration' (G,)."""
+    history = {key: torch.stack(v) for key, v in hist.items() if key not in ("time", "iteration")}
+    history["time"] = torch.tensor(hist["time"], dtype=torch.float64)
+    history["iteration"] = torch.tensor(hist["iteration"], dtype=torch.long)
+    return history

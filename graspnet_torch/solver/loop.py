@@ -168,6 +168,22 @@ def run_loop(env: Environment, trials: int, seed: int, solver: SolverCfg | None 
                        success=success, wall_time_s=wall, history=history, start=start)
 
 
+@dataclass
+class _Search:
+    """The loop's state between iterations, one row per trial (R = T; once the loop runs the active trials
+    only, R of them): the networks, each trial's best so far, ``o_prev``, ``o_prev2`` (R, n) the last two
+    configurations fed back (normalised), ``polished_at`` (R,) the observed reinforcement at each row's
+    last polish (-inf: none), ``pending`` (R,) bool the near rows waiting for a polish, the last evaluation."""
+
+    net: ConfigurationNetwork
+    best: Tracker
+    o_prev: Tensor
+    o_prev2: Tensor
+    polished_at: Tensor
+    pending: Tensor
+    ev: Evaluation | None = None
+
+
 def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, reward: Reward, noise: NoiseCfg,
              gen: torch.Generator, o_prev: Tensor, threshold: float | None, curves: Curves,
              t0: float, given: bool = False, some: Tensor | None = None
@@ -182,122 +198,167 @@ def _iterate(env: Environment, net: ConfigurationNetwork, solver: SolverCfg, rew
     every per-trial tensor below (R, ...) is then theirs, in trial order. The random draws stay every trial's."""
     T, n = o_prev.shape
     dtype, device = o_prev.dtype, o_prev.device
-    span = env.upper - env.lower
-    o_prev2 = o_prev
-    best = Tracker(T, reward, solver.max_iterations, env.problem_index, solver.stop, device)
-    polish_from = None  # the polish inside the loop (solver.polish.from_r; never with sensor noise)
-    first_from = None  # the first iteration's (solver.polish.from_r_free: nothing to collide with)
+    s = _Search(net=net, best=Tracker(T, reward, solver.max_iterations, env.problem_index, solver.stop, device),
+                o_prev=o_prev, o_prev2=o_prev, polished_at=torch.full((T,), -float("inf"), dtype=dtype, device=device),
+                pending=torch.zeros(T, dtype=torch.bool, device=device))
+    polish_from, first_from = _polish_bars(env, solver, noise, threshold)
+    grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
+    tolerance = solver.tolerance_mm / 1000
+    part = RunningRows(env, T, env.upper - env.lower)  # the rows the loop runs: all, until most trials have stopped
+    for k in range(solver.max_iterations):
+        rows = part.rows
+        x = torch.cat([s.o_prev, s.o_prev - s.o_prev2], dim=1)
+        noise_k = torch.randn(T, n, generator=gen, dtype=dtype, device=device)  # every trial's draw, always
+        step = s.net(x, noise_k if rows is None else noise_k[rows])
+        o, r_hat, sigma = (s.o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
+        if some is not None and k == 0:
+            o = torch.where(some.unsqueeze(1), s.o_prev, o)
+        s.ev = _evaluate(env, part, s, o, T)
+        config = s.ev.config  # the configuration evaluated (where the environment settled the proposal)
+        r = reward(s.ev, k + 1)  # (14), (20)-(23)
+        observed = part.observe(r, noise.sigma, gen)  # (15)
+        _learn(s, observed, (given or some is not None) and k == 0, some)
+        s.best.rescore(k + 1)
+        s.best.offer(config, s.ev, r, observed, None if solver.report == "best" else torch.ones_like(s.best.active))
+        shown = config  # each trial's configuration this iteration (a landed one: where the polish put it)
+        if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
+            observed, r, shown = _polish_step(env, s, reward, solver, k, T, first_from if k == 0 else polish_from,
+                                              k == 0 and first_from != polish_from, threshold,
+                                              tolerance if grasp_rule else None, rows, observed, r, shown)
+        if solver.history:
+            _history_row(curves, rows, t0, solver, r, observed, r_hat, sigma, s.ev, shown)
+        o_new = o if s.best.all_active else torch.where(s.best.active.unsqueeze(1), o, s.o_prev)
+        s.o_prev2, s.o_prev = s.o_prev, o_new
+        if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
+            s.best.halt(k + 1)
+            break
+        if threshold is not None:
+            done = _done(env, s, part, solver, gen, observed, threshold, grasp_rule, tolerance)
+            if bool(done.any()):
+                if not s.best.finish(done, k + 1):
+                    break
+                _run_rest_only(s, part)
+            restart = solver.restart_every is not None and (k + 1) % solver.restart_every == 0
+            if restart and k + 1 < solver.max_iterations:
+                # still searching: a new network and a new random start (the best so far is kept)
+                _restart(s, s.best.active.nonzero().squeeze(1), gen)
+    best = part.whole(s.best)
+    return best.config, best.evaluation, best.r, best.iterations
+
+
+def _polish_bars(env: Environment, solver: SolverCfg, noise: NoiseCfg, threshold: float | None
+                 ) -> tuple[float | None, float | None]:
+    """The observed reinforcement above which a trial is polished inside the loop, and the first
+    iteration's: (None, None) when the loop does not polish."""
+    polish_from = first_from = None  # solver.polish.from_r (never with sensor noise), from_r_free (the first's)
     if solver.polish.from_r is not None and env.polishes and noise.sigma == 0 and threshold is not None:
         polish_from = first_from = solver.polish.from_r
         if solver.polish.from_r_free is not None and (not env.counts_collisions or env.on_surface):
             first_from = solver.polish.from_r_free
-    polished_at = torch.full((T,), -float("inf"), dtype=dtype, device=device)
-    pending = torch.zeros(T, dtype=torch.bool, device=device)
-    grasp_rule = solver.stop_rule == "grasp" and noise.sigma == 0  # with noise the error is not observed
-    confirm = grasp_rule and env.counts_collisions  # a grasp stops a trial once FCL, too, finds it clear
-    tolerance = solver.tolerance_mm / 1000
-    part = RunningRows(env, T, span)  # the rows the loop runs: all, until most trials have stopped
-    ev = None
-    for k in range(solver.max_iterations):
-        rows = part.rows
-        x = torch.cat([o_prev, o_prev - o_prev2], dim=1)
-        noise_k = torch.randn(T, n, generator=gen, dtype=dtype, device=device)  # every trial's draw, always
-        step = net(x, noise_k if rows is None else noise_k[rows])
-        o, r_hat, sigma = (o_prev if given and k == 0 else step.o), step.r_hat, step.sigma
-        if some is not None and k == 0:
-            o = torch.where(some.unsqueeze(1), o_prev, o)
-        config = torch.addcmul(part.lower, part.span, o)  # (13)
-        if rows is None and (best.all_active or best.n_active * 2 > T or not env.subsets):
-            ev = env.evaluate(config)  # E of eq. 3 (+ collisions)
-        elif env.subsets:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
-            idx = best.active.nonzero().squeeze(1)
-            ev = ev.put(idx, env.evaluate(config[idx], idx if rows is None else rows[idx]), config)
-        else:  # an environment evaluated whole: every trial's configuration, the stopped ones' where they stopped
-            ev = part.evaluate(o)
-        config = ev.config  # the configuration evaluated (where the environment settled the proposal)
-        r = reward(ev, k + 1)  # (14), (20)-(23)
-        observed = part.observe(r, noise.sigma, gen)  # (15)
-        if (given or some is not None) and k == 0:  # the start itself was evaluated: nothing drawn to learn
-            # from; the networks expect what the start got (narrow exploration near a grasp), but for
-            # a colliding start (R3/R4 weigh its collisions more with every iteration): wide
-            clear = None if ev.collisions is None else ev.collisions.to(device) == 0
-            if some is not None:
-                net.reinforce(observed, ~some)  # the others learn from their first draw
-            clear_rows = some if clear is None else clear if some is None else some & clear
-            net.place(o_prev, observed, rows=clear_rows)
-        else:
-            net.reinforce(observed, None if best.all_active else best.active)  # (16)-(19)
-        best.rescore(k + 1)
-        best.offer(config, ev, r, observed, None if solver.report == "best" else torch.ones_like(best.active))
-        shown = config  # each trial's configuration this iteration (a landed one: where the polish put it)
-        if polish_from is not None:  # trials near a solution: the polish lands them (or they learn on)
-            near = best.active & (observed > (first_from if k == 0 else polish_from)) & (observed > polished_at)
-            polished_at = torch.where(near, observed, polished_at)
-            if T >= DEFER_FROM:  # a large batch: a few near trials wait for others (or a few iterations)
-                pending = (pending | near) & best.active
-                near = pending if int(pending.sum()) >= DEFER_ROWS or (k + 1) % DEFER_EVERY == 0 else near & False
-            if bool(near.any()):
-                pending = pending & ~near
-                landed = _polish_near(env, near, best, reward, k + 1, threshold, solver,
-                                      tolerance if grasp_rule else None,
-                                      landed_only=k == 0 and first_from != polish_from, rows=rows)
-                observed = torch.where(landed, best.observed, observed)  # the stop below sees the landed ones
-                r = torch.where(landed, best.r, r)  # a landed trial is where the polish put it: its curves
-                ev = best.evaluation.where(landed, ev)  # end there, and its collision count is the landed one's
-                if solver.history_postures:
-                    shown = torch.where(landed.unsqueeze(1), best.config, shown)
-        if solver.history:
-            values = {"reinforcement": r, "observed": observed, "expected": r_hat, "sigma": sigma, "total": ev.error,
-                      "errors": ev.finger_errors, "collisions": ev.collisions, "alignment": ev.alignment}
-            if solver.history_postures:  # each trial's configuration and finger joints: the viewer's replay
-                values["config"] = shown.clone()
-                values["joints"] = None if ev.joints is None else ev.joints.clone()
-            curves.add(rows, time.perf_counter() - t0, values)
-        o_new = o if best.all_active else torch.where(best.active.unsqueeze(1), o, o_prev)
-        o_prev2, o_prev = o_prev, o_new
-        if solver.time_budget is not None and time.perf_counter() - t0 > solver.time_budget:
-            best.halt(k + 1)
-            break
-        if threshold is not None:
-            if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
-                done = best.active & env.grasped(ev, tolerance)
-                if confirm and bool(done.any()):  # ... and clear by the exact check (the proxy can miss a link)
-                    idx = done.nonzero().squeeze(1)
-                    refused = torch.zeros_like(done).index_fill(0, idx[~part.confirm(best, idx).to(device)], True)
-                    if bool(refused.any()):  # those trials start again: new network, new random start
-                        done = done & ~refused
-                        best.forget(refused)
-                        idx = refused.nonzero().squeeze(1)
-                        net.restart(idx, gen)
-                        o_prev = o_prev.index_copy(0, idx, torch.rand(idx.numel(), n, generator=gen, dtype=dtype,
-                                                                      device=device))
-                        o_prev2 = o_prev
-                        polished_at = polished_at.index_fill(0, idx, -float("inf"))
-            else:  # the paper's rule: the observed reinforcement exceeds the threshold
-                done = best.active & (observed > threshold)
-                if solver.stops_clear and ev.collisions is not None:  # a colliding grasp is no reason to stop
-                    done &= ev.collisions == 0
-            if bool(done.any()):
-                if not best.finish(done, k + 1):
-                    break
-                running = o_prev.shape[0]
-                if best.n_active * 4 <= running and running >= 64 and not net.autograd:  # run the rest only
-                    keep = best.active.nonzero().squeeze(1)
-                    net = net.select(keep)
-                    best = part.select(keep, best, o_prev)
-                    o_prev, o_prev2, ev = o_prev[keep], o_prev2[keep], take_rows(ev, keep)
-                    polished_at, pending = polished_at[keep], pending[keep]
-            restart = solver.restart_every is not None and (k + 1) % solver.restart_every == 0
-            if restart and k + 1 < solver.max_iterations:
-                # still searching: a new network and a new random start (the best so far is kept)
-                idx = best.active.nonzero().squeeze(1)
-                net.restart(idx, gen)
-                o_prev = o_prev.index_copy(0, idx, torch.rand(idx.numel(), n, generator=gen, dtype=dtype,
-                                                              device=device))
-                o_prev2 = o_prev
-                polished_at = polished_at.index_fill(0, idx, -float("inf"))
-    best = part.whole(best)
-    return best.config, best.evaluation, best.r, best.iterations
+    return polish_from, first_from
+
+
+def _evaluate(env: Environment, part: RunningRows, s: _Search, o: Tensor, T: int) -> Evaluation:
+    """The environment's evaluation of the configurations o (R, n) (normalised; eq. 13): every
+    row's, or once most trials have stopped the active ones' only."""
+    rows = part.rows
+    config = torch.addcmul(part.lower, part.span, o)  # (13)
+    if rows is None and (s.best.all_active or s.best.n_active * 2 > T or not env.subsets):
+        return env.evaluate(config)  # E of eq. 3 (+ collisions)
+    if env.subsets:  # most trials have stopped: evaluate the others only (stopped ones keep a stale row)
+        idx = s.best.active.nonzero().squeeze(1)
+        return s.ev.put(idx, env.evaluate(config[idx], idx if rows is None else rows[idx]), config)
+    return part.evaluate(o)  # evaluated whole: every trial's configuration, the stopped ones' where they stopped
+
+
+def _learn(s: _Search, observed: Tensor, first: bool, some: Tensor | None) -> None:
+    """The networks learn from the observed reinforcement (R,); at a ``first`` iteration that
+    evaluated the given starts (every row's, or ``some`` (T,) bool), they are placed there."""
+    if first:  # nothing drawn to learn from; the networks expect what the start got (narrow exploration near
+        # a grasp), but for a colliding start (R3/R4 weigh its collisions more with every iteration): wide
+        clear = None if s.ev.collisions is None else s.ev.collisions.to(s.o_prev.device) == 0
+        if some is not None:
+            s.net.reinforce(observed, ~some)  # the others learn from their first draw
+        clear_rows = some if clear is None else clear if some is None else some & clear
+        s.net.place(s.o_prev, observed, rows=clear_rows)
+    else:
+        s.net.reinforce(observed, None if s.best.all_active else s.best.active)  # (16)-(19)
+
+
+def _polish_step(env: Environment, s: _Search, reward: Reward, solver: SolverCfg, k: int, T: int, bar: float,
+                 landed_only: bool, threshold: float, tolerance: float | None, rows: Tensor | None, observed: Tensor,
+                 r: Tensor, shown: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Polish the active rows observed above ``bar`` and their last polish's at iteration ``k`` (a large
+    batch: a few wait for others); returns the observed and noise-free reinforcements (R,) and shown
+    configurations (R, n), and sets ``s.ev``, with the landed rows' where the polish put them."""
+    near = s.best.active & (observed > bar) & (observed > s.polished_at)
+    s.polished_at = torch.where(near, observed, s.polished_at)
+    if T >= DEFER_FROM:  # a large batch: a few near trials wait for others (or a few iterations)
+        s.pending = (s.pending | near) & s.best.active
+        near = s.pending if int(s.pending.sum()) >= DEFER_ROWS or (k + 1) % DEFER_EVERY == 0 else near & False
+    if not bool(near.any()):
+        return observed, r, shown
+    s.pending = s.pending & ~near
+    landed = _polish_near(env, near, s.best, reward, k + 1, threshold, solver, tolerance, landed_only=landed_only,
+                          rows=rows)
+    observed = torch.where(landed, s.best.observed, observed)  # the stop below sees the landed ones
+    r = torch.where(landed, s.best.r, r)  # a landed trial is where the polish put it: its curves
+    s.ev = s.best.evaluation.where(landed, s.ev)  # end there, and its collision count is the landed one's
+    if solver.history_postures:
+        shown = torch.where(landed.unsqueeze(1), s.best.config, shown)
+    return observed, r, shown
+
+
+def _history_row(curves: Curves, rows: Tensor | None, t0: float, solver: SolverCfg, r: Tensor, observed: Tensor,
+                 r_hat: Tensor, sigma: Tensor, ev: Evaluation, shown: Tensor) -> None:
+    """Add one iteration's row to the curves (``solver.history_postures``: the shown postures too)."""
+    values = {"reinforcement": r, "observed": observed, "expected": r_hat, "sigma": sigma, "total": ev.error,
+              "errors": ev.finger_errors, "collisions": ev.collisions, "alignment": ev.alignment}
+    if solver.history_postures:  # each trial's configuration and finger joints: the viewer's replay
+        values["config"] = shown.clone()
+        values["joints"] = None if ev.joints is None else ev.joints.clone()
+    curves.add(rows, time.perf_counter() - t0, values)
+
+
+def _done(env: Environment, s: _Search, part: RunningRows, solver: SolverCfg, gen: torch.Generator,
+          observed: Tensor, threshold: float, grasp_rule: bool, tolerance: float) -> Tensor:
+    """(R,) bool: the active rows that meet the stopping rule: ``grasp_rule``, a grasp in the model
+    within ``tolerance`` (m), clear by the exact check too (a refused row starts again); else the
+    observed reinforcement (R,) exceeds the threshold."""
+    if grasp_rule:  # the configuration is a grasp in the model (within the tolerance, clear)
+        done = s.best.active & env.grasped(s.ev, tolerance)
+        if env.counts_collisions and bool(done.any()):  # ... and clear by the exact check (the proxy can miss a link)
+            idx = done.nonzero().squeeze(1)
+            refused = torch.zeros_like(done).index_fill(0, idx[~part.confirm(s.best, idx).to(s.o_prev.device)], True)
+            if bool(refused.any()):  # those trials start again: new network, new random start
+                done = done & ~refused
+                s.best.forget(refused)
+                _restart(s, refused.nonzero().squeeze(1), gen)
+    else:  # the paper's rule: the observed reinforcement exceeds the threshold
+        done = s.best.active & (observed > threshold)
+        if solver.stops_clear and s.ev.collisions is not None:  # a colliding grasp is no reason to stop
+            done &= s.ev.collisions == 0
+    return done
+
+
+def _restart(s: _Search, idx: Tensor, gen: torch.Generator) -> None:
+    """The rows ``idx`` start again: a new network, a new random start (their best so far is kept)."""
+    s.net.restart(idx, gen)
+    s.o_prev = s.o_prev.index_copy(0, idx, torch.rand(idx.numel(), s.o_prev.shape[1], generator=gen,
+                                                      dtype=s.o_prev.dtype, device=s.o_prev.device))
+    s.o_prev2 = s.o_prev
+    s.polished_at = s.polished_at.index_fill(0, idx, -float("inf"))
+
+
+def _run_rest_only(s: _Search, part: RunningRows) -> None:
+    """With a quarter or fewer of 64 or more rows active, every row of ``s`` taken to the active ones."""
+    running = s.o_prev.shape[0]
+    if s.best.n_active * 4 <= running and running >= 64 and not s.net.autograd:  # run the rest only
+        keep = s.best.active.nonzero().squeeze(1)
+        s.net = s.net.select(keep)
+        s.best = part.select(keep, s.best, s.o_prev)
+        s.o_prev, s.o_prev2, s.ev = s.o_prev[keep], s.o_prev2[keep], take_rows(s.ev, keep)
+        s.polished_at, s.pending = s.polished_at[keep], s.pending[keep]
 
 
 def _polish_near(env: Environment, near: Tensor, best: Tracker, reward: Reward, iteration: int, threshold: float,

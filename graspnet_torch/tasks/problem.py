@@ -9,7 +9,6 @@ metres and radians.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,14 +16,15 @@ from typing import Any, Literal
 
 import numpy as np
 
-from graspnet_torch.errors import ConfigError, ProblemError
+from graspnet_torch.errors import ProblemError
 from graspnet_torch.files import read_document
 from graspnet_torch.paths import configs_dir
-from graspnet_torch.robot.config import PoseBounds, RobotCfg, available_robots, load_robot_cfg
+from graspnet_torch.robot.config import PoseBounds, RobotCfg
 from graspnet_torch.robot.shape import Shape, numbers, pose_degrees, unknown_keys
 from graspnet_torch.robot.transforms import rpy_to_matrix_np
 from graspnet_torch.settings import MAX_ANGLE_DEG, clip, number_list, short
 from graspnet_torch.tasks.auto_contacts import AUTO_KEYS, AutoContacts, auto_contacts
+from graspnet_torch.tasks.problem_sections import joint_bounds_of, palm_bounds_of, robot_of
 from graspnet_torch.tasks.shapes import check_free_contacts, obstacles_of
 
 __all__ = ["Contact", "GraspProblem", "ReferencePosture", "Shape", "available_tasks"]
@@ -77,6 +77,44 @@ class Contact:
 
     finger: str
     position: np.ndarray
+
+
+def _check_kind_keys(data: Mapping, source: str, robot: str, robot_cfg: RobotCfg) -> None:
+    """Refuse the keys of another kind of robot (:data:`KIND_KEYS` that the robot's problems do not
+    take; ``contacts: auto`` suits any kind)."""
+    schema = robot_cfg.problem_schema
+    for key in KIND_KEYS:  # the keys of another kind of robot
+        chosen = key == "contacts" and data.get(key) == "auto"  # contacts: auto: any kind of robot
+        if data.get(key) is not None and key not in schema.keys and not chosen:
+            raise ProblemError(f"{source}: '{key}' ({KIND_KEYS[key]}) does not apply to robot '{robot}' "
+                               f"({robot_cfg.kind}), whose problems give {', '.join(schema.keys)}")
+
+
+def _contacts_of(data: Mapping, source: str, robot: str, fingers: list[str]) -> list[Contact]:
+    """The problem's ``contacts``: 2 to len(fingers) entries {finger, position (m, object frame)},
+    at most one per finger."""
+    raw = data.get("contacts")
+    if not isinstance(raw, Sequence) or isinstance(raw, str):
+        raise ProblemError(f"{source}: 'contacts' must be a list of {{finger, position}}")
+    if not 2 <= len(raw) <= len(fingers):
+        raise ProblemError(f"{source}: contacts: need 2 to {len(fingers)} contacts (at most one per finger of "
+                           f"'{robot}'), got {len(raw)}")
+    contacts, seen = [], {}
+    for k, entry in enumerate(raw):
+        where = f"{source}: contacts[{k}]"
+        if not isinstance(entry, Mapping) or unknown_keys(entry, {"finger", "position"}) or "finger" not in entry:
+            raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {short(entry)}")
+        finger = entry["finger"]
+        if not isinstance(finger, str) or finger not in fingers:
+            raise ProblemError(f"{where}.finger: unknown finger {short(finger)} for robot '{robot}' (fingers: "
+                               f"{', '.join(fingers)})")
+        if finger in seen:
+            raise ProblemError(f"{where}.finger: finger '{finger}' appears twice (contacts[{seen[finger]}] "
+                               f"and contacts[{k}])")
+        seen[finger] = k
+        contacts.append(Contact(finger, numbers(entry.get("position"), 3, f"{where}.position",
+                                                 "numbers (x, y, z in metres)")))
+    return contacts
 
 
 @dataclass(frozen=True)
@@ -151,30 +189,8 @@ class GraspProblem:
         if unknown:
             raise ProblemError(f"{source}: unknown key(s) {', '.join(unknown[:5])} "
                                f"(expected {', '.join(sorted(KNOWN_KEYS))})")
-        robot = data.get("robot")
-        if not isinstance(robot, str) or not robot or len(robot) > 4096:
-            raise ProblemError(f"{source}: 'robot' must name a robot ({', '.join(available_robots())})")
-        by_path = robot.endswith((".yaml", ".yml")) or "/" in robot or os.sep in robot
-        if by_path and folder is not None and not Path(robot).is_absolute() and (Path(folder) / robot).is_file():
-            robot = str(Path(folder) / robot)  # a robot config beside the problem
-        if robot_cfg is None or by_path:
-            try:
-                loaded = load_robot_cfg(robot)
-            except ConfigError as exc:
-                raise ProblemError(f"{source}: robot: {exc}") from None
-            if robot_cfg is not None and loaded.name != robot_cfg.name:
-                raise ProblemError(f"{source}: the problem is for robot '{loaded.name}' ({clip(robot, 200)}), "
-                                   f"but robot={robot_cfg.name} was given")
-            robot_cfg = robot_cfg or loaded
-            robot = robot_cfg.name
-        elif robot_cfg.name != robot:
-            raise ProblemError(f"{source}: the problem is for robot '{robot}', but robot={robot_cfg.name} was given")
-        schema = robot_cfg.problem_schema
-        for key in KIND_KEYS:  # the keys of another kind of robot
-            chosen = key == "contacts" and data.get(key) == "auto"  # contacts: auto: any kind of robot
-            if data.get(key) is not None and key not in schema.keys and not chosen:
-                raise ProblemError(f"{source}: '{key}' ({KIND_KEYS[key]}) does not apply to robot '{robot}' "
-                                   f"({robot_cfg.kind}), whose problems give {', '.join(schema.keys)}")
+        robot, robot_cfg = robot_of(data, source, robot_cfg, folder)
+        _check_kind_keys(data, source, robot, robot_cfg)
         auto = auto_contacts(data, source, robot_cfg)  # contacts: auto (tasks/auto_contacts.py)
         if auto is not None:
             obj = Shape.from_mapping(data["object"], f"{source}: object", folder=folder,
@@ -183,61 +199,15 @@ class GraspProblem:
             obstacles = obstacles_of(data, source, {"folder": folder, "allow_outside_paths": allow_outside_paths})
             return cls(robot=robot, contacts=(), object=obj, name=data.get("name"), description=data.get("description"),
                        source=source, robot_cfg=robot_cfg, auto=auto, obstacles=obstacles)
-        if schema.targets == "points":  # a gripper with two marked points (MANUS): points instead of contacts
+        if robot_cfg.problem_schema.targets == "points":  # a gripper with two marked points (MANUS): no contacts
             return cls._gripper_problem(data, source, robot, robot_cfg, folder, allow_outside_paths)
-        fingers = list(robot_cfg.fingers)
-        raw = data.get("contacts")
-        if not isinstance(raw, Sequence) or isinstance(raw, str):
-            raise ProblemError(f"{source}: 'contacts' must be a list of {{finger, position}}")
-        if not 2 <= len(raw) <= len(fingers):
-            raise ProblemError(f"{source}: contacts: need 2 to {len(fingers)} contacts (at most one per finger of "
-                               f"'{robot}'), got {len(raw)}")
-        contacts, seen = [], {}
-        for k, entry in enumerate(raw):
-            where = f"{source}: contacts[{k}]"
-            if not isinstance(entry, Mapping) or unknown_keys(entry, {"finger", "position"}) or "finger" not in entry:
-                raise ProblemError(f"{where}: expected {{finger: <name>, position: [x, y, z]}}, got {short(entry)}")
-            finger = entry["finger"]
-            if not isinstance(finger, str) or finger not in fingers:
-                raise ProblemError(f"{where}.finger: unknown finger {short(finger)} for robot '{robot}' (fingers: "
-                                   f"{', '.join(fingers)})")
-            if finger in seen:
-                raise ProblemError(f"{where}.finger: finger '{finger}' appears twice (contacts[{seen[finger]}] "
-                                   f"and contacts[{k}])")
-            seen[finger] = k
-            contacts.append(Contact(finger, numbers(entry.get("position"), 3, f"{where}.position",
-                                                     "numbers (x, y, z in metres)")))
+        contacts = _contacts_of(data, source, robot, list(robot_cfg.fingers))
         shape = {"folder": folder, "allow_outside_paths": allow_outside_paths}
         obj = None
         if data.get("object") is not None:
             obj = Shape.from_mapping(data["object"], f"{source}: object", **shape)
-        bounds = None
-        if data.get("palm_bounds") == "robot":
-            if robot_cfg.palm_bounds is None:
-                raise ProblemError(f"{source}: palm_bounds: robot '{robot}' has no palm_bounds in its config "
-                                   f"(give {{min: [...], max: [...]}}, or leave palm_bounds out: the search "
-                                   f"follows the contacts)")
-            bounds = "robot"
-        elif data.get("palm_bounds") is not None:
-            try:
-                bounds = PoseBounds.from_degrees(data["palm_bounds"], f"{source}: palm_bounds")
-            except ConfigError as exc:
-                raise ProblemError(str(exc)) from None
-        joint_bounds = None
-        if data.get("bounds") is not None:
-            raw_b = data["bounds"]
-            if not isinstance(raw_b, Mapping) or unknown_keys(raw_b, {"min", "max"}) or len(raw_b) != 2:
-                raise ProblemError(f"{source}: bounds: expected {{min: [...], max: [...]}} (arm joints in chain "
-                                   f"order, degrees or metres)")
-            lo_b, hi_b = (np.asarray(number_list(raw_b[k], None, f"{source}: bounds.{k}", ProblemError,
-                                                 -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "joint values"), dtype=np.float64)
-                          for k in ("min", "max"))
-            if lo_b.shape != hi_b.shape or not lo_b.size:
-                raise ProblemError(f"{source}: bounds: min and max must list the same joints")
-            if np.any(lo_b > hi_b):
-                raise ProblemError(f"{source}: bounds: min > max for joint(s) "
-                                   f"{', '.join(str(i) for i in np.nonzero(lo_b > hi_b)[0])}")
-            joint_bounds = (lo_b, hi_b)
+        bounds = palm_bounds_of(data, source, robot, robot_cfg)
+        joint_bounds = joint_bounds_of(data, source)
         obstacles = obstacles_of(data, source, shape)
         reference = cls._reference(data.get("reference"), contacts, robot_cfg, source)
         if obstacles:
