@@ -184,6 +184,8 @@ def _batch(robot: Robot, obj: Shape, B: int, rng: np.random.Generator, scene: An
         links, cset, quality = rated
         squeeze = np.clip(q[b].numpy() + math.radians(SQUEEZE_DEG) * direction[b], lo, hi)
         first = {f: i for i, f in reversed(list(enumerate(cset.fingers))) if f in robot.fingers}
+        if len(first) < MIN_TOUCHING:  # the palm and one finger within reach of the surface: no problem to state
+            continue
         problem = placeholder_problem(robot, obj, tuple(first), cset.contacts[list(first.values())], obstacles)
         kind = "power" if any(link not in pads for link in links) else "precision"
         result = closed_result(robot, posture, squeeze, seed)
