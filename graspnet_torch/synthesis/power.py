@@ -338,8 +338,7 @@ def _seated(robot: Robot, obj: Shape, T: np.ndarray, q_open: torch.Tensor, palm_
     T = T.copy()
     d = np.einsum("bij,j->bi", T[:, :3, :3], front)  # world: the palm's front
     for _ in range(SEAT_STEPS):
-        world = np.einsum("bij,pj->bpi", T[:, :3, :3], palm_pts) + T[:, None, :3, 3]
-        palm = surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(T), -1).min(axis=1)
+        palm = _palm_gap(obj, T, palm_pts)
         head = matrix_to_pose(torch.as_tensor(T, dtype=torch.float64))
         fingers = _sphere_gaps(robot, obj, head, q_open, model).min(axis=1)
         T[:, :3, 3] += np.minimum(palm - palm_gap, fingers - sum(GAP_M) / 2)[:, None] * d
