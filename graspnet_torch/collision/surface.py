@@ -43,7 +43,24 @@ NEAR_ERROR_M = 1e-3  # m: surface_distance_near's bound on a mesh's error near i
 def _local(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World points (k, 3) in the shape's frame, and the shape's rotation (3, 3)."""
     T = pose_to_matrix_np(obj.pose)
-    return (np.asarray(points, dtype=np.float64).reshape(-1, 3) - T[:3, 3]) @ T[:3, :3], T[:3, :3]
+    shifted = np.asarray(points, dtype=np.float64).reshape(-1, 3) - T[:3, 3]
+    return (T[:3, :3].T @ shifted.T).T, T[:3, :3]  # (shifted @ R), as one product over the long axis
+
+
+def _excess(obj: Shape, p: np.ndarray) -> np.ndarray:
+    """How far points (k, 3), in a box's or cylinder's frame, lie beyond each pair of its faces:
+    (k, 3) a box's, (k, 2) a cylinder's (radially, axially)."""
+    if obj.kind == "box":
+        return np.abs(p) - np.asarray(obj.size) / 2
+    return np.stack([np.linalg.norm(p[:, :2], axis=1) - obj.size[0], np.abs(p[:, 2]) - obj.size[1] / 2], axis=1)
+
+
+def _primitive_distance(obj: Shape, p: np.ndarray) -> np.ndarray:
+    """Signed distances (k,) of points (k, 3) in a primitive's frame to its surface."""
+    if obj.kind == "sphere":
+        return np.linalg.norm(p, axis=1) - obj.size[0]
+    q = _excess(obj, p)
+    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
 
 
 def _primitive(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,23 +69,21 @@ def _primitive(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if obj.kind == "sphere":
         norm = np.linalg.norm(p, axis=1)
         n = np.where(norm[:, None] > 0, p / np.where(norm > 0, norm, 1.0)[:, None], [0.0, 0.0, 1.0])
-        return n, norm - obj.size[0]
+        return n, _primitive_distance(obj, p)
+    q = _excess(obj, p)
     if obj.kind == "box":
-        q = np.abs(p) - np.asarray(obj.size) / 2  # (k, 3) beyond each face pair
         axis = np.argmax(q, axis=1)
         n = np.zeros((k, 3))
         n[np.arange(k), axis] = np.where(p[np.arange(k), axis] < 0, -1.0, 1.0)
     else:  # cylinder
         rho = np.linalg.norm(p[:, :2], axis=1)
-        q = np.stack([rho - obj.size[0], np.abs(p[:, 2]) - obj.size[1] / 2], axis=1)
         side = q[:, 0] >= q[:, 1]
         radial = np.concatenate([p[:, :2] / np.where(rho > 0, rho, 1.0)[:, None], np.zeros((k, 1))], axis=1)
         radial[rho == 0] = [1.0, 0.0, 0.0]
         cap = np.zeros((k, 3))
         cap[:, 2] = np.where(p[:, 2] < 0, -1.0, 1.0)
         n = np.where(side[:, None], radial, cap)
-    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
-    return n, outside + np.minimum(q.max(axis=1), 0.0)
+    return n, _primitive_distance(obj, p)
 
 
 def _centres(path: Path, scale: float) -> tuple[cKDTree, float]:
@@ -111,7 +126,7 @@ def _measure(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
     p, R = _local(obj, points)
     n, d = _mesh(obj, p) if obj.kind == "mesh" else _primitive(obj, p)
-    return n @ R.T, d
+    return (R @ n.T).T, d
 
 
 def surface_normals(obj: Shape, points: np.ndarray) -> np.ndarray:
@@ -135,10 +150,10 @@ def surface_distance_near(obj: Shape, points: np.ndarray) -> np.ndarray:
     :func:`surface_distance` misses a crossing). For searches that call it on many points (a grasp
     sampler's closing lines, about 0.2 microseconds a point), which ask only whether a sphere
     touches; the exact one checks what they find."""
-    if obj.kind != "mesh":
-        return surface_distance(obj, points)
+    if obj.kind not in ("box", "cylinder", "sphere", "mesh"):
+        raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
     p, _ = _local(obj, points)
-    return distance_grid(obj)(p)
+    return distance_grid(obj)(p) if obj.kind == "mesh" else _primitive_distance(obj, p)
 
 
 def surface_distance_within(obj: Shape, points: np.ndarray, within_m: float) -> np.ndarray:

@@ -4,6 +4,7 @@ the package's one :class:`~graspnet_torch.robot.shape.Shape`, in its link's fram
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,8 @@ from graspnet_torch.robot.transforms import matrix_to_pose_np
 __all__ = ["LinkShape", "link_shapes", "palm_shapes", "support", "surface_points"]
 
 GREY = (0.6, 0.6, 0.6, 1.0)
+_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # UrdfModel -> source -> its shapes
+_POINTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # LinkShape -> (count, vertices) -> points
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,8 +70,19 @@ def link_shapes(model: UrdfModel, source: str = "collision", errors: list[str] |
     Meshes are loaded (``robot/meshes.py`` resolves their URIs, within the model's folders). A mesh
     that lies outside them, cannot be found or cannot be loaded is a one-line :class:`ConfigError`
     naming the link, the URI and where it looked; when ``errors`` (a list) is given, it is
-    skipped instead and that line appended (pictures).
+    skipped instead and that line appended (pictures). Without ``errors``, a model's shapes are read
+    once and shared (the same :class:`LinkShape` objects on every call; a new list each time).
     """
+    if errors is not None:
+        return _read_shapes(model, source, errors)
+    cached = _SHAPES.setdefault(model, {})
+    if source not in cached:
+        cached[source] = tuple(_read_shapes(model, source, None))
+    return list(cached[source])
+
+
+def _read_shapes(model: UrdfModel, source: str, errors: list[str] | None) -> list[LinkShape]:
+    """:func:`link_shapes`, read from the URDF and its mesh files."""
     from pytorch_kinematics.urdf_parser_py.urdf import Box, Cylinder, Mesh, Sphere
 
     materials = {m.name: m for m in model.robot.materials}
@@ -131,11 +145,15 @@ def surface_points(s: LinkShape, P: np.ndarray, count: int, vertices: int | None
     primitive's: a fine triangulation's; at most ``vertices`` of them, evenly strided, where given)
     and up to ``count`` more spread evenly over it (the same points on every call), in the frame
     ``P`` maps into (m)."""
-    mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
-    corners = np.asarray(mesh.vertices, dtype=np.float64)
-    if vertices is not None and len(corners) > vertices:
-        corners = corners[:: math.ceil(len(corners) / vertices)]
-    points = np.concatenate([corners, sample_even(mesh, count)])
+    points = _POINTS.setdefault(s, {}).get((count, vertices))
+    if points is None:
+        mesh = s.mesh if s.kind == "mesh" else primitive_mesh(s.kind, s.size, fine=True)
+        corners = np.asarray(mesh.vertices, dtype=np.float64)
+        if vertices is not None and len(corners) > vertices:
+            corners = corners[:: math.ceil(len(corners) / vertices)]
+        points = np.concatenate([corners, sample_even(mesh, count)])
+        points.flags.writeable = False
+        _POINTS[s][(count, vertices)] = points
     return points @ P[:3, :3].T + P[:3, 3]
 
 

@@ -96,8 +96,13 @@ def sphere_pairs(robot: Robot, spheres: tuple) -> tuple[np.ndarray, np.ndarray]:
 
 def placed_spheres(frames: np.ndarray, model: tuple) -> np.ndarray:
     """(B, s, 3) a sphere model's centres in the world; frames (B, L, 4, 4)."""
-    T = frames[:, model[1]]  # (B, s, 4, 4)
-    return np.einsum("bsij,sj->bsi", T[..., :3, :3], model[2]) + T[..., :3, 3]
+    links, centres = np.asarray(model[1]), model[2]
+    out = np.empty((len(frames), len(links), 3))
+    for link in np.unique(links):  # one product per link: its centres (k, 3) by its frames (B, 3, 3)
+        rows = np.flatnonzero(links == link)
+        T = frames[:, link]
+        out[:, rows] = (T[:, :3, :3] @ centres[rows].T).transpose(0, 2, 1) + T[:, None, :3, 3]
+    return out
 
 
 def finger_gaps(robot: Robot, obj: Shape, head: torch.Tensor, q: torch.Tensor, models: tuple,

@@ -105,8 +105,8 @@ def _palm_points(robot: Robot) -> np.ndarray:
     return np.concatenate([surface_points(s, P, PALM_POINTS, PALM_POINTS) for s, P in shapes])
 
 
-def power_grasps(robot: Robot, obj: Shape, n_grasps: int, seed: int = 0, max_tries: int = 4 * BATCH,
-                 physics: Callable[..., Any] | None = None, checks: int = 16, obstacles: Sequence[Shape] = (),
+def power_grasps(robot: Robot, obj: Shape, n_grasps: int, seed: int = 0, max_tries: int = 8 * BATCH,
+                 physics: Callable[..., Any] | None = None, checks: int = 32, obstacles: Sequence[Shape] = (),
                  stats: dict | None = None) -> list[SynthesizedGrasp]:
     """Up to ``n_grasps`` power grasps of ``obj`` by the free hand ``robot`` (module docstring),
     from at most ``max_tries`` palm poses: with ``physics`` (a check ``physics(problem, result,
