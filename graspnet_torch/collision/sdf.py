@@ -68,7 +68,7 @@ class DistanceGrid:
         i = np.minimum(inside.astype(np.intp), top - 1)  # the cell's first corner (inside >= 0: the floor)
         fx, fy, fz = (inside - i).T
         sx, sy = shape[1] * shape[2], shape[2]  # the flat grid's strides along x and y (z: 1)
-        corners = self.values.reshape(-1)[(i @ np.array([sx, sy, 1]))[:, None] + np.array(
+        corners = self.values.reshape(-1)[(i[:, 0] * sx + i[:, 1] * sy + i[:, 2])[:, None] + np.array(
             [0, sx, 1, sx + 1, sy, sx + sy, sy + 1, sx + sy + 1])]  # (k, 8): one gather
         gx, gy, gz = 1 - fx, 1 - fy, 1 - fz
         c00 = corners[:, 0] * gx + corners[:, 1] * fx

@@ -60,7 +60,8 @@ from graspnet_torch.tasks.objects import OBJECT_CENTRE, centred_mesh
 from graspnet_torch.viz import Panel, render_robot
 from graspnet_torch.viz.result import posture_panels
 
-__all__ = ["EXCLUDED", "ROBOTS", "SCALE", "SynthesisExperimentCfg", "object_pool", "pick_objects", "run_synthesis"]
+__all__ = ["EXCLUDED", "ROBOTS", "SCALE", "SynthesisExperimentCfg", "fresh_objects", "object_mesh", "object_pool",
+           "pick_objects", "run_synthesis"]
 
 ROBOTS = {"hand": ("hand", ("thumb", "index", "middle")),  # name -> (robot config, fingers)
           "trifinger": ("examples/trifinger/trifinger.yaml", ("f0", "f120", "f240")),
@@ -98,16 +99,30 @@ def object_pool() -> list[int]:
     return [k for k in range(1000) if k not in EXCLUDED]
 
 
-def pick_objects(n: int, seed: int) -> list[tuple[str, Shape]]:
-    """``n`` random objects drawn by ``seed`` (name ``blobNNN``, bounding box centred 0.2 m above the origin)."""
-    import pybullet_data
-
-    pool = object_pool()
+def _picked(n: int, seed: int, pool: list[int]) -> list[int]:
     if n > len(pool):
         raise ConfigError(f"experiments.synthesis.objects: {n} exceeds the {len(pool)} unused random objects")
-    root = Path(pybullet_data.getDataPath()) / "random_urdfs"
-    picked = sorted(np.random.default_rng(seed).choice(pool, size=n, replace=False).tolist())
-    return [(f"blob{k:03d}", centred_mesh(root / f"{k:03d}" / f"{k:03d}.obj", SCALE)) for k in picked]
+    return sorted(np.random.default_rng(seed).choice(pool, size=n, replace=False).tolist())
+
+
+def object_mesh(number: int) -> Shape:
+    """Random object ``number`` (0-999) at ``SCALE``, its bounding box centred 0.2 m above the origin."""
+    import pybullet_data
+
+    return centred_mesh(Path(pybullet_data.getDataPath()) / "random_urdfs" / f"{number:03d}" / f"{number:03d}.obj",
+                        SCALE)
+
+
+def pick_objects(n: int, seed: int) -> list[tuple[str, Shape]]:
+    """``n`` random objects drawn by ``seed`` (name ``blobNNN``, bounding box centred 0.2 m above the origin)."""
+    return [(f"blob{k:03d}", object_mesh(k)) for k in _picked(n, seed, object_pool())]
+
+
+def fresh_objects(n: int, seed: int) -> list[int]:
+    """The numbers of ``n`` random objects drawn by ``seed`` from those that neither tuning, tests nor
+    the experiment's own 100 (seed 2026) use: objects this package has never been measured on."""
+    used = set(_picked(100, 2026, object_pool()))
+    return _picked(n, seed, [k for k in object_pool() if k not in used])
 
 
 def _robot(name: str) -> gt.Robot:

@@ -25,6 +25,7 @@ __all__ = [
     "matrix_to_pose",
     "matrix_to_pose_np",
     "matrix_to_rpy",
+    "place_points_np",
     "pose_from_degrees",
     "pose_jacobian",
     "pose_to_degrees",
@@ -218,3 +219,9 @@ def pose_to_matrix_np(pose: Sequence[float] | np.ndarray) -> np.ndarray:
 def matrix_to_pose_np(T: np.ndarray) -> np.ndarray:
     """float64 numpy :func:`matrix_to_pose` of one matrix: (4, 4) -> (6,) (m, rad)."""
     return matrix_to_pose(torch.as_tensor(T, dtype=torch.float64)).numpy()
+
+
+def place_points_np(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points (s, 3) placed by each of N frames T (N, 4, 4): (N, s, 3), ``R p + t`` (one product
+    per frame over all the points: many times faster than a per-point product for large s)."""
+    return (T[:, :3, :3] @ np.asarray(points, dtype=np.float64).T).transpose(0, 2, 1) + T[:, None, :3, 3]

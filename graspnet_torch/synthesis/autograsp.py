@@ -24,6 +24,7 @@ from graspnet_torch.collision.surface import (
 from graspnet_torch.robot.geometry import link_shapes, surface_points
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
+from graspnet_torch.robot.transforms import place_points_np
 from graspnet_torch.solver import GraspResult
 from graspnet_torch.solver.contact import posture_fields
 from graspnet_torch.solver.result import TrialResult
@@ -100,8 +101,7 @@ def placed_spheres(frames: np.ndarray, model: tuple) -> np.ndarray:
     out = np.empty((len(frames), len(links), 3))
     for link in np.unique(links):  # one product per link: its centres (k, 3) by its frames (B, 3, 3)
         rows = np.flatnonzero(links == link)
-        T = frames[:, link]
-        out[:, rows] = (T[:, :3, :3] @ centres[rows].T).transpose(0, 2, 1) + T[:, None, :3, 3]
+        out[:, rows] = place_points_np(frames[:, link], centres[rows])
     return out
 
 

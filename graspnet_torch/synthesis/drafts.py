@@ -51,7 +51,7 @@ from graspnet_torch.robot.geometry import link_shapes, palm_shapes, support, sur
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.robot.transforms import matrix_to_pose
+from graspnet_torch.robot.transforms import matrix_to_pose, place_points_np
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
@@ -184,8 +184,7 @@ def _clearance(obj: Shape, names: list[str], frames: np.ndarray,
     as ``spheres`` (inf: none given); frames (N, L, 4, 4) of the links ``names``."""
     out = np.full((len(frames), F), np.inf)
     for row, link, centres, radii, _ in spheres:
-        T = frames[:, names.index(link)]  # (N, 4, 4)
-        world = np.einsum("nij,sj->nsi", T[:, :3, :3], centres) + T[:, None, :3, 3]
+        world = place_points_np(frames[:, names.index(link)], centres)  # (N, s, 3)
         gap = surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(frames), -1) - radii
         out[:, row] = np.minimum(out[:, row], gap.min(axis=1))
     return out

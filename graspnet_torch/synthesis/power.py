@@ -56,7 +56,7 @@ from graspnet_torch.robot.geometry import palm_shapes, surface_points
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.shape import Shape
-from graspnet_torch.robot.transforms import matrix_to_pose
+from graspnet_torch.robot.transforms import matrix_to_pose, place_points_np
 from graspnet_torch.solver.postures import trial_posture
 from graspnet_torch.synthesis.autograsp import (
     TOUCH_M,
@@ -299,7 +299,7 @@ def _across(rng: np.random.Generator, B: int, verts: np.ndarray, front: np.ndarr
 
 def _palm_gap(obj: Shape, T: np.ndarray, palm_pts: np.ndarray) -> np.ndarray:
     """(B,) the palm's gap to the object (m) at palm poses ``T`` (B, 4, 4); ``palm_pts`` (P, 3), palm frame."""
-    world = np.einsum("bij,pj->bpi", T[:, :3, :3], palm_pts) + T[:, None, :3, 3]
+    world = place_points_np(T, palm_pts)
     return surface_distance_near(obj, world.reshape(-1, 3)).reshape(len(T), -1).min(axis=1)
 
 
