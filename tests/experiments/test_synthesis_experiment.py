@@ -13,7 +13,7 @@ from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.errors import ConfigError
 from graspnet_torch.experiments import EXPERIMENTS, SynthesisExperimentCfg, run_synthesis, synthesis
 from graspnet_torch.experiments.report import quick_settings
-from graspnet_torch.experiments.synthesis import EXCLUDED, pick_objects, summarize
+from graspnet_torch.experiments.synthesis import EXCLUDED, fresh_objects, pick_objects, summarize
 from graspnet_torch.jobs.reproduce import shipped_experiments
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.solver.postures import trial_posture
@@ -37,6 +37,13 @@ def test_objects_drawn_by_seed_from_the_unused_ones():
     lo, hi = shape.trimesh().bounds  # placed as the synthesis job places an object: its box centred at 0.2 m
     assert shape.kind == "mesh" and shape.scale == 0.015 and np.allclose((lo + hi) / 2, [0, 0, 0.2], atol=1e-9)
     assert 0.02 < max(shape.trimesh().extents) < 0.2  # hand-sized in metres
+
+
+def test_fresh_objects_are_none_the_experiment_tuning_or_tests_use():
+    used = {int(name[4:]) for name, _ in pick_objects(100, 2026)} | set(EXCLUDED)
+    fresh = fresh_objects(50, 7)
+    assert len(set(fresh)) == 50 and not set(fresh) & used and fresh == fresh_objects(50, 7)
+    assert fresh != fresh_objects(50, 8)
 
 
 @pytest.mark.parametrize(("data", "key"), [({"objects": 0}, "objects"), ({"robots": ["nope"]}, "robots"),

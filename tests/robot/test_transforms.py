@@ -85,3 +85,14 @@ def test_degrees_conversion():
     rad = tf.pose_from_degrees(pose)
     np.testing.assert_allclose(rad.numpy(), [0.1, -0.2, 0.3, math.pi / 2, -math.pi / 4, math.pi])
     np.testing.assert_allclose(tf.pose_to_degrees(rad).numpy(), pose.numpy())
+
+
+def test_place_points_np_is_each_frame_applied_to_each_point():
+    rng = np.random.default_rng(0)
+    T = np.stack([tf.pose_to_matrix_np(np.concatenate([rng.normal(size=3), rng.uniform(-3, 3, 3)])) for _ in range(5)])
+    points = rng.normal(size=(7, 3))
+    placed = tf.place_points_np(T, points)
+    assert placed.shape == (5, 7, 3)
+    for n in range(5):
+        for s in range(7):
+            assert np.allclose(placed[n, s], T[n, :3, :3] @ points[s] + T[n, :3, 3], atol=1e-14)
