@@ -25,7 +25,7 @@ from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import tip_frames
 from graspnet_torch.synthesis.drafts import (
     COMBOS,
-    GAP_M,
+    GAP_SHARE,
     TOUCH_M,
     ContactSet,
     check_pad_fingers,
@@ -34,7 +34,7 @@ from graspnet_torch.synthesis.drafts import (
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["COMBOS", "FRICTION", "GAP_M", "OPPOSE", "TOUCH_M", "ContactSet", "SetCheck", "check_pad_fingers",
+__all__ = ["COMBOS", "FRICTION", "GAP_SHARE", "OPPOSE", "TOUCH_M", "ContactSet", "SetCheck", "check_pad_fingers",
            "iter_contact_sets", "opposes", "pad_contact_sets", "placeholder_problem"]
 
 OPPOSE = -0.3  # "opposed": the thumb's inward normal dotted with the others' mean lies below this

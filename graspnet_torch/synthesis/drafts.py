@@ -7,7 +7,8 @@ Drafts are made in batches of ``BATCH`` palm poses, in three steps:
 1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
    front, the side its fingers close toward: :func:`~graspnet_torch.robot.opposition.hand_axes`;
    :func:`palm_front`) at a random point of the plane of the
-   palm within the fingertips' reach, and at a random gap (``GAP_M``) from the palm's face, i.e.
+   palm within the fingertips' reach, and at a random gap from the palm's face, up to ``GAP_SHARE``
+   of the fingertips' reach beyond it (:func:`palm_gap`: the hand's own scale), i.e.
    the palm looks at the object from a random direction, at a random roll. Once some palm pose
    has touched (step 2), ``NEAR_SHARE`` of each batch are instead drawn near those that have
    (turned by ``NEAR_DEG``, moved by ``NEAR_M``, standard deviations): a palm pose near one that
@@ -55,10 +56,10 @@ from graspnet_torch.robot.transforms import matrix_to_pose, place_points_np
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 from graspnet_torch.tasks.auto_contacts import contact_fingers
 
-__all__ = ["BATCH", "COMBOS", "GAP_M", "LINES", "TOUCH_M", "ContactSet", "check_pad_fingers", "iter_contact_drafts",
-           "palm_front", "palm_plane", "palm_poses"]
+__all__ = ["BATCH", "COMBOS", "GAP_SHARE", "LINES", "TOUCH_M", "ContactSet", "check_pad_fingers",
+           "iter_contact_drafts", "palm_front", "palm_gap", "palm_plane", "palm_poses"]
 
-GAP_M = (0.0, 0.035)  # the object's gap to the palm's face
+GAP_SHARE = 0.55  # the object's gap to the palm's face: up to this share of the fingertips' reach beyond it
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
@@ -124,6 +125,19 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
     plane = palm_plane(front)
     reach = tips_at @ plane
     return front, face, np.stack([reach.min(axis=0), reach.max(axis=0)]), plane
+
+
+def palm_gap(robot: Robot, rows: list[int], palm: tuple) -> tuple[float, float]:
+    """The range (m) of the object's gap to the palm's face: from 0 to ``GAP_SHARE`` of the
+    fingertips' reach beyond it, the median over the fingers ``rows`` of how far each fingertip
+    reaches along the front past the face with every joint at its lower limit, its middle or its
+    upper limit (the farthest of the three); ``palm``: :func:`palm_front`'s. A hand 1.5 times the
+    human size draws its objects 1.5 times as far out (the shipped hand: up to about 35 mm)."""
+    front, face = palm[0], palm[1]
+    lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
+    tips = np.stack([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, (lo + hi) / 2, hi)])
+    reach = float(np.median((tips @ front - face).max(axis=0)))
+    return 0.0, GAP_SHARE * max(reach, 0.0)
 
 
 def _leader(robot: Robot, fingers: Sequence[str]) -> tuple[int, list[int]]:
@@ -254,6 +268,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     lead, rest = _leader(robot, fingers)
     palm = palm_front(robot, rows)  # front, face, reach and the palm's plane
+    gap = palm_gap(robot, rows, palm)
     verts = np.asarray(obj.trimesh().vertices, dtype=np.float64)
     centre = np.asarray(obj.pose[:3], dtype=np.float64)
     F = len(finger_names)
@@ -269,7 +284,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             B = min(BATCH, max_tries - counts["tried"])
             counts["tried"] += B
             R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
-            T = palm_poses(R, rng, palm, verts, centre, landed)
+            T = palm_poses(R, rng, palm, verts, centre, landed, gap)
             if reachable is not None:
                 T = T[reachable(T)]
                 B = len(T)
@@ -318,7 +333,7 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
 
 
 def palm_poses(R: np.ndarray, rng: np.random.Generator, palm: tuple, verts: np.ndarray, centre: np.ndarray,
-               landed: list[np.ndarray], gap_m: tuple[float, float] = GAP_M) -> np.ndarray:
+               landed: list[np.ndarray], gap_m: tuple[float, float]) -> np.ndarray:
     """A batch's palm poses (B, 4, 4), world (module docstring, step 1): orientations R (B, 3, 3),
     the object's centre at a random point of the palm's plane within reach and a random gap from
     its face (uniform in ``gap_m``, m); a share near the palm poses ``landed`` that touched.
