@@ -29,6 +29,7 @@ from scipy.ndimage import distance_transform_edt
 from scipy.spatial import HalfspaceIntersection, QhullError
 
 from graspnet_torch.collision.mesh import MeshQuery, closest_points_rows, mesh_query
+from graspnet_torch.collision.parity import column_inside
 from graspnet_torch.meshes import mesh_path
 from graspnet_torch.robot.shape import Shape
 
@@ -39,7 +40,6 @@ BAND_M = 3e-3  # m: grid points this near the surface hold the exact distance (>
 MARGIN_M = 0.02  # m of grid around the mesh's bounding box
 MAX_CELLS = 1 << 24  # grid points at most (float64: 134 MB); a larger mesh's cells grow
 PAIRS = 1 << 15  # (grid point, triangle) pairs measured at once (the arrays stay in the cache)
-JITTER_M = 1.234567e-7  # m: the inside test's grid columns are moved this far in x and y
 PIECE_PAD_M = 1e-9  # m: a convex piece's box, grown by this, holds every point its planes call inside
 
 
@@ -103,40 +103,12 @@ def _grid(path: Path, scale: float) -> DistanceGrid:
     bound = exact[np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)] + far.ravel() * cell
     unsigned = np.where(known, exact, np.minimum(exact, bound))
     if query.closed:
-        inside = _inside(query.triangles, axes).ravel()
+        inside = column_inside(query.triangles, axes).ravel()
     elif query.pieces is None:  # the mesh's own test
         inside = query.inside(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
     else:
         inside = _inside_pieces(query, axes).ravel()
     return DistanceGrid(origin, cell, np.where(inside, -unsigned, unsigned).reshape(shape))
-
-
-def _inside(triangles: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
-    """(nx, ny, nz) bool: the grid points inside a closed mesh (triangles (M, 3, 3)), by the parity
-    of the surface crossings below each point on its grid column (a line along z, moved off the
-    grid by ``JITTER_M`` so that it meets no edge or vertex of a mesh on the grid)."""
-    x, y, z = axes
-    shape = (len(x), len(y), len(z))
-    a, b, c = (triangles[:, k] for k in range(3))
-    lo = tuple(np.searchsorted(g, triangles[:, :, d].min(1) - JITTER_M) for d, g in enumerate((x, y)))
-    hi = tuple(np.searchsorted(g, triangles[:, :, d].max(1) - JITTER_M, side="right") for d, g in enumerate((x, y)))
-    nx, ny = np.maximum(hi[0] - lo[0], 0), np.maximum(hi[1] - lo[1], 0)
-    count = nx * ny
-    t = np.repeat(np.arange(len(triangles)), count)
-    k = np.arange(len(t)) - np.repeat(np.cumsum(count) - count, count)
-    i, j = lo[0][t] + k // ny[t], lo[1][t] + k % ny[t]
-    px, py = x[i] + JITTER_M, y[j] + JITTER_M
-    e1, e2 = b[t] - a[t], c[t] - a[t]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    dx, dy = px - a[t, 0], py - a[t, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u, v = (dx * e2[:, 1] - dy * e2[:, 0]) / det, (e1[:, 0] * dy - e1[:, 1] * dx) / det
-        hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
-    zc = a[t, 2][hit] + u[hit] * e1[hit, 2] + v[hit] * e2[hit, 2]  # where the column crosses the triangle
-    first = np.clip(np.searchsorted(z, zc), 0, len(z))  # the first grid point above the crossing
-    flips = np.zeros((shape[0], shape[1], shape[2] + 1), dtype=np.int64)
-    np.add.at(flips, (i[hit], j[hit], first), 1)
-    return (np.cumsum(flips, axis=2)[..., :-1] % 2).astype(bool)
 
 
 def _inside_pieces(query: MeshQuery, axes: list[np.ndarray]) -> np.ndarray:

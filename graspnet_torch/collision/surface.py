@@ -41,7 +41,10 @@ NEAR_ERROR_M = 1e-3  # m: surface_distance_near's bound on a mesh's error near i
 
 
 def _local(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World points (k, 3) in the shape's frame, and the shape's rotation (3, 3)."""
+    """World points (k, 3) in the shape's frame, and the shape's rotation (3, 3); ValueError for a
+    shape of no known kind."""
+    if obj.kind not in ("box", "cylinder", "sphere", "mesh"):
+        raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
     T = pose_to_matrix_np(obj.pose)
     shifted = np.asarray(points, dtype=np.float64).reshape(-1, 3) - T[:3, 3]
     return (T[:3, :3].T @ shifted.T).T, T[:3, :3]  # (shifted @ R), as one product over the long axis
@@ -122,8 +125,6 @@ def _mesh(obj: Shape, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _measure(obj: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World normals (k, 3) and signed distances (k,)."""
-    if obj.kind not in ("box", "cylinder", "sphere", "mesh"):
-        raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
     p, R = _local(obj, points)
     n, d = _mesh(obj, p) if obj.kind == "mesh" else _primitive(obj, p)
     return (R @ n.T).T, d
@@ -150,8 +151,6 @@ def surface_distance_near(obj: Shape, points: np.ndarray) -> np.ndarray:
     :func:`surface_distance` misses a crossing). For searches that call it on many points (a grasp
     sampler's closing lines, about 0.2 microseconds a point), which ask only whether a sphere
     touches; the exact one checks what they find."""
-    if obj.kind not in ("box", "cylinder", "sphere", "mesh"):
-        raise ValueError(f"surface: unknown shape kind '{obj.kind}'")
     p, _ = _local(obj, points)
     return distance_grid(obj)(p) if obj.kind == "mesh" else _primitive_distance(obj, p)
 
