@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-cold-start bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-hands report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-cold-start bench-decomposition bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-hands report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -107,6 +107,9 @@ bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time 
 
 bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min)
 	$(PY) benchmarks/cold_start.py --check
+
+bench-decomposition: $(STAMP)  ## convex pieces of never-seen meshes: the plane decomposition beside CoACD, seconds and accuracy (~10 min)
+	$(PY) benchmarks/decomposition.py --check
 
 bench-proposal: $(STAMP)  ## gt.solve_many from posture proposals beside random starts, 1000 hand problems (targets 5x, 3000/s; ~1 min)
 	$(PY) benchmarks/proposal.py --check
