@@ -4,16 +4,14 @@ each draft before it is a contact set).
 
 Drafts are made in batches of ``BATCH`` palm poses, in three steps:
 
-1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the palm
-   front, the side its fingers close toward: :func:`~graspnet_torch.robot.opposition.hand_axes`;
-   :func:`palm_front`) at a random point of the plane of the
-   palm within the fingertips' reach, and at a random gap from the palm's face, up to ``GAP_SHARE``
-   of the fingertips' reach beyond it (:func:`palm_gap`: the hand's own scale), i.e.
-   the palm looks at the object from a random direction, at a random roll. Once some palm pose
-   has touched (step 2), ``NEAR_SHARE`` of each batch are instead drawn near those that have
+1. *Palm*: a uniformly random palm orientation; the object is put in front of the palm (the side
+   its fingers close toward: :func:`~graspnet_torch.robot.opposition.hand_axes`; :func:`palm_front`)
+   at a random point of the palm's plane within the fingertips' reach, at a random gap from the
+   palm's face up to ``GAP_SHARE`` of the fingertips' reach beyond it (:func:`palm_gap`: the hand's
+   own scale): the palm looks at the object from a random direction, at a random roll. Once some
+   palm pose has touched (step 2), ``NEAR_SHARE`` of each batch are drawn near those that have
    (turned by ``NEAR_DEG``, moved by ``NEAR_M``, standard deviations): a palm pose near one that
-   touches often touches too (on the shipped hand and three random objects, 3-10x more sets per
-   palm pose).
+   touches often touches too.
 2. *Fingers*: each finger closes along ``LINES`` random straight lines in joint space
    (:func:`~graspnet_torch.synthesis.closing.closing_lines`) that move its pad forward, along the
    pad normal, and stops where its pad sphere (the tip frame's origin, radius the pad's depth)
@@ -63,8 +61,7 @@ GAP_SHARE = 0.55  # the object's gap to the palm's face: up to this share of the
 TOUCH_M = 1e-3  # a pad touches within this of the surface
 BATCH = 64  # palm poses drawn at once
 LINES = 16  # closing lines tried per finger and palm pose
-HOLDER_SPREAD = 0.2  # a palm without a box: how far off the fingers' mean axis the object is drawn (share
-# of the home fingertips' distance from it)
+HOLDER_SPREAD = 0.2  # a palm without a box: the object's offset off the fingers' mean axis (share of the tips')
 NEAR_SHARE = 0.5  # of each batch after a palm pose touched: palm poses near those that did
 NEAR_DEG, NEAR_M = 10.0, 0.005  # how near (standard deviations of the turn and the shift)
 PAD_POINTS = 128  # points spread over a pad link's mesh where the sampler measures its clearance
@@ -128,11 +125,9 @@ def palm_front(robot: Robot, rows: list[int]) -> tuple[np.ndarray, float, np.nda
 
 
 def palm_gap(robot: Robot, rows: list[int], palm: tuple) -> tuple[float, float]:
-    """The range (m) of the object's gap to the palm's face: from 0 to ``GAP_SHARE`` of the
-    fingertips' reach beyond it, the median over the fingers ``rows`` of how far each fingertip
-    reaches along the front past the face with every joint at its lower limit, its middle or its
-    upper limit (the farthest of the three); ``palm``: :func:`palm_front`'s. A hand 1.5 times the
-    human size draws its objects 1.5 times as far out (the shipped hand: up to about 35 mm)."""
+    """The range (m) of the object's gap to the palm's face (``palm``: :func:`palm_front`'s): 0 to
+    ``GAP_SHARE`` of the median over the fingers ``rows`` of how far each fingertip reaches past the
+    face along the front, its joints at their lower limits, middles or upper limits (the farthest)."""
     front, face = palm[0], palm[1]
     lo, hi = (np.asarray(a, dtype=np.float64) for a in robot.finger_limits)
     tips = np.stack([robot.fingertips_palm(torch.as_tensor(q)).numpy()[rows] for q in (lo, (lo + hi) / 2, hi)])
@@ -283,10 +278,8 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
         while counts["tried"] < max_tries:
             B = min(BATCH, max_tries - counts["tried"])
             counts["tried"] += B
-            R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
-            T = palm_poses(R, rng, palm, verts, centre, landed, gap)
+            T = _batch_palms(rng, B, (palm, gap), verts, centre, landed, orientations, reachable)
             if reachable is not None:
-                T = T[reachable(T)]
                 B = len(T)
                 counts["reached"] += B
                 if not B:
@@ -330,6 +323,15 @@ def iter_contact_drafts(robot: Robot, obj: Shape, fingers: Sequence[str] = ("thu
             yield batch
 
     return batches()
+
+
+def _batch_palms(rng: np.random.Generator, B: int, where: tuple, verts: np.ndarray, centre: np.ndarray,
+                 landed: list[np.ndarray], orientations: Callable | None, reachable: Callable | None) -> np.ndarray:
+    """Step 1 (module docstring): a batch's palm poses (B', 4, 4), placed by :func:`palm_poses`
+    (``where``: :func:`palm_front`'s and :func:`palm_gap`'s), those ``reachable`` keeps if given."""
+    R = Rotation.random(B, random_state=rng).as_matrix() if orientations is None else orientations(rng, B)
+    T = palm_poses(R, rng, where[0], verts, centre, landed, where[1])
+    return T if reachable is None else T[reachable(T)]
 
 
 def palm_poses(R: np.ndarray, rng: np.random.Generator, palm: tuple, verts: np.ndarray, centre: np.ndarray,
