@@ -1,11 +1,11 @@
 """Mesh objects and obstacles as convex pieces, for the loop's collision proxy.
 
-A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (CoACD, the
-``coacd`` package: approximate convex decomposition by collision-aware concavity and tree
-search; a mesh that is already convex is its own hull, one piece), and the pieces are cached on
-disk per mesh content and scale (:func:`convex_pieces`). Measured against V-HACD (``vhacdx``) on
-the Stanford bunny: CoACD's 42 pieces (6 s) put 15 % of the points that lie within 4 mm outside
-the surface inside a piece, V-HACD's 16 pieces 32 % and its 128 pieces (19 s) 17 %.
+A triangle mesh (a user's STL, OBJ, PLY or GLB) is cut into convex pieces once (a mesh that is
+already convex is its own hull, one piece): by CoACD (the ``coacd`` package: collision-aware
+concavity and a tree search, here a shallow one) within ``COACD_BUDGET_S``; where it runs longer or
+fails, by planes through the mesh's deepest concavities
+(:mod:`~graspnet_torch.collision.decompose`: bounded in time, deterministic, a looser fit). The
+pieces are cached on disk per mesh content and scale (:func:`convex_pieces`).
 
 Each piece is the intersection of its faces' half-spaces n . x <= b (n unit, outward), so its
 signed distance, batched in torch, is
@@ -31,7 +31,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -40,16 +39,16 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspnet_torch.collision.decompose import DEPTH, GRID, MAX_PIECES, MIN_CELLS, plane_pieces
 from graspnet_torch.io import atomic_path
 from graspnet_torch.meshes import load_mesh, mesh_path
 
-__all__ = ["ConvexPieces", "cache_dir", "convex_pieces", "piece_distance", "pieces_distance"]
+__all__ = ["ConvexPieces", "cache_dir", "coacd_apart", "convex_pieces", "piece_distance", "pieces_distance"]
 
-VERSION = 8  # of the cached files: bump when the decomposition or its settings change
-COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0}  # CoACD's concavity threshold (its default)
-COACD_TIMEOUT_S = 60  # a decomposition that takes longer is given up: tried again (COACD_FAST, then remeshed)
-COACD_FAST = {"mcts_iterations": 50, "mcts_nodes": 10}  # a shallower tree search (measured: a 432-face random
-# object whose default search ran past 600 s, 28 pieces in 3.4 s); where it too fails, the hull stands in
+VERSION = 9  # of the cached files: bump when the decomposition changes
+COACD = {"threshold": 0.05, "max_ch_vertex": 32, "seed": 0,  # CoACD's concavity threshold (its default) ...
+         "mcts_iterations": 30, "mcts_nodes": 10, "mcts_max_depth": 2, "resolution": 1000}  # ... a shallow search
+COACD_BUDGET_S = 2.0  # s: CoACD running longer is stopped, and the mesh cut by planes instead
 CONVEX_VOLUME_RATIO = 1.001  # a mesh whose hull holds at most this much more volume is convex: one piece
 MAX_PLANES = 64  # planes of a piece: its faces, then bevels; a hull of more faces is bounded by this many
 BEVEL_COS = 0.9  # faces that meet at more than about 26 degrees make a sharp edge or corner (bevelled)
@@ -175,34 +174,24 @@ def _spread(directions: np.ndarray, chosen: list[int], count: int) -> list[int]:
     return chosen
 
 
-def _decompose(mesh, name: str = "a mesh") -> tuple[list[np.ndarray], bool]:
-    """The hull vertices of each piece, and whether the mesh is convex (one exact piece). CoACD
-    (collision-aware concavity, tree search; deterministic in its seed) cuts a closed mesh as it
-    is and first makes one that is not closed manifold (its preprocessing); where it fails or takes
-    longer than ``COACD_TIMEOUT_S``, once more with ``COACD_FAST``; a closed mesh where that fails
-    too, a third time with ``COACD_FAST`` after its preprocessing (pybullet's random objects
-    include closed meshes whose faces cross, on which the first two abort or run past the time
-    limit: 4 of the synthesis experiment's 100, their hulls 1.4-14 times their volume, now cut in
-    8-15 s); where every try fails, the hull is the one piece (warned)."""
+def _decompose(mesh) -> tuple[list[np.ndarray], bool]:
+    """The hull vertices of each piece, and whether the mesh is convex (one exact piece): a mesh
+    whose hull holds at most ``CONVEX_VOLUME_RATIO`` of its volume is its hull; any other is cut by
+    CoACD with a shallow search (``COACD``; a closed mesh as it is, an open one after CoACD's
+    remeshing) within ``COACD_BUDGET_S``, else (it ran past that, or failed) by planes
+    (:func:`~graspnet_torch.collision.decompose.plane_pieces`). Where no piece spans a volume (a
+    flat or broken mesh), the hull."""
     hull = mesh.convex_hull
     volume = abs(mesh.volume) if mesh.is_watertight else 0.0
     if mesh.is_convex or (volume > 0 and hull.volume <= CONVEX_VOLUME_RATIO * volume):
         return [np.asarray(hull.vertices, dtype=np.float64)], True
+    vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
     settings = {**COACD, "preprocess_mode": "off" if mesh.is_watertight else "on"}
-    tries = [settings, {**settings, **COACD_FAST}]  # too slow (or died): the shallower search
-    if mesh.is_watertight:  # closed, yet CoACD cannot cut it as it is (self-intersecting faces): remeshed first
-        tries.append({**settings, **COACD_FAST, "preprocess_mode": "on"})
-    vertices, faces, parts = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), None
-    for given in tries:
-        parts = _coacd_apart(vertices, faces, given)
-        if parts is not None:
-            break
-    if parts is None:  # CoACD died on this mesh (it aborts on some): the hull stands in for it
-        warnings.warn(f"{name}: the convex decomposition (CoACD) failed on this mesh; its convex hull stands in "
-                      f"for it in the loop's collision proxy (FCL still checks the mesh itself)", stacklevel=2)
-        parts = []
+    parts = coacd_apart(vertices, faces, settings, COACD_BUDGET_S)
+    if parts is None:
+        parts = plane_pieces(vertices, faces, mesh.is_watertight)
     out = [v for v in parts if len(v) >= 4 and np.linalg.matrix_rank(v - v.mean(0), tol=1e-9) == 3]
-    if not out:  # nothing usable (a flat or broken mesh): its hull
+    if not out:
         return [np.asarray(hull.vertices, dtype=np.float64)], False
     return out, False
 
@@ -218,15 +207,17 @@ np.savez(sys.argv[2], n=len(parts), **{f"v{k}": np.asarray(v, dtype=np.float64) 
 """
 
 
-def _coacd_apart(vertices: np.ndarray, faces: np.ndarray, settings: dict) -> list[np.ndarray] | None:
-    """CoACD's pieces (their vertices) of a mesh, run in a process of its own: on some meshes its
-    C++ aborts or crashes, which would take this process with it. None when it did not finish."""
+def coacd_apart(vertices: np.ndarray, faces: np.ndarray, settings: dict, timeout_s: float) -> list[np.ndarray] | None:
+    """CoACD's pieces (their vertices (V_k, 3)) of a mesh (vertices (V, 3), faces (M, 3)) with
+    ``settings`` (``coacd.run_coacd``'s keywords), run in a process of its own (on some meshes its
+    C++ aborts, which would take this process with it). None where it did not finish within
+    ``timeout_s`` or failed."""
     with tempfile.TemporaryDirectory() as folder:
         given, pieces = Path(folder) / "mesh.npz", Path(folder) / "pieces.npz"
         np.savez(given, v=vertices, f=faces)
         try:
             done = subprocess.run([sys.executable, "-c", _COACD_WORKER, str(given), str(pieces), json.dumps(settings)],
-                                  capture_output=True, timeout=COACD_TIMEOUT_S, check=False)
+                                  capture_output=True, timeout=timeout_s, check=False)
         except subprocess.TimeoutExpired:
             return None
         if done.returncode != 0 or not pieces.is_file():
@@ -243,8 +234,8 @@ def convex_pieces(path: str | Path, scale: float = 1.0) -> ConvexPieces:
 
 @lru_cache(maxsize=32)
 def _convex_pieces(path: Path, scale: float) -> ConvexPieces:
-    key = hashlib.sha256(path.read_bytes() + repr((scale, VERSION, sorted(COACD.items()), sorted(COACD_FAST.items()),
-                                                   COACD_TIMEOUT_S)).encode()).hexdigest()
+    settings = (scale, VERSION, sorted(COACD.items()), COACD_BUDGET_S, GRID, DEPTH, MAX_PIECES, MIN_CELLS)
+    key = hashlib.sha256(path.read_bytes() + repr(settings).encode()).hexdigest()
     file = cache_dir() / "convex" / f"{key[:32]}.npz"
     if file.is_file():
         try:
@@ -253,7 +244,7 @@ def _convex_pieces(path: Path, scale: float) -> ConvexPieces:
                 return _pieces(vertices, bool(data["exact"]))
         except (OSError, ValueError, KeyError):  # a broken cache file: computed again below
             pass
-    vertices, exact = _decompose(load_mesh(path, scale), str(path))
+    vertices, exact = _decompose(load_mesh(path, scale))
     try:
         with atomic_path(file, ".npz") as tmp:
             np.savez(tmp, n=len(vertices), exact=exact, **{f"v{k}": v for k, v in enumerate(vertices)})

@@ -69,7 +69,7 @@ def holds_text(grasp: Any) -> str:
 
 
 def decompose_s(obj: Shape) -> float:
-    """The seconds an object's convex decomposition takes (CoACD, cached on disk: 0 where it was;
+    """The seconds an object's convex decomposition takes (cached on disk: 0 where it was;
     a primitive has none)."""
     if obj.kind != "mesh":
         return 0.0

@@ -255,7 +255,7 @@ def _intro(cfg: HandsCfg, objs: list[tuple[Household, Shape]], prepared: list[fl
             "exempt); farthest contact link: of the links a grasp says touch (where it says so), the farthest from "
             "the object (FCL distance). Types: each grasp's `type` (none: precision). Time per object: the "
             f"call's wall time, {cfg.jobs} process{'es' if cfg.jobs > 1 else ''} over the objects, one torch thread "
-            "each. Not timed: each mesh object's convex decomposition (CoACD, cached on disk), made before the "
+            "each. Not timed: each mesh object's convex decomposition (cached on disk), made before the "
             f"runs: longest {max(prepared, default=0.0):.1f} s here (0 where cached).")
 
 

@@ -29,7 +29,7 @@ would reach were sampling and solving free (the ceiling that checking every land
 pinned protocol puts on the run), and the rate were every check one that holds (the checks that held
 6/6 alone, at the run's parallelism: the protocol's own ceiling on this machine, whatever the search;
 a holding check simulates 0.5 s of settling and six 2 s pushes at 4 ms steps). Each object's convex
-decomposition (CoACD: the solver's collision proxy and the physics check need it; once per object,
+decomposition (the solver's collision proxy and the physics check need it; once per object,
 cached on disk) is made before the timed runs and reported apart, as grasp synthesis benchmarks
 report their object preprocessing.
 Targets (``checks``, the issue's): the hand's top-1 holds on at least 80 % of the objects, at least
@@ -254,7 +254,7 @@ def run_synthesis(cfg: SynthesisExperimentCfg, out: Path) -> ExperimentReport:
             "the wall time), the ceiling this run's checks put on its grasps; holding checks alone: the rate were "
             "every check one that holds 6/6 (the checks that held 6/6 over their share of the wall time), the "
             "ceiling the pinned protocol itself puts on this machine, whatever the search. "
-            "Not timed: each object's convex decomposition (CoACD, for the "
+            "Not timed: each object's convex decomposition (for the "
             "solver's collision proxy and MuJoCo; once per object, cached on disk), made before the runs: "
             f"median {np.median(prepared):.1f} s, longest {max(prepared):.1f} s here "
             f"(0 where cached).{no_baseline}\n\n"

@@ -26,7 +26,7 @@ The model, in the problem's world frame:
   primitive hands overlap at their knuckles by design); the problem's obstacles are left out
   (DexGraspBench's check has no table);
 - the object a free body (box, cylinder, sphere; a mesh by its convex pieces, the collision
-  proxy's CoACD decomposition) of ``object_mass_kg``, uniform density, at the problem's pose.
+  proxy's convex decomposition) of ``object_mass_kg``, uniform density, at the problem's pose.
 """
 
 from __future__ import annotations

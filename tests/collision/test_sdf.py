@@ -76,7 +76,7 @@ def test_a_large_meshs_grid_grows_its_cells_and_stays_exact_near_its_faces(tmp_p
 
 
 def test_an_open_meshs_grid_takes_its_sign_from_the_meshs_own_inside_test(tmp_path):
-    """A box without its top (not closed: its inside is its convex pieces', CoACD's): every grid
+    """A box without its top (not closed: its inside is its convex pieces'): every grid
     point's sign is the mesh's own inside test (each piece tested in its box only), the points near
     its faces hold the exact distance."""
     half = np.array([0.02, 0.015, 0.01])
