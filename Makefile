@@ -105,8 +105,8 @@ bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the s
 bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time to the first beside the baseline, 10 objects (targets 10/s, 2 s; ~2 min)
 	$(PY) benchmarks/synthesis.py --check
 
-bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min)
-	$(PY) benchmarks/cold_start.py --check
+bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min) -> reports/cold_start.md
+	$(PY) benchmarks/cold_start.py --report reports/cold_start.md --check
 
 bench-decomposition: $(STAMP)  ## convex pieces of never-seen meshes: the plane decomposition beside CoACD, seconds and accuracy (~10 min)
 	$(PY) benchmarks/decomposition.py --check
