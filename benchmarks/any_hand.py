@@ -195,6 +195,19 @@ def contacts_world(problem: gt.GraspProblem) -> dict[str, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------- main
+def describe(robot) -> None:
+    """Print each finger's joints (shared and mimic ones named) and tip."""
+    for f in robot.fingers.values():
+        every = robot.finger_all_joint_names(f.name)
+        mimic = [n for n in f.chain.all_joint_names if n not in f.joint_names]
+        shared = every[: len(every) - len(f.chain.all_joint_names)]
+        print(f"  {f.name:>7s}: {len(every)} joints {', '.join(every)}"
+              f"{' (shared: ' + ', '.join(shared) + ')' if shared else ''}"
+              f"{' (mimic: ' + ', '.join(mimic) + ')' if mimic else ''}, tip {f.chain.tip}")
+    if robot.shared.names:
+        print(f"  shared joints searched with the palm pose: {', '.join(robot.shared.names)}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robot", type=Path, default=DEFAULT_ROBOT, help="robot config YAML")
@@ -210,15 +223,7 @@ def main() -> int:
     torch.set_num_threads(args.threads)
     robot = load_robot(args.robot)
     print(f"{robot!r} from {args.robot}; torch threads: {torch.get_num_threads()}")
-    for f in robot.fingers.values():
-        every = robot.finger_all_joint_names(f.name)
-        mimic = [n for n in f.chain.all_joint_names if n not in f.joint_names]
-        shared = every[: len(every) - len(f.chain.all_joint_names)]
-        print(f"  {f.name:>7s}: {len(every)} joints {', '.join(every)}"
-              f"{' (shared: ' + ', '.join(shared) + ')' if shared else ''}"
-              f"{' (mimic: ' + ', '.join(mimic) + ')' if mimic else ''}, tip {f.chain.tip}")
-    if robot.shared.names:
-        print(f"  shared joints searched with the palm pose: {', '.join(robot.shared.names)}")
+    describe(robot)
 
     with tempfile.TemporaryDirectory() as tmp:
         export = robot.cfg.checkpoint if args.export and robot.cfg.checkpoint else Path(tmp) / "fcnn.pt"
