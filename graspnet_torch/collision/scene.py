@@ -1,4 +1,4 @@
-"""Collision counts with python-fcl, the engine of record (docs/interface.md).
+"""Collision counts with python-fcl, the engine of record (docs/contact.md).
 
 A :class:`CollisionScene` holds the robot's links (the URDF's ``<collision>`` primitives and meshes) and the
 problem's environment: its obstacles and the grasped object. For a posture it counts

@@ -64,7 +64,7 @@ class Verification:
         return any(c.passed for c in self.checks)
 
     def to_dict(self) -> dict:
-        """The reported trial's ``verified`` field (docs/interface.md, "Physics check")."""
+        """The reported trial's ``verified`` field (docs/physics.md)."""
         return {"what": list(self.what), "checked": self.checked, "passed": self.passed,
                 "trials": [c.to_dict() for c in self.checks]}
 

@@ -87,7 +87,7 @@ class PhysicsReport:
         return self.holds == self.of
 
     def to_dict(self) -> dict:
-        """``{"physics": {...}}``: the result file's ``physics`` entry (docs/interface.md)."""
+        """``{"physics": {...}}``: the result file's ``physics`` entry (docs/physics.md)."""
         return {"physics": {"holds": self.holds, "of": self.of, "pushes_run": len(self.directions),
                             "directions": dict(self.directions),
                             "settle_shift_mm": round(self.settle_shift_mm, 3),

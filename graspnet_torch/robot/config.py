@@ -1,6 +1,6 @@
 """Typed robot configuration, read from ``configs/robot/<name>.yaml``.
 
-The YAML keys are those of docs/interface.md and docs/robots.md; files give lengths in metres and angles in
+The YAML keys are those of docs/robots.md; files give lengths in metres and angles in
 degrees, the dataclasses hold SI units (metres, radians). See configs/robot/hand.yaml for a
 commented example.
 """

@@ -38,7 +38,7 @@ class PolishCfg:
         from_r_free: ``from_r`` where the search counts no collision (nothing to collide with, or
             a reward that ignores collisions): -1 polishes every trial from the first iteration
             on (the learner proposes, the polish lands), which on random reachable problems is
-            about 3x faster than 0.9 at the same success (docs/interface.md, "Many calls, and
+            about 3x faster than 0.9 at the same success (docs/python.md, "Many calls, and
             sequences"). None: ``from_r``.
             Near an object a polish from far lands against it, within tolerance but less exact:
             there ``from_r`` applies. With ``from_r: null`` (the polish after the loop only) neither.
@@ -53,7 +53,7 @@ class PolishCfg:
             warm start did not land) is moved, its contacts held, toward the middle of its
             fingers' joint ranges (a prior of this weight per range, faded out in six steps of five
             iterations), so the frames after it start away from the limits, where a warm start
-            gets stuck (docs/interface.md, "Many calls, and sequences", measures both settings). None: not moved.
+            gets stuck (docs/python.md, "Many calls, and sequences", measures both settings). None: not moved.
     """
 
     mode: str = setting("whole", choices=("fingers", "whole"))
@@ -169,7 +169,7 @@ class SolverCfg:
             (the default: 'surface' where the problem has an object and its contact fingers have
             pads, else 'point': without a surface there is nothing to touch; a gripper has no
             pads). The search sees the pads' normals (:mod:`graspnet_torch.solver.pad_term`) and
-            the whole polish how deep each link reaches (docs/interface.md, "Pads on the surface").
+            the whole polish how deep each link reaches (docs/contact.md).
         penetration_mm: in the surface model, how deep a link of the robot (the contact
             fingers' distal links included) may lie inside the object.
         normal_cone_deg: in the surface model, the largest angle between a contact finger's pad

@@ -130,7 +130,7 @@ def tip_frames(robot: Robot, posture: Posture, fingers: Sequence[str]) -> tuple[
 
 
 def surface_fields(robot: Robot, problem: GraspProblem, postures: Sequence[Posture]) -> list[dict]:
-    """The surface model's fields of trials at ``postures`` (docs/interface.md), one forward
+    """The surface model's fields of trials at ``postures`` (docs/contact.md), one forward
     kinematics and one collision pass for them all: per contact finger the pad's distance to its
     contact (mm) and its normal's angle to the object's inward normal (degrees), and the deepest
     link in the object (mm, FCL: every link, the contact fingers' distal links included; 0 where

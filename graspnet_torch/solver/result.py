@@ -1,4 +1,4 @@
-"""Grasp results and their JSON form (docs/interface.md).
+"""Grasp results and their JSON form (docs/results.md).
 
 Angles in degrees, lengths in metres, errors in millimetres. The reported errors are recomputed
 in float64 from the reported configuration by forward kinematics against the problem's contacts,

@@ -1,6 +1,6 @@
 """Grasp problems: a robot, an object, one contact per finger (problem files, shipped tasks).
 
-A problem file (YAML or JSON; docs/interface.md) is validated completely before any
+A problem file (YAML or JSON; docs/objects.md) is validated completely before any
 work starts; every refusal is a :class:`~graspnet_torch.errors.ProblemError` with one line that
 names the file and the offending entry. Files give angles in degrees; the dataclasses hold
 metres and radians.
