@@ -108,7 +108,7 @@ bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time 
 bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min) -> reports/cold_start.md
 	$(PY) benchmarks/cold_start.py --report reports/cold_start.md --check
 
-bench-decomposition: $(STAMP)  ## convex pieces of never-seen meshes: the plane decomposition beside CoACD, seconds and accuracy (~10 min)
+bench-decomposition: $(STAMP)  ## convex pieces of never-seen meshes: the package's decomposition beside CoACD's full search and planes alone, seconds and fit (~10 min)
 	$(PY) benchmarks/decomposition.py --check
 
 bench-proposal: $(STAMP)  ## gt.solve_many from posture proposals beside random starts, 1000 hand problems (targets 5x, 3000/s; ~1 min)
