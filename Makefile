@@ -129,7 +129,7 @@ report-contact: $(STAMP)  ## the experiment contact as in reports/contact.md (50
 report-synthesis: $(STAMP)  ## the experiment synthesis as in reports/synthesis.md (100 objects; hand, TriFinger, arm + hand; the baseline): MuJoCo, checks (~20 min)
 	$(PY) scripts/reproduce.py check=true out=outputs/experiment/synthesis hydra.run.dir=outputs/experiment/synthesis +experiment=synthesis
 
-report-hands: $(STAMP)  ## the experiment hands (-> reports/hands.md): synthesis on every example hand over 40 everyday objects at real scale, MuJoCo, checks (~1 h; scripts/fetch_hands.py first for schunk, ability, inspire)
+report-hands: $(STAMP)  ## the experiment hands (-> reports/hands.md): synthesis on every example hand over 40 everyday objects at real scale, MuJoCo, checks (~1 h; pip install -e '.[hands]' and scripts/fetch_hands.py first for dexmate, schunk, ability, inspire, icub)
 	rm -f outputs/experiment/hands/REPRODUCTION.md; $(PY) scripts/reproduce.py check=true out=outputs/experiment/hands hydra.run.dir=outputs/experiment/hands +experiment=hands; \
 	status=$$?; test -f outputs/experiment/hands/REPRODUCTION.md && cp outputs/experiment/hands/REPRODUCTION.md reports/hands.md \
 	&& cp outputs/experiment/hands/hands_*.png reports/; exit $$status

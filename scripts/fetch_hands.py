@@ -1,11 +1,12 @@
 """Fetch the example hands whose URDF is not shipped: dexsuite/dex-urdf at commit 93505db, cloned
-into each git-ignored examples/<hand>/dex-urdf (schunk_svh, ability_hand, inspire_hand).
+into each git-ignored examples/<hand>/dex-urdf (schunk_svh, ability_hand, inspire_hand), and the
+iCub hand copied from the installed Python package icub-models into examples/icub_hand/iCub.
 
     python scripts/fetch_hands.py                          # from GitHub (git and the network)
     python scripts/fetch_hands.py --from /path/to/dex-urdf # from a local clone or another URL
 
-Exit status: 0 when every such folder has its clone, 2 when git failed (one line on stderr; nothing
-written).
+Exit status: 0 when every such folder is there, 2 when git failed or icub-models is not installed
+(one line on stderr; nothing written).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import argparse
 import sys
 
 from graspnet_torch.errors import GraspnetError, say
-from graspnet_torch.jobs.fetch_hands import COMMIT, DEX_URDF, fetch_hands
+from graspnet_torch.jobs.fetch_hands import CLONE, COMMIT, DEX_URDF, ICUB_DIST, fetch_hands
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -27,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
         say(str(exc))
         return 2
     for path in made:
-        print(f"fetched {path} (dex-urdf at {COMMIT})")
+        print(f"fetched {path} ({f'dex-urdf at {COMMIT}' if path.name == CLONE else f'from {ICUB_DIST}'})")
     if not made:
         print("every fetched hand is there already")
     return 0

@@ -70,7 +70,7 @@ HANDS = {  # name -> robot config (a shipped robot's name or a YAML path under t
     "barrett": "examples/barrett_hand/barrett_hand.yaml", "dclaw": "examples/dclaw_gripper/dclaw_gripper.yaml",
     "shadow": "examples/shadow_hand/shadow_hand_right.yaml", "dexmate": "examples/dexmate_f5d6/dexmate_f5d6_right.yaml",
     "schunk": "examples/schunk_svh/schunk_svh_right.yaml", "ability": "examples/ability_hand/ability_hand_right.yaml",
-    "inspire": "examples/inspire_hand/inspire_hand_right.yaml"}
+    "inspire": "examples/inspire_hand/inspire_hand_right.yaml", "icub": "examples/icub_hand/icub_hand_left.yaml"}
 SHIPPED = "hand"
 CAPPED = "stopped at the"  # a run past max_s: its reason starts so
 TOP1_PCT, LONG_PCT, LONG_HANDS, DEPTH_MM, GAP_MM = 80.0, 80.0, 3, 1.0, 1.0  # the targets

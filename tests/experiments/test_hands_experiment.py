@@ -140,3 +140,41 @@ def test_fetch_hands_refuses_a_bad_source_with_exit_2_and_writes_nothing(tmp_pat
     assert err.startswith("fetch_hands: git clone failed") and err.count("\n") == 1
     assert sorted(p.name for p in examples.rglob("*")) == sorted(
         ["one", "one.yaml", "two", "two.yaml", "shipped", "shipped.yaml"])
+
+
+def _icub_share(tmp_path) -> Path:
+    share = tmp_path / "share" / "iCub"
+    (share / "robots" / "hand_mk3").mkdir(parents=True, exist_ok=True)
+    (share / "meshes" / "sim").mkdir(parents=True, exist_ok=True)
+    (share / "robots" / "hand_mk3" / "model.urdf").write_text(
+        '<robot name="h"><link name="a"><collision><geometry><mesh filename="package://iCub/meshes/sim/a.stl"/>'
+        '</geometry></collision></link></robot>')
+    for name in ("a.stl", "unused.stl"):
+        (share / "meshes" / "sim" / name).write_text("solid a\nendsolid a\n")
+    (share / "LICENSE").write_text("CC BY-SA 4.0\n")
+    return share
+
+
+def test_fetch_hands_copies_the_icub_model_and_only_the_meshes_it_names(tmp_path):
+    examples = tmp_path / "examples"
+    (examples / "icub").mkdir(parents=True)
+    (examples / "icub" / "icub.yaml").write_text("urdf: iCub/robots/hand_mk3/model.urdf\n")
+    made = fetch_hands("unused", "unused", examples, icub=_icub_share(tmp_path))
+    assert made == [examples / "icub" / "iCub"]
+    got = sorted(str(p.relative_to(made[0])) for p in made[0].rglob("*") if p.is_file())
+    assert got == ["LICENSE", "meshes/sim/a.stl", "robots/hand_mk3/model.urdf"]
+    assert fetch_hands("unused", "unused", examples, icub=_icub_share(tmp_path)) == []
+
+
+def test_fetch_hands_refuses_a_missing_icub_model_and_writes_nothing(tmp_path):
+    source = tmp_path / "source"
+    for args in (["init", "-q", str(source)], ["-C", str(source), "-c", "user.name=t", "-c", "user.email=t@t",
+                                                 "commit", "-q", "--allow-empty", "-m", "one"]):
+        subprocess.run(["git", *args], check=True)
+    examples = _examples(tmp_path)
+    (examples / "icub").mkdir()
+    (examples / "icub" / "icub.yaml").write_text("urdf: iCub/robots/no_such_model/model.urdf\n")
+    before = sorted(p.name for p in examples.rglob("*"))
+    with pytest.raises(ConfigError, match="icub.yaml: icub-models has no robots/no_such_model/model.urdf"):
+        fetch_hands(str(source), "HEAD", examples, icub=_icub_share(tmp_path))
+    assert sorted(p.name for p in examples.rglob("*")) == before  # the dex-urdf clones made first are gone

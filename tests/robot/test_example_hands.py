@@ -9,7 +9,7 @@ The oracle is pytorch-kinematics' chain built with its origins in float64
 off on these hands' fractional millimetres, which a 1e-9 m check would read as a kinematics error.
 
 Skipped, with the reason: a config whose URDF the user fetches (scripts/fetch_hands.py: schunk_svh,
-ability_hand, inspire_hand, not shipped) until it is there, and a config whose URDF is in a Python
+ability_hand, inspire_hand, icub_hand, not shipped) until it is there, and a config whose URDF is in a Python
 package that is not installed."""
 
 from __future__ import annotations
@@ -34,6 +34,8 @@ FETCHED = {  # config file name -> why its URDF is not in a fresh clone
                                "user, not shipped: run scripts/fetch_hands.py",
     "inspire_hand_right.yaml": "its URDF (dex-urdf; a licence that grants no redistribution) is fetched by the "
                                "user, not shipped: run scripts/fetch_hands.py",
+    "icub_hand_left.yaml": "its URDF (icub-models, CC BY-SA 4.0) is copied by the user from the installed package, "
+                           "not shipped: run scripts/fetch_hands.py",
 }
 
 
