@@ -175,6 +175,6 @@ def test_fetch_hands_refuses_a_missing_icub_model_and_writes_nothing(tmp_path):
     (examples / "icub").mkdir()
     (examples / "icub" / "icub.yaml").write_text("urdf: iCub/robots/no_such_model/model.urdf\n")
     before = sorted(p.name for p in examples.rglob("*"))
-    with pytest.raises(ConfigError, match="icub.yaml: icub-models has no robots/no_such_model/model.urdf"):
+    with pytest.raises(ConfigError, match=r"icub\.yaml: icub-models has no robots/no_such_model/model\.urdf"):
         fetch_hands(str(source), "HEAD", examples, icub=_icub_share(tmp_path))
     assert sorted(p.name for p in examples.rglob("*")) == before  # the dex-urdf clones made first are gone
