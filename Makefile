@@ -5,7 +5,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-cold-start bench-decomposition bench-contact bench-retarget bench-proposal bench-solvers report-arm report-contact report-synthesis report-hands report-manus report-reach fcnn posture urdf clean
+.PHONY: help install demo docs robots test test-fast lint sync-defaults reproduce reproduce-quick experiment bench bench-fcnn bench-fcnn-train bench-solver bench-validation bench-arm bench-manus bench-any-hand bench-meshes bench-calls bench-api bench-quality bench-synthesis bench-cold-start bench-decomposition bench-contact bench-retarget bench-proposal bench-solvers bench-reports report-arm report-contact report-synthesis report-hands report-manus report-reach fcnn posture urdf clean
 
 help:  ## list the targets
 	@grep -hE '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -58,64 +58,70 @@ sync-defaults: $(STAMP)  ## write the defaults the YAML files under configs/ lis
 	$(PY) scripts/sync_defaults.py
 
 bench: $(STAMP)  ## kinematics throughput against pytorch-kinematics
-	$(PY) benchmarks/bench_kinematics.py
+	$(PY) benchmarks/report.py bench_kinematics
 
 bench-fcnn: $(STAMP)  ## FCNN finger IK against pytorch-kinematics PseudoInverseIK (accuracy, speed)
-	$(PY) benchmarks/bench_fcnn.py
+	$(PY) benchmarks/report.py bench_fcnn
 
 bench-fcnn-train: $(STAMP)  ## time to train all five fingers of the hand from scratch
-	$(PY) benchmarks/bench_fcnn_training.py
+	$(PY) benchmarks/report.py bench_fcnn_training
 
 bench-solver: $(STAMP)  ## iterations per second of the closed loop, 1 to 1000 trials
-	$(PY) benchmarks/bench_solver.py
+	$(PY) benchmarks/report.py bench_solver
 
 bench-validation: $(STAMP)  ## start-up time the input checks add to a solve (target < 0.2 s)
-	$(PY) benchmarks/bench_validation.py --check
+	$(PY) benchmarks/report.py bench_validation
 
 bench-arm: $(STAMP)  ## the arm loop with collision checking vs without (targets 1,000 it/s, 30,000 at T=1000)
-	$(PY) benchmarks/bench_arm.py --check
+	$(PY) benchmarks/report.py bench_arm
 
 bench-manus: $(STAMP)  ## the MANUS loop with its defaults vs the bare loop (targets 2,000 it/s, 100,000 at T=1000)
-	$(PY) benchmarks/bench_manus.py --check
+	$(PY) benchmarks/report.py bench_manus
 
 bench-any-hand: $(STAMP)  ## any hand by config (Dexmate F5D6, mimic joints): train, solve 40 problems, verify from the URDF (~7 min)
 	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
-	$(PY) benchmarks/any_hand.py --check
+	$(PY) benchmarks/report.py any_hand
 
 bench-meshes: $(STAMP)  ## mesh objects: the loop's speed vs the primitive (>= 0.5x); the experiment proxy: verdicts vs FCL (>= 99 %)
-	$(PY) benchmarks/mesh_objects.py --check
+	$(PY) benchmarks/report.py mesh_objects
 	$(call EXPERIMENT_RUN,proxy)
 
 bench-calls: $(STAMP)  ## many calls: per-call overhead and single-problem wall time, gt.Solver beside gt.solve (targets 2 ms, 15 ms)
-	$(PY) benchmarks/calls.py --check
+	$(PY) benchmarks/report.py calls
 
 bench-api: $(STAMP)  ## the Python API from a plain program: solve_many problems/s, gt.Solver overhead; 1 thread vs torch's own (targets 1,000/s, 2 ms; ~1 min)
-	$(PY) benchmarks/api_speed.py --check
+	$(PY) benchmarks/report.py api_speed
 
 bench-quality: $(STAMP)  ## grasp quality per contact set (epsilon, sigma_min) beside an LP force-closure test, --check
-	$(PY) benchmarks/quality.py --check
+	$(PY) benchmarks/report.py quality
 
 bench-contact: $(STAMP)  ## the surface contact model's wall time beside the point model's (target <= 2x)
-	$(PY) benchmarks/contact_models.py --check
+	$(PY) benchmarks/report.py contact_models
 
 bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the same frames (installs the retarget extra; ~2 min)
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
-	$(PY) benchmarks/retarget.py --check
+	$(PY) benchmarks/report.py retarget
 
 bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time to the first beside the baseline, 10 objects (targets 10/s, 2 s; ~2 min)
-	$(PY) benchmarks/synthesis.py --check
+	$(PY) benchmarks/report.py synthesis
 
 bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min) -> reports/cold_start.md
 	$(PY) benchmarks/cold_start.py --report reports/cold_start.md --check
 
 bench-decomposition: $(STAMP)  ## convex pieces of never-seen meshes: the package's decomposition beside CoACD's full search and planes alone, seconds and fit (~10 min)
-	$(PY) benchmarks/decomposition.py --check
+	$(PY) benchmarks/report.py decomposition
 
 bench-proposal: $(STAMP)  ## gt.solve_many from posture proposals beside random starts, 1000 hand problems (targets 5x, 3000/s; ~1 min)
-	$(PY) benchmarks/proposal.py --check
+	$(PY) benchmarks/report.py proposal
 
 bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cmaes, dls) on the same problems, targets (~11 min)
 	$(call EXPERIMENT_RUN,solvers)
+
+bench-reports: $(STAMP)  ## every benchmark the docs quote, each in a fresh process -> reports/bench_NAME.md (~45 min; each bench-* target writes its own)
+	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
+	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
+	$(PY) benchmarks/report.py bench_kinematics bench_fcnn bench_fcnn_training bench_solver bench_threads bench_validation \
+	  bench_arm bench_manus any_hand mesh_objects calls api_speed quality contact_models retarget synthesis decomposition proposal
 
 report-manus: $(STAMP)  ## the experiment manus: section 7.2, 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 (~7 min)
 	$(call EXPERIMENT_RUN,manus)

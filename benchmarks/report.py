@@ -1,0 +1,68 @@
+"""Run benchmarks in fresh processes and keep what each printed as a report the docs can quote.
+
+    python benchmarks/report.py calls api_speed       # -> reports/bench_calls.md, reports/bench_api_speed.md
+    python benchmarks/report.py calls --out DIR       # into DIR
+
+Each NAME runs as ``python benchmarks/NAME.py --check`` (one torch thread, its own defaults) in a
+new process, and ``reports/bench_NAME.md`` gets its whole standard output (its tables, its ratios
+against the peer measured in the same run and its targets, met or MISSED), the command, the date,
+the wall time, the exit status and the machine with the commit (``graspnet_torch.experiments.report
+.machine``). A report is written atomically, also when a target is missed; a benchmark that crashed
+writes none. Exit status: 0 when every benchmark met its targets, 1 when one missed a target, 2 for
+an unknown name or a crash (one line on stderr each).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def _report(name: str, command: list[str], done: subprocess.CompletedProcess[str], wall: float) -> str:
+    from graspnet_torch.experiments.report import machine
+
+    status = "every target met" if done.returncode == 0 else "a target MISSED"
+    head = (f"Written by `python benchmarks/report.py {name}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: "
+            f"`{' '.join(command)}` in a fresh process, {wall:.0f} s, exit status {done.returncode} ({status}). "
+            "Below, everything it printed; the machine and the commit at the end.")
+    return "\n".join([f"# Benchmark `{name}`", "", head, "", "```text", done.stdout.rstrip(), "```", "",
+                      "| machine | |", "|---|---|", *(f"| {k} | {v} |" for k, v in machine().items()), ""])
+
+
+def run(name: str, out: Path) -> int:
+    """Run ``benchmarks/<name>.py --check`` and write ``out/bench_<name>.md``; its exit status
+    (2 when it crashed: no report)."""
+    from graspnet_torch.io import atomic_write_text
+
+    script = HERE / f"{name}.py"
+    if name == "report" or not script.is_file():
+        print(f"report: no benchmark '{name}' (benchmarks/{name}.py)", file=sys.stderr)
+        return 2
+    command = [sys.executable, str(script.relative_to(HERE.parent)), "--check"]
+    t0 = time.perf_counter()
+    done = subprocess.run(command, cwd=HERE.parent, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
+    if done.returncode not in (0, 1):
+        last = (done.stderr.strip().splitlines() or [f"exit status {done.returncode}"])[-1]
+        print(f"report: {name} failed: {last}", file=sys.stderr)
+        return 2
+    path = atomic_write_text(out / f"bench_{name}.md", _report(name, command[1:], done, wall))
+    print(f"wrote {path} ({wall:.0f} s, {'targets met' if done.returncode == 0 else 'a target missed'})")
+    return done.returncode
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="+", help="benchmarks/NAME.py to run")
+    ap.add_argument("--out", default=str(HERE.parent / "reports"), help="folder of the reports (default reports/)")
+    args = ap.parse_args(argv)
+    return max(run(name, Path(args.out)) for name in args.names)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
