@@ -102,7 +102,7 @@ bench-retarget: $(STAMP)  ## sequences: tracking beside dex-retargeting on the s
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
 	$(PY) benchmarks/report.py retarget
 
-bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time to the first beside the baseline, 10 objects (targets 10/s, 2 s; ~2 min)
+bench-synthesis: $(STAMP)  ## grasps from an object: verified grasps/s and time to the first beside the baseline, 10 objects (targets 5/s, 2 s; ~2 min)
 	$(PY) benchmarks/report.py synthesis
 
 bench-cold-start: $(STAMP)  ## a never-seen object, empty cache, fresh process: time to the first verified grasp, 50 objects (targets 1.5 s median, 4 s p95; ~20 min) -> reports/cold_start.md

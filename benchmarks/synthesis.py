@@ -16,7 +16,7 @@ hold over the wall time of the whole set; first: from the call's start to the fi
 holds 6/6 (never on an object with none); physics % of time: the objects' time spent in the
 checks; physics alone: the rate were sampling and solving free; holding checks alone: the rate were
 every check one that holds (the checks holding 6/6 over their share of the wall time: the pinned
-protocol's own ceiling on the machine, whatever the search). Targets (``--check``): at least 10
+protocol's own ceiling on the machine, whatever the search). Targets (``--check``): at least 5
 verified grasps/s, median first at most 2 s.
 """
 
@@ -35,7 +35,7 @@ from graspnet_torch.collision.convex import convex_pieces
 from graspnet_torch.experiments.report import python_speed_ms
 from graspnet_torch.experiments.synthesis import pick_objects
 
-RATE, FIRST_S = 10.0, 2.0
+RATE, FIRST_S = 5.0, 2.0  # roadmap 20's rate (it replaced 10/s, set against figures before any physics check)
 FINGERS = ("thumb", "index", "middle")
 
 
