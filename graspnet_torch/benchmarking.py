@@ -50,8 +50,8 @@ def check_targets(checks: Sequence[tuple[str, bool]], check: bool) -> int:
 
 
 def bench_args(doc: str, extra: Sequence[tuple[str, type, Any]] = ()) -> argparse.Namespace:
-    """``--threads`` (default 1, pinned here: on a busy 2-core machine 2 threads ran 10-90x
-    slower) and ``--check`` (exit 1 when a target is missed), the options every speed
+    """``--threads`` (default 1, pinned here: on busy cores two threads run many times slower than
+    one, ``benchmarks/bench_threads.py``) and ``--check`` (exit 1 when a target is missed), the options every speed
     benchmark takes; ``extra``: its own options as (flag, type, default)."""
     import torch
 
@@ -74,8 +74,8 @@ def loop_rate(task: str | GraspProblem, trials: int, iterations: int, repeats: i
     steps inside the loop per evaluation (FCNN refinement; a gripper's settling steps), None: the
     defaults. The paper's point contact model: the loop these rates were set for (in the surface
     model, the default with an object, a fixed-budget run also pays its finish: the whole polish
-    with every link's depth on every trial: at T = 1000, 20 iterations, 5-6x slower on glass3,
-    11x on videotape5 and 39x on its mesh, measured with benchmarks/mesh_objects.py)."""
+    with every link's depth on every trial, several times the loop's cost;
+    ``benchmarks/mesh_objects.py`` measures it)."""
     best = 0.0
     for seed in range(repeats):
         fingers, gripper = {"final_refine": 0}, {"polish_iterations": 0}  # no polish after the loop

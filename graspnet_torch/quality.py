@@ -40,9 +40,8 @@ point-contact grasp matrix [I ; [p_i - c]x / L]: independent of m, and at mu = 0
 map's sigma_min (0 for fewer than 6 contacts).
 
 Cost: the edge matrix is one batched torch expression; Q1 is one 6-D scipy ConvexHull (Qhull) per
-set (without pre-merged facets, ``FAST_QHULL``), a Python loop over B, about 1.2, 2.5 and 4.2 ms a set for
-k = 3, 4, 5 contacts and 8 edges (24-40 wrenches, one thread of a 2-core CPU; ``make bench-quality``),
-growing with the hull's facet count.
+set (without pre-merged facets, ``FAST_QHULL``), a Python loop over B, growing with the hull's facet
+count (``make bench-quality`` times sets of k = 3, 4, 5 contacts, 24-40 wrenches).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """How many CPU threads torch uses for the package's work, and the caller's count put back after.
 
-On a busy 2-core machine two torch threads ran a 20-trial solve 10x slower than one and FCNN
-training 14x slower (``benchmarks/bench_threads.py``; docs "Which solver?", "Threads"), so the
-Python API (:func:`gt.solve`, :func:`gt.solve_many`, :class:`gt.Solver`) runs its work on **one
+On a machine whose cores are busy, two torch threads run a solve or FCNN training many times
+slower than one (``benchmarks/bench_threads.py`` measures both side by side; docs "Which solver?",
+"Threads"), so the Python API (:func:`gt.solve`, :func:`gt.solve_many`, :class:`gt.Solver`) runs its work on **one
 thread by default**, as the command-line jobs do, and restores the caller's count afterwards.
 
 - ``threads=N`` on a call: N threads for that call.

@@ -23,7 +23,7 @@ So no sphere stands out of its slab's hull by more than the slack, and every poi
 sphere; the surface between the points lies within the slack of one (measured on a box and on
 TriFinger's links: within 0.9 of the slack, tests/collision/test_mesh_links.py). A concave link is
 modelled by its slabs' hulls: TriFinger's middle link stands out of its mesh by up to 20 mm (35 mm
-as a box). Cost: 0.2-0.6 s per link mesh, once per (file, scale) in a process.
+as a box). Made once per (file, scale) in a process.
 """
 
 from __future__ import annotations
