@@ -44,10 +44,12 @@ from omegaconf import OmegaConf
 
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.fcnn import FingerIK, load_finger_ik
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.files import read_document
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.robot import RobotCfg
 from graspnet_torch.solver.config import paper_protocol
 from graspnet_torch.table import format_table
 
@@ -75,12 +77,12 @@ def load_robot(path: Path) -> gt.Robot:
             raise SystemExit(f"{exc}{hint}") from None
         urdf = Path(next(iter(spec.submodule_search_locations))) / inner
         print(f"note: {raw} not found; using the installed package's {urdf}")
-        cfg = gt.RobotCfg.from_mapping({**data, "urdf": str(urdf)}, source=str(path), folder=path.resolve().parent)
+        cfg = RobotCfg.from_mapping({**data, "urdf": str(urdf)}, source=str(path), folder=path.resolve().parent)
         return gt.Robot(cfg)
 
 
 # ---------------------------------------------------------------------------------------- training
-def train(robot: gt.Robot, epochs: int | None, export: Path) -> tuple[gt.FingerIK, list[dict], float, int]:
+def train(robot: gt.Robot, epochs: int | None, export: Path) -> tuple[FingerIK, list[dict], float, int]:
     with initialize_config_dir(config_dir=str(configs_dir()), version_base="1.3"):
         cfg = compose(config_name="train_fcnn")
     fcnn = FCNNTrainCfg.from_mapping(OmegaConf.to_container(cfg.fcnn))
@@ -91,7 +93,7 @@ def train(robot: gt.Robot, epochs: int | None, export: Path) -> tuple[gt.FingerI
         _, rows = train_fcnn(robot, fcnn, run_dir, seed=cfg.seed, export=export, progress=False,
                              eval_targets=10_000)
         seconds = time.perf_counter() - t0
-    ik = gt.load_finger_ik(robot, export)  # what the solver reads, not the trainer's objects
+    ik = load_finger_ik(robot, export)  # what the solver reads, not the trainer's objects
     return ik, rows, seconds, fcnn.epochs
 
 
@@ -118,7 +120,7 @@ class UrdfChecker:
     float64 pytorch-kinematics chain built from its bytes; finger chains and tip offsets from the
     robot config file, nothing from the library's kinematics."""
 
-    def __init__(self, urdf: Path, cfg: gt.RobotCfg):
+    def __init__(self, urdf: Path, cfg: RobotCfg):
         import pytorch_kinematics as pk
 
         data = urdf.read_bytes()

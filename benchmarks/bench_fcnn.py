@@ -25,6 +25,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets, time_interleaved
+from graspnet_torch.fcnn import load_finger_ik
 from graspnet_torch.fcnn.evaluate import error_stats, heldout_targets
 from graspnet_torch.robot import ChainKernel
 from graspnet_torch.table import format_table
@@ -66,7 +67,7 @@ def main() -> int:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     robot = gt.load_robot("hand")
-    ik = gt.load_finger_ik(robot)
+    ik = load_finger_ik(robot)
     rows, summary = [], []
     n_total = args.targets * args.sets
     for finger in args.fingers or robot.finger_names:

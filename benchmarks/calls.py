@@ -22,6 +22,7 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.paths import repo_root
+from graspnet_torch.robot import load_robot_cfg
 
 OVERHEAD_MS, MEDIAN_MS, BELOW_PCT = 2.0, 15.0, 99.5
 
@@ -48,7 +49,7 @@ def main() -> int:
     print(f"torch threads: {torch.get_num_threads()}")
     hand = gt.load_robot("hand")
     problems = [gt.random_reachable_problem(hand, 40_000 + k, (4, 5)) for k in range(args.problems)]
-    trifinger = gt.load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml"))
+    trifinger = load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml"))
     tri = gt.Robot(trifinger)
     tri_problems = [gt.random_reachable_problem(tri, 41_000 + k) for k in range(min(args.problems, 40))]
     cases = [("hand, random 4-5 fingers", gt.Solver("hand"), lambda p: gt.solve(p), problems),

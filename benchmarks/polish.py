@@ -36,6 +36,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets, time_interleaved
+from graspnet_torch.fcnn import load_finger_ik
 
 STEP_TARGET = 3.0
 MANY_TARGET = 2.0
@@ -51,7 +52,7 @@ def step_part(iterations: int) -> tuple[list[tuple[str, bool]], list[str]]:
     from graspnet_torch.solver.api import build_environment
 
     robot = gt.load_robot("hand")
-    ik = gt.load_finger_ik(robot)
+    ik = load_finger_ik(robot)
     checks, lines = [], []
     for P, runs, fingers in ((1, 20, None), (64, 4, None), (250, 4, None), (1, 20, 5), (64, 4, 5), (250, 4, 5)):
         problems = [gt.random_reachable_problem(robot, 20_000 + k, fingers) for k in range(P)]

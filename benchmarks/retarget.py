@@ -9,8 +9,8 @@ Needs the ``retarget`` extra (``pip install -e '.[retarget]'``: dex-retargeting,
 ``python benchmarks/any_hand.py --export``).
 
 Both methods get the same frames: (a) ``--sequences`` smooth sequences of ``--frames`` frames
-(``gt.random_sequence``: contact fingertips move <= 1 cm and the palm turns <= 5 deg per frame),
-(b) ``--problems`` independent random reachable problems (one-frame ``gt.random_sequence``: a
+(``random_sequence``: contact fingertips move <= 1 cm and the palm turns <= 5 deg per frame),
+(b) ``--problems`` independent random reachable problems (one-frame ``random_sequence``: a
 posture uniform in the search space, as ``gt.random_reachable_problem`` draws it, which also gives
 the true palm pose), each with ``--fingers`` contact fingers. Methods:
 
@@ -65,6 +65,7 @@ import graspnet_torch as gt
 from graspnet_torch.benchmarking import check_targets
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_from_degrees, pose_to_rt
 from graspnet_torch.table import markdown_table
+from graspnet_torch.tasks import random_sequence
 
 SEQ_BELOW_PCT, SEQ_MS, ONE_BELOW_PCT, ONE_MS, JUMP_DEG, FITS_M = 99.0, 3.0, 99.5, 15.0, 20.0, 0.01
 TUNED_FTOL, TUNED_MAXEVAL = 1e-9, 300
@@ -277,10 +278,10 @@ def main() -> int:
         ap.error(f"--robot {args.robot}: a free hand is needed (dex-retargeting's dummy free joint), got "
                  f"a robot of kind '{robot.kind}'")
     fingers = tuple(args.fingers)
-    sequences = [gt.random_sequence(robot, 30_000 + s, args.frames, fingers) for s in range(args.sequences)]
+    sequences = [random_sequence(robot, 30_000 + s, args.frames, fingers) for s in range(args.sequences)]
     # an independent problem: a sequence's first frame (a posture uniform in the search space, as
     # gt.random_reachable_problem draws it), which carries its posture (the true wrist)
-    singles = [gt.random_sequence(robot, 40_000 + k, 1, fingers) for k in range(args.problems)]
+    singles = [random_sequence(robot, 40_000 + k, 1, fingers) for k in range(args.problems)]
 
     methods: dict[str, Callable[[list[list[gt.GraspProblem]]], Run]] = {
         "ours, cold (Solver.solve)": lambda s: run_ours_cold(robot, s),

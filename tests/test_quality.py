@@ -234,7 +234,7 @@ def test_torch_in_torch_out_batched_equals_one_at_a_time():
     d = q.to_dict()
     assert isinstance(d["epsilon"], list) and len(d["epsilon"]) == 4
     assert ferrari_canny is epsilon
-    assert gt.grasp_quality is grasp_quality and gt.GraspQuality is GraspQuality
+    assert gt.grasp_quality is grasp_quality and GraspQuality is GraspQuality
 
 
 def test_bad_inputs_say_what_is_wrong():

@@ -11,10 +11,12 @@ from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.configs import SolveGraspJobCfg, TrainFCNNJobCfg, TrainPostureJobCfg, estimate_solve_memory
 from graspnet_torch.proposal import ProposalCfg
 from graspnet_torch.settings import Free, build, lookup, setting, short, unset
+from graspnet_torch.solver import NoiseCfg
+from graspnet_torch.srv import SRVNetCfg
 
 
 def test_defaults_build_and_equal_the_dataclass_defaults():
-    for cls in (gt.SolverCfg, gt.SRVNetCfg, gt.RewardCfg, gt.NoiseCfg, FCNNTrainCfg, SolveGraspJobCfg, TrainFCNNJobCfg,
+    for cls in (gt.SolverCfg, SRVNetCfg, gt.RewardCfg, NoiseCfg, FCNNTrainCfg, SolveGraspJobCfg, TrainFCNNJobCfg,
                 ProposalCfg, TrainPostureJobCfg):
         assert build(cls, {}) == cls() == build(cls, None)
 
@@ -51,7 +53,7 @@ def test_every_field_of_every_job_has_a_type_the_checker_knows():
 
 def test_strict_types_and_ranges():
     assert build(gt.SolverCfg, {"threshold": 1, "time_budget": 5}).threshold == 1.0  # an int is a number
-    assert build(gt.SRVNetCfg, {"hidden": [8, 9]}).hidden == (8, 9)
+    assert build(SRVNetCfg, {"hidden": [8, 9]}).hidden == (8, 9)
     bad = [({"max_iterations": True}, "expected an integer"), ({"max_iterations": 2.0}, "expected an integer"),
            ({"max_iterations": 0}, "in [1, 10000000]"), ({"threshold": "0.9"}, "expected a number"),
            ({"threshold": float("nan")}, "expected a number"), ({"dtype": "float7"}, "one of float32, float64"),
@@ -63,7 +65,7 @@ def test_strict_types_and_ranges():
 
 def test_nested_keys_and_lookup():
     with pytest.raises(gt.ConfigError, match=r"srv.sigma.kind='cubic': expected one of linear, quadratic"):
-        build(gt.SRVNetCfg, {"sigma": {"kind": "cubic"}}, "srv")
+        build(SRVNetCfg, {"sigma": {"kind": "cubic"}}, "srv")
     assert lookup(SolveGraspJobCfg, "srv.sigma.scale")[1]["lo_open"] is True
     assert lookup(SolveGraspJobCfg, "task.contacts")[0] is Free
     assert lookup(SolveGraspJobCfg, "solver.nope") is None

@@ -34,11 +34,13 @@ import graspnet_torch as gt
 from graspnet_torch.experiments.report import ExperimentReport, arm_cell, batch_cell, progress
 from graspnet_torch.paths import configs_dir, repo_root
 from graspnet_torch.proposal import proposal_of
+from graspnet_torch.robot import load_robot_cfg
 from graspnet_torch.settings import setting
 from graspnet_torch.solver import api
 from graspnet_torch.solver.config import DEFAULT_TRIALS
 from graspnet_torch.solver.environments import build_environment
 from graspnet_torch.solver.proposals import proposals
+from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
@@ -124,7 +126,7 @@ def _noise(trials: int) -> tuple[str, dict]:
 
     preset = OmegaConf.load(configs_dir() / "noise" / "sigma0.2.yaml")
     reward = gt.RewardCfg(a=float(preset.reward.a))
-    srv = gt.SRVNetCfg(sigma=gt.SigmaCfg(scale=float(preset.srv.sigma.scale)))
+    srv = SRVNetCfg(sigma=SigmaCfg(scale=float(preset.srv.sigma.scale)))
     base = {"threshold": None, "polish": gt.PolishCfg(mode=preset.solver.polish.mode), "max_iterations": 2000,
             "history": False}
     variants = {"preset, proposal": (srv, _solver("proposal", **base)), "preset, random": (srv, _solver("random",
@@ -181,7 +183,7 @@ def run_proposal(cfg: ProposalExperimentCfg, out: Path) -> ExperimentReport:
     noise_text, noise_at = _noise(cfg.noise_trials)
     arm_text, arm_at = _arm(cfg.arm_seeds)
     manus_text, manus_at = _manus(cfg.manus_positions, cfg.manus_runs)
-    tri = gt.Robot(gt.load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml")))
+    tri = gt.Robot(load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml")))
     tri_text, tri_at = _hand_rows(tri, [gt.random_reachable_problem(tri, 51_000 + k)
                                         for k in range(max(2, cfg.problems // 4))], "trifinger")
     body = "\n\n".join([

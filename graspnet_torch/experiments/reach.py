@@ -25,6 +25,7 @@ import numpy as np
 import graspnet_torch as gt
 from graspnet_torch.collision.problems import random_obstacle_problems
 from graspnet_torch.experiments.report import ExperimentReport, Figure, progress
+from graspnet_torch.motion import check_motion
 from graspnet_torch.settings import setting
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
@@ -71,7 +72,7 @@ def _reach(row: _Row, problem: gt.GraspProblem, result: gt.GraspResult, cfg: gt.
         return
     row.found += 1
     row.durations.append(float(motion.times[-1]))
-    bad = gt.check_motion(robot, problem, result.best, motion, cfg)
+    bad = check_motion(robot, problem, result.best, motion, cfg)
     row.checked += not bad
     for reason in bad:
         row.reasons[f"re-check: {reason}"] = row.reasons.get(f"re-check: {reason}", 0) + 1

@@ -35,6 +35,7 @@ from graspnet_torch.experiments.report import ExperimentReport, arm_cell, batch_
 from graspnet_torch.paths import configs_dir
 from graspnet_torch.settings import setting
 from graspnet_torch.solver.config import DEFAULT_TRIALS, paper_protocol
+from graspnet_torch.srv import SigmaCfg, SRVNetCfg
 from graspnet_torch.table import markdown_table
 from graspnet_torch.tasks.manus import cube_problem, protocol_positions
 
@@ -121,8 +122,8 @@ def noise(trials: int, levels: tuple[float, ...]) -> tuple[str, dict]:
         a, scale = float(preset.reward.a), float(preset.srv.sigma.scale)
         solver = {**POINT, "threshold": None, "polish": {"mode": preset.solver.polish.mode}, "max_iterations": 2000,
                   "history": False}
-        variants = {f"srv, preset (a = {a:g}, scale {scale:g})": (gt.RewardCfg(a=a), gt.SRVNetCfg(
-                        sigma=gt.SigmaCfg(scale=scale)), solver),
+        variants = {f"srv, preset (a = {a:g}, scale {scale:g})": (gt.RewardCfg(a=a), SRVNetCfg(
+                        sigma=SigmaCfg(scale=scale)), solver),
                     f"cmaes (a = {a:g})": (gt.RewardCfg(a=a), None, {**solver, "method": "cmaes"}),
                     "srv, the paper's a = 1": (gt.RewardCfg(a=1.0), None, solver)}
         for task in ("block5", "glass4"):

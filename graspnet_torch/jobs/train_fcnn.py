@@ -1,5 +1,5 @@
 """Train the FCNN of every finger of a robot: progress bar, TensorBoard, resumable state,
-closing accuracy table, and (``export``) the checkpoint that ``gt.load_finger_ik`` reads."""
+closing accuracy table, and (``export``) the checkpoint that ``load_finger_ik`` reads."""
 
 from __future__ import annotations
 

@@ -9,14 +9,16 @@ import torch
 import yaml
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import FingerIK, load_finger_ik
 from graspnet_torch.fcnn.checkpoint import default_checkpoint, save_finger_ik
 from graspnet_torch.fcnn.evaluate import heldout_targets
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.robot import load_robot_cfg
 
 
 @pytest.fixture(scope="module")
 def ik(hand):
-    return gt.load_finger_ik(hand)
+    return load_finger_ik(hand)
 
 
 def test_shipped_checkpoint_covers_every_finger(ik, hand):
@@ -85,7 +87,7 @@ def test_unknown_finger(ik):
 
 def test_checkpoint_round_trip(ik, hand, tmp_path):
     path = save_finger_ik(ik, tmp_path / "fcnn.pt", {"note": "test"})
-    again = gt.load_finger_ik(hand, path)
+    again = load_finger_ik(hand, path)
     _, x = heldout_targets(ik, "ring", n=500, seed=3)
     assert torch.equal(ik.solve("ring", x, refine=1)[0], again.solve("ring", x, refine=1)[0])
 
@@ -94,23 +96,23 @@ def test_corrupted_checkpoint_names_the_file(hand, tmp_path):
     path = tmp_path / "broken.pt"
     path.write_bytes(default_checkpoint("hand").read_bytes()[:5000])
     with pytest.raises(gt.CheckpointError, match=r"broken.pt: not a readable checkpoint"):
-        gt.load_finger_ik(hand, path)
+        load_finger_ik(hand, path)
     path.write_bytes(b"not a checkpoint at all")
     with pytest.raises(gt.CheckpointError, match=r"broken.pt"):
-        gt.load_finger_ik(hand, path)
+        load_finger_ik(hand, path)
 
 
 def test_missing_checkpoint(hand, tmp_path):
     with pytest.raises(gt.CheckpointError, match=r"nope.pt: FCNN checkpoint not found"):
-        gt.load_finger_ik(hand, tmp_path / "nope.pt")
+        load_finger_ik(hand, tmp_path / "nope.pt")
 
 
 def test_checkpoint_for_another_robot_or_chain_is_refused(ik, robots, tmp_path):
     arm_hand = robots["arm_hand"]  # same fingers, other robot name
     with pytest.raises(gt.CheckpointError, match=r"fcnn.pt: trained for robot 'hand', not 'arm_hand'"):
-        gt.load_finger_ik(arm_hand, default_checkpoint("hand"))
+        load_finger_ik(arm_hand, default_checkpoint("hand"))
     # a hand whose index finger has other joint limits: same names, different chain
-    urdf = gt.load_robot_cfg("hand").urdf.read_text()
+    urdf = load_robot_cfg("hand").urdf.read_text()
     assert 'upper="1.919862177"' in urdf  # 110 deg, first used by index_pip
     urdf = urdf.replace('upper="1.919862177"', 'upper="1.8"', 1)
     (tmp_path / "hand.urdf").write_text(urdf)
@@ -119,7 +121,7 @@ def test_checkpoint_for_another_robot_or_chain_is_refused(ik, robots, tmp_path):
     (tmp_path / "hand.yaml").write_text(yaml.safe_dump(cfg))
     changed = gt.load_robot(tmp_path / "hand.yaml")
     with pytest.raises(gt.CheckpointError, match=r"finger '\w+' was trained for a different chain"):
-        gt.load_finger_ik(changed, default_checkpoint("hand"))
+        load_finger_ik(changed, default_checkpoint("hand"))
 
 
 @pytest.mark.slow
@@ -129,7 +131,7 @@ def test_candidates_and_fallback_never_worsen_and_rescue_poor_answers(hand, inde
     from graspnet_torch.fcnn.train import FCNNTrainCfg, FingerTrainer
 
     trainer = FingerTrainer(index_chain, FCNNTrainCfg(val_targets=500), seed=0)  # never trained
-    untrained = gt.FingerIK(hand, {"index": trainer.experts})
+    untrained = FingerIK(hand, {"index": trainer.experts})
     x = trainer.val_x
     _, e1 = untrained.solve("index", x, refine=1)
     _, e2 = untrained.solve("index", x, refine=1, candidates=2)
@@ -152,4 +154,4 @@ def test_checkpoint_with_non_finite_weights_or_zero_scale_is_refused(ik, hand, t
     payload["fingers"]["index"]["state"][key].view(-1)[0] = value
     torch.save(payload, path)
     with pytest.raises(gt.CheckpointError, match=message):
-        gt.load_finger_ik(hand, path)
+        load_finger_ik(hand, path)

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 import graspnet_torch as gt
+from graspnet_torch.robot import available_robots, load_robot_cfg
 from graspnet_torch.robot.geometry import link_shapes
 from tests.mesh_robots import mesh_hand_urdf, write_box_mesh, write_robot
 from tests.odd_hands import oddhand_urdf, write_oddhand
@@ -125,9 +126,9 @@ def test_a_urdf_of_too_many_links_is_refused_before_the_tree_is_built(tmp_path):
 
 
 def test_the_shipped_and_example_robots_pass_the_checks():
-    for name in (*gt.available_robots(), "examples/trifinger/trifinger.yaml"):
+    for name in (*available_robots(), "examples/trifinger/trifinger.yaml"):
         try:
-            cfg = gt.load_robot_cfg(name)
+            cfg = load_robot_cfg(name)
         except gt.ConfigError as exc:  # an example whose URDF comes with an optional package
             assert "is not installed" in str(exc) or "file not found" in str(exc), exc
             continue
@@ -194,5 +195,5 @@ def test_meshes_inside_the_robots_folders_still_load(tmp_path, monkeypatch):
     outside = _mesh_robot(tmp_path, str(tmp_path / "elsewhere" / "palm.stl"))
     with pytest.raises(gt.ConfigError, match="is outside the URDF's folder"):
         link_shapes(gt.load_robot(outside).urdf)
-    robot = gt.Robot(gt.load_robot_cfg(outside, allow_outside_paths=True))
+    robot = gt.Robot(load_robot_cfg(outside, allow_outside_paths=True))
     assert [s.kind for s in link_shapes(robot.urdf) if s.link == "palm"] == ["mesh"]

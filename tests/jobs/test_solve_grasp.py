@@ -6,7 +6,9 @@ import json
 
 import pytest
 
+from graspnet_torch.errors import InternalError
 from graspnet_torch.paths import repo_root
+from graspnet_torch.tasks import random_sequence
 from tests.in_process import ScriptRun, run_script
 
 
@@ -79,7 +81,6 @@ def _job_cfg(out, **extra):
 
 
 def test_a_non_finite_result_is_an_internal_error_and_writes_nothing(tmp_path, monkeypatch, capsys):
-    import graspnet_torch as gt
     from graspnet_torch.jobs import solve_grasp as job
     from graspnet_torch.jobs.cli import user_errors_exit_2
 
@@ -93,7 +94,7 @@ def test_a_non_finite_result_is_an_internal_error_and_writes_nothing(tmp_path, m
 
     monkeypatch.setattr(job, "solve", nan_solve)
     out = tmp_path / "r.json"
-    with pytest.raises(gt.InternalError, match=r"not finite .* in palm_pose\[0\]"):
+    with pytest.raises(InternalError, match=r"not finite .* in palm_pose\[0\]"):
         job.solve_grasp(_job_cfg(out), tmp_path)
     assert not out.exists() and not list(tmp_path.glob(".r.json*"))
     with pytest.raises(SystemExit) as info:
@@ -282,7 +283,7 @@ def test_a_sequence_of_frames_is_tracked_in_order_from_a_jsonl_file(hand, tmp_pa
     import graspnet_torch as gt
 
     robot = gt.load_robot("hand")
-    frames = gt.random_sequence(robot, 3, 6, n_fingers=4)
+    frames = random_sequence(robot, 3, 6, n_fingers=4)
     path = tmp_path / "frames.jsonl"
     path.write_text("".join(json.dumps(f.to_mapping()) + "\n" for f in frames))
     out = tmp_path / "results"

@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import load_finger_ik
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
 from graspnet_torch.paths import repo_root
@@ -28,7 +29,7 @@ def test_job_writes_state_experts_tensorboard_and_export(hand, tmp_path, capsys)
     assert list((tmp_path / "run" / "tb").glob("events.out.tfevents.*"))
     assert [r["finger"] for r in rows] == ["index", "pinky"] and all(r["within_limits"] for r in rows)
     assert "median mm" in out and "pinky" in out
-    loaded = gt.load_finger_ik(hand, export)
+    loaded = load_finger_ik(hand, export)
     assert loaded.finger_names == ("index", "pinky")
 
 

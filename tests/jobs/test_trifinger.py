@@ -17,7 +17,9 @@ import torch
 import yaml
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import load_finger_ik
 from graspnet_torch.paths import repo_root
+from graspnet_torch.robot import load_robot_cfg
 from tests.in_process import run_script
 
 PACKAGE = "robot_properties_fingers"  # not imported: its __init__ imports pinocchio
@@ -60,7 +62,7 @@ def trained(tmp_path_factory):
 
 
 def test_example_config_names_the_packaged_urdf():
-    cfg = gt.load_robot_cfg(EXAMPLE / "trifinger.yaml")
+    cfg = load_robot_cfg(EXAMPLE / "trifinger.yaml")
     data = yaml.safe_load((EXAMPLE / "trifinger.yaml").read_text())
     assert data["urdf"] == "package://robot_properties_fingers/urdf/pro/trifingerpro.urdf"
     assert cfg.urdf == (_package_root() / "urdf" / "pro" / "trifingerpro.urdf").resolve()
@@ -74,7 +76,7 @@ def test_training_exports_the_checkpoint_beside_the_config(trained):
     assert (folder / "trifinger.fcnn.pt").is_file() and (folder / "run" / "state.pt").is_file()
     assert robot.cfg.checkpoint == (folder / "trifinger.fcnn.pt").resolve()
     assert [r["finger"] for r in rows] == ["f0", "f120", "f240"] and all(r["within_limits"] for r in rows)
-    loaded = gt.load_finger_ik(robot)
+    loaded = load_finger_ik(robot)
     assert loaded.finger_names == ik.finger_names == ("f0", "f120", "f240")
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import graspnet_torch as gt
-from graspnet_torch.motion import MotionChecker, StateLayout, start_posture, time_path
+from graspnet_torch.motion import MotionChecker, StateLayout, check_motion, start_posture, time_path
 from graspnet_torch.solver.postures import trial_posture
 
 
@@ -59,7 +59,7 @@ def test_the_motion_goes_around_what_the_straight_line_hits(env2):
     assert checker.first_collision(start, straight, 0.5, 1.0) is not None  # the straight line collides
     motion = gt.plan_reach(problem, result)
     assert motion.found, motion.reason
-    assert gt.check_motion(robot, problem, result.best, motion) == []
+    assert check_motion(robot, problem, result.best, motion) == []
     assert np.allclose(motion.positions[0], start, atol=1e-9) and np.allclose(motion.positions[-1], goal, atol=1e-9)
     body = motion.positions[:, :7]
     line = goal[:7] - start[:7]
@@ -76,9 +76,9 @@ def test_the_re_check_catches_a_motion_through_an_obstacle_or_too_fast(env2):
     assert motion.found
     s = np.linspace(0.0, 1.0, len(motion.times))[:, None]
     through = replace(motion, positions=motion.positions[0] + s * (motion.positions[-1] - motion.positions[0]))
-    assert any("FCL finds a collision" in m for m in gt.check_motion(robot, problem, result.best, through))
+    assert any("FCL finds a collision" in m for m in check_motion(robot, problem, result.best, through))
     fast = replace(motion, times=motion.times / 2)
-    assert any("velocity exceeds" in m for m in gt.check_motion(robot, problem, result.best, fast))
+    assert any("velocity exceeds" in m for m in check_motion(robot, problem, result.best, fast))
 
 
 @pytest.mark.slow
@@ -88,7 +88,7 @@ def test_the_manus_reaches_the_cube_from_home_with_its_jaws_touching_only_at_the
     robot = gt.load_robot("manus")
     motion = gt.plan_reach(problem, result)
     assert motion.found, motion.reason
-    assert gt.check_motion(robot, problem, result.best, motion) == []
+    assert check_motion(robot, problem, result.best, motion) == []
     checker = MotionChecker(robot, problem, StateLayout.of(robot))
     arrived = checker.arrived(motion.positions)
     assert arrived[-1] and not arrived[0] and np.all(np.diff(arrived.astype(int)) >= 0)  # touching: the end only
@@ -104,7 +104,7 @@ def test_a_free_hand_approaches_from_its_pre_grasp():
     assert motion.found, motion.reason
     assert motion.joint_names[:6] == ["palm_x", "palm_y", "palm_z", "palm_rx", "palm_ry", "palm_rz"]
     assert np.linalg.norm(motion.positions[0, :3] - motion.positions[-1, :3]) == pytest.approx(0.08)
-    assert gt.check_motion(robot, problem, result.best, motion) == []
+    assert check_motion(robot, problem, result.best, motion) == []
 
 
 @pytest.mark.slow
@@ -203,4 +203,4 @@ def test_a_surface_grasp_is_reached_through_its_own_pre_grasp():
     pre[:6] = goal[:6]
     assert np.abs(motion.positions - pre).max(1).min() < 1e-9  # a row is the pre-grasp
     np.testing.assert_allclose(motion.positions[-1], goal, atol=1e-9)
-    assert gt.check_motion(robot, problem, result.best, motion) == []
+    assert check_motion(robot, problem, result.best, motion) == []

@@ -10,20 +10,21 @@ import yaml
 
 import graspnet_torch as gt
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.robot import RobotCfg, available_robots, load_robot_cfg
 
 
 def test_shipped_robots_are_listed():
-    assert set(gt.available_robots()) >= {"hand", "arm_hand", "manus"}
+    assert set(available_robots()) >= {"hand", "arm_hand", "manus"}
 
 
 @pytest.mark.parametrize("name", ["hand", "arm_hand", "manus"])
 def test_every_shipped_config_loads(name):
-    cfg = gt.load_robot_cfg(name)
+    cfg = load_robot_cfg(name)
     assert cfg.name == name and cfg.urdf.is_file()
 
 
 def test_hand_palm_bounds_are_paper_table_1():
-    b = gt.load_robot_cfg("hand").palm_bounds
+    b = load_robot_cfg("hand").palm_bounds
     d = math.pi / 180
     np.testing.assert_allclose(b.lower, [-0.1, -0.1, 0.15, -45 * d, -45 * d, -135 * d])
     np.testing.assert_allclose(b.upper, [0.1, 0.1, 0.25, 45 * d, 45 * d, -45 * d])
@@ -103,14 +104,14 @@ def test_unknown_key_and_missing_key(tmp_path):
 def test_hand_names_an_arms_free_hand(tmp_path):
     """``hand``: only beside an arm, a name or a file (a file relative to the config's folder)."""
     with pytest.raises(gt.ConfigError, match=r"'hand' \(a robot with an arm: its free hand, name or file\) got 'hand'"):
-        gt.load_robot_cfg(_hand_yaml(tmp_path, hand="hand"))
+        load_robot_cfg(_hand_yaml(tmp_path, hand="hand"))
     data = yaml.safe_load((configs_dir() / "robot" / "arm_hand.yaml").read_text())
     for bad in (3, "", ["hand"]):
         with pytest.raises(gt.ConfigError, match=r"'hand' \(a robot with an arm"):
-            gt.RobotCfg.from_mapping({**data, "hand": bad}, "arm.yaml")
+            RobotCfg.from_mapping({**data, "hand": bad}, "arm.yaml")
     folder = tmp_path / "arm"
-    cfg = gt.RobotCfg.from_mapping({**data, "hand": "my_hand.yaml"}, "arm.yaml", folder=folder)
-    assert cfg.hand == str(folder / "my_hand.yaml") and gt.load_robot_cfg("arm_hand").hand == "hand"
+    cfg = RobotCfg.from_mapping({**data, "hand": "my_hand.yaml"}, "arm.yaml", folder=folder)
+    assert cfg.hand == str(folder / "my_hand.yaml") and load_robot_cfg("arm_hand").hand == "hand"
 
 
 def test_malformed_yaml_names_the_file(tmp_path):
@@ -144,7 +145,7 @@ def _installed_package(tmp_path, monkeypatch, name="fake_hand_description"):
 
 def test_urdf_inside_an_installed_package(tmp_path, monkeypatch):
     root = _installed_package(tmp_path, monkeypatch)
-    cfg = gt.load_robot_cfg(_hand_yaml(tmp_path, urdf="package://fake_hand_description/urdf/hand.urdf"))
+    cfg = load_robot_cfg(_hand_yaml(tmp_path, urdf="package://fake_hand_description/urdf/hand.urdf"))
     assert cfg.urdf == (root / "urdf" / "hand.urdf").resolve()
     assert gt.load_robot(cfg).n_fingers == 5
 
@@ -165,7 +166,7 @@ def test_urdf_inside_an_installed_package(tmp_path, monkeypatch):
 def test_bad_package_urdf_is_one_line(tmp_path, monkeypatch, urdf, message):
     _installed_package(tmp_path, monkeypatch)
     with pytest.raises(gt.ConfigError, match=message) as info:
-        gt.load_robot_cfg(_hand_yaml(tmp_path, urdf=urdf))
+        load_robot_cfg(_hand_yaml(tmp_path, urdf=urdf))
     assert "\n" not in str(info.value)
 
 
@@ -181,4 +182,4 @@ def test_a_link_out_of_the_package_is_refused(tmp_path, monkeypatch):
     config.parent.mkdir()
     config.write_text(yaml.safe_dump(data))
     with pytest.raises(gt.ConfigError, match=r"is outside the file's folder, the repository and installed packages"):
-        gt.load_robot_cfg(config)
+        load_robot_cfg(config)

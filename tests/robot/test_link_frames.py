@@ -16,6 +16,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.paths import repo_root
+from graspnet_torch.robot import available_robots
 from graspnet_torch.robot.kernel import ChainKernel, TreeKernel
 from graspnet_torch.robot.transforms import pose_to_matrix
 from tests.odd_hands import write_coupled_hand, write_odd_arm, write_oddhand
@@ -109,7 +110,7 @@ def assert_link_frames_match_oracle(robot, gen: torch.Generator, B: int = 16) ->
     np.testing.assert_allclose(frames, want, atol=1e-9, rtol=0)
 
 
-@pytest.mark.parametrize("name", gt.available_robots())
+@pytest.mark.parametrize("name", available_robots())
 def test_link_frames_of_every_shipped_robot_match_pytorch_kinematics(name, gen):
     robot = gt.load_robot(name)
     assert_link_frames_match_oracle(robot, gen)

@@ -13,8 +13,10 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import load_finger_ik
 from graspnet_torch.fcnn.train import FCNNTrainCfg
 from graspnet_torch.jobs.train_fcnn import train_fcnn
+from graspnet_torch.tasks import random_sequence
 from tests.odd_hands import MIMIC, pk_fingertips_palm, write_odd_arm, write_oddhand
 
 pytestmark = pytest.mark.slow  # every test shares a module fixture that trains the odd hand's FCNN
@@ -36,7 +38,7 @@ def test_expert_sets_are_sized_from_each_chain_and_exported_beside_the_config(tr
     assert {f: ik.experts[f].n_joints for f in robot.finger_names} == {"thumb": 4, "index": 3, "middle": 2, "ring": 2}
     assert [r["finger"] for r in rows] == list(robot.finger_names)
     assert robot.cfg.checkpoint.is_file()
-    loaded = gt.load_finger_ik(robot)  # found beside the config
+    loaded = load_finger_ik(robot)  # found beside the config
     x = robot.fingertips_base(torch.zeros(1, 4, 4)).float().expand(5, 4, 3)
     torch.testing.assert_close(loaded.solve_fingers(x)[0], ik.solve_fingers(x)[0])
 
@@ -92,7 +94,7 @@ def test_an_arm_carries_another_hand(trained, tmp_path):
     arm = gt.load_robot(str(write_odd_arm(tmp_path, checkpoint=str(robot.cfg.checkpoint))))
     assert arm.body_joint_names == ("shoulder_yaw", "shoulder_pitch", "elbow", "wrist_roll")
     assert arm.dof == 4 + 11
-    arm_ik = gt.load_finger_ik(arm)  # the hand's checkpoint: fingerprints match
+    arm_ik = load_finger_ik(arm)  # the hand's checkpoint: fingerprints match
     problem = gt.random_reachable_problem(arm, 2, n_fingers=2)
     result = gt.solve(problem, trials=8, seed=0, robot=arm, finger_ik=arm_ik, max_iterations=400,
                       solver={"polish": {"mode": "whole"}})
@@ -110,7 +112,7 @@ def test_tracking_the_odd_hand_bounds_each_free_joints_step(trained):
     """Fingers of different sizes, a mimic joint: a tracked sequence's warm starts move no free
     finger joint more than solver.polish.warm_step_deg (the padding slots never move) and land."""
     robot, ik, _ = trained
-    frames = gt.random_sequence(robot, 5, 8, (3, 4))
+    frames = random_sequence(robot, 5, 8, (3, 4))
     results = gt.Solver(robot, trials=8, finger_ik=ik).track(frames)
     step = math.radians(gt.SolverCfg().polish.warm_step_deg)
     idx = [robot.finger_index(f) for f in frames[0].fingers]

@@ -9,7 +9,9 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import load_finger_ik
 from graspnet_torch.solver.arm import ArmHandEnvironment
+from graspnet_torch.srv import SRVNetCfg
 
 
 @pytest.fixture(scope="module")
@@ -32,13 +34,13 @@ def problem_from_arm_posture(robot, fingers, seed=0, bounds=None):
 
 
 def test_the_hand_checkpoint_serves_the_arm_hand(arm_hand):
-    ik = gt.load_finger_ik(arm_hand)  # configs/robot/arm_hand.yaml: checkpoint: checkpoints/hand/fcnn.pt
+    ik = load_finger_ik(arm_hand)  # configs/robot/arm_hand.yaml: checkpoint: checkpoints/hand/fcnn.pt
     assert ik.finger_names == arm_hand.finger_names
 
 
 def test_evaluation_agrees_with_forward_kinematics(arm_hand):
     problem, qa = problem_from_arm_posture(arm_hand, ("thumb", "index", "middle"), seed=1)
-    env = ArmHandEnvironment(arm_hand, problem, gt.SolverCfg(), gt.load_finger_ik(arm_hand), dtype=torch.float64)
+    env = ArmHandEnvironment(arm_hand, problem, gt.SolverCfg(), load_finger_ik(arm_hand), dtype=torch.float64)
     assert env.n == 7
     configs = torch.stack([qa, (env.lower + env.upper) / 2])
     ev = env.evaluate(configs)
@@ -98,8 +100,8 @@ def test_the_robot_chooses_its_solver_defaults_and_the_user_overrides_them():
 
 
 @pytest.mark.parametrize(("task", "srv", "reward", "max_iterations", "ratio"), [
-    ("glass3", gt.SRVNetCfg(), gt.RewardCfg(kind="r1"), 1000, 0.6),
-    ("env1", gt.SRVNetCfg(lr_bp=0.03, lr_srv=0.03, lr_lms=0.01), None, 1000, 0.7),
+    ("glass3", SRVNetCfg(), gt.RewardCfg(kind="r1"), 1000, 0.6),
+    ("env1", SRVNetCfg(lr_bp=0.03, lr_srv=0.03, lr_lms=0.01), None, 1000, 0.7),
 ])
 @pytest.mark.slow
 def test_learning_beats_the_same_loop_with_learning_rates_at_zero(task, srv, reward, max_iterations, ratio):
@@ -107,7 +109,7 @@ def test_learning_beats_the_same_loop_with_learning_rates_at_zero(task, srv, rew
     needs clearly fewer iterations (failures count as the whole budget) and reaches r > 0.99 at
     least as often as the same loop with alpha_BP = alpha_SRV = rho = 0 (exploration only).
     Measured: glass3 (R1, section 5) 50 vs 170 mean iterations; env1 (R3) 421 vs 900, 24/30 vs 6/30."""
-    frozen = gt.SRVNetCfg(lr_bp=0.0, lr_srv=0.0, lr_lms=0.0)
+    frozen = SRVNetCfg(lr_bp=0.0, lr_srv=0.0, lr_lms=0.0)
     runs = {}
     for name, cfg in (("learning", srv), ("frozen", frozen)):
         result = gt.solve(task, trials=30, seed=0, srv=cfg, reward=reward,

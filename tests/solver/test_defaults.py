@@ -10,6 +10,7 @@ import graspnet_torch as gt
 from graspnet_torch.jobs.configs import SolveGraspJobCfg
 from graspnet_torch.jobs.solve_grasp import with_robot_defaults
 from graspnet_torch.paths import configs_dir
+from graspnet_torch.robot import available_robots, load_robot_cfg
 from graspnet_torch.solver.defaults import check_solver_defaults
 
 BAD = [
@@ -24,7 +25,7 @@ def _hand_cfg(tmp_path, defaults):
     data["solver_defaults"] = defaults
     path = tmp_path / "robot.yaml"
     path.write_text(yaml.safe_dump(data))
-    return gt.load_robot_cfg(path)
+    return load_robot_cfg(path)
 
 
 @pytest.mark.parametrize(("defaults", "message"), BAD)
@@ -38,8 +39,8 @@ def test_bad_solver_defaults_are_refused_naming_the_robots_file(tmp_path, defaul
 
 
 def test_the_shipped_solver_defaults_pass():
-    for name in gt.available_robots():
-        check_solver_defaults(gt.load_robot_cfg(name))
+    for name in available_robots():
+        check_solver_defaults(load_robot_cfg(name))
 
 
 def test_the_command_lines_solver_group_leaves_the_cone_and_squeeze_to_the_robot(tmp_path):
@@ -51,7 +52,7 @@ def test_the_command_lines_solver_group_leaves_the_cone_and_squeeze_to_the_robot
     group = yaml.safe_load((configs_dir() / "solver" / "srv.yaml").read_text())
     assert group["normal_cone_deg"] is None and group["squeeze_mm"] is None
     robot = _hand_cfg(tmp_path, {"solver": {"normal_cone_deg": 60, "squeeze_mm": 15}})
-    plain = gt.load_robot_cfg("hand")
+    plain = load_robot_cfg("hand")
     for given, cfg, want in (({}, robot, (60, 15)), ({}, plain, (SolverCfg.normal_cone_deg, SolverCfg.squeeze_mm)),
                              ({"normal_cone_deg": 45}, robot, (45, 15))):
         job, groups, _ = job_settings({"solver": {**group, **given}})

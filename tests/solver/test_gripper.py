@@ -12,6 +12,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.robot.robot import Posture
+from graspnet_torch.solver import GripperCfg
 from graspnet_torch.solver.gripper import GripperEnvironment
 from graspnet_torch.solver.search_space import gripper_bounds
 
@@ -28,7 +29,7 @@ def test_evaluation_is_eq_24_to_28_of_forward_kinematics(manus):
     """d = min of the two pairings' summed distances and |n_g . n_o|, with the gripper points from
     pytorch-kinematics link frames (float64)."""
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
-    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)), dtype=torch.float64)
+    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=GripperCfg(settle=0)), dtype=torch.float64)
     assert env.n == 9
     g = torch.Generator().manual_seed(0)
     q = env.lower + (env.upper - env.lower) * torch.rand(5, 9, generator=g, dtype=torch.float64)
@@ -112,7 +113,7 @@ def test_polish_lands_from_random_starts(manus):
     q0 = torch.tensor([[0.1, -0.2, 0.3, 0.5, 0.4, -1.0, 0.7, 0.2, -0.4]], dtype=torch.float64)
     points = manus.gripper_points(q0)[0].tolist()
     problem = gt.GraspProblem.from_mapping({"robot": "manus", "points": points}, source="reachable")
-    cfg = gt.SolverCfg(gripper=gt.GripperCfg(settle=0, polish_iterations=200))
+    cfg = gt.SolverCfg(gripper=GripperCfg(settle=0, polish_iterations=200))
     env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64)
     g = torch.Generator().manual_seed(5)
     starts = env.lower + (env.upper - env.lower) * torch.rand(40, 9, generator=g, dtype=torch.float64)
@@ -128,7 +129,7 @@ def test_polish_and_refine_never_step_into_a_collision(manus):
     """With collisions counted, a polish step that raises the proxy's count is refused: starts
     that are clear stay clear."""
     problem = gt.GraspProblem.from_task("cube")
-    cfg = gt.SolverCfg(gripper=gt.GripperCfg(settle=0, polish_iterations=100))  # the polish alone
+    cfg = gt.SolverCfg(gripper=GripperCfg(settle=0, polish_iterations=100))  # the polish alone
     env = GripperEnvironment(manus, problem, cfg, dtype=torch.float64, collisions=True)
     g = torch.Generator().manual_seed(6)
     starts = env.lower + (env.upper - env.lower) * torch.rand(60, 9, generator=g, dtype=torch.float64)
@@ -144,8 +145,8 @@ def test_refine_steps_are_evaluated_and_reported(manus):
     """With solver.refine, the environment evaluates (and the loop reports) the settled
     configuration, which is closer than the proposal."""
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
-    plain = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)))
-    refined = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=2)))
+    plain = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=GripperCfg(settle=0)))
+    refined = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=GripperCfg(settle=2)))
     g = torch.Generator().manual_seed(7)
     q = plain.lower + (plain.upper - plain.lower) * torch.rand(50, 9, generator=g)
     ev0, ev2 = plain.evaluate(q), refined.evaluate(q)
@@ -168,7 +169,7 @@ def test_a_batch_of_problems_evaluates_as_each_problem_alone(manus):
     each trial the evaluation its own problem's environment gives; a subset of trials (the loop's
     active ones) gives the same rows."""
     problems = [_cube_at(0.7, -0.3), _cube_at(0.9, 0.1), _cube_at(1.1, 0.4)]
-    settle2 = gt.SolverCfg(gripper=gt.GripperCfg(settle=2))
+    settle2 = gt.SolverCfg(gripper=GripperCfg(settle=2))
     batch = GripperEnvironment(manus, problems, settle2, dtype=torch.float64, collisions=True, runs=4)
     assert batch.lower.shape == (12, 9) and batch.problem_index.tolist() == [0] * 4 + [1] * 4 + [2] * 4
     g = torch.Generator().manual_seed(8)
@@ -215,7 +216,7 @@ def test_closed_form_points_and_jacobian_match_the_kernel_and_finite_differences
     Jacobian (w x (p - o) per revolute joint, w per prismatic one) equals central differences
     (float64)."""
     problem = gt.GraspProblem.from_mapping(CUBE, source="cube")
-    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=gt.GripperCfg(settle=0)), dtype=torch.float64)
+    env = GripperEnvironment(manus, problem, gt.SolverCfg(gripper=GripperCfg(settle=0)), dtype=torch.float64)
     g = torch.Generator().manual_seed(10)
     q = env.lower + (env.upper - env.lower) * torch.rand(6, 9, generator=g, dtype=torch.float64)
     _levels, points, J = env.kinematics(q, jacobian=True)

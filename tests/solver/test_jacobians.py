@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import FingerIK, load_finger_ik
 from graspnet_torch.fcnn.experts import ExpertSet
 from graspnet_torch.least_squares import numerical_jacobian
 from graspnet_torch.robot.transforms import frame_point_jacobian, pose_jacobian, pose_to_rt, transform_points
@@ -63,13 +64,13 @@ def whole_model_check(env, seed: int = 0, B: int = 12) -> None:
 
 def test_free_hand_whole_jacobian(hand):
     problem = gt.random_reachable_problem(hand, 3)
-    env = build_environment(hand, problem, gt.load_finger_ik(hand), SolverCfg())
+    env = build_environment(hand, problem, load_finger_ik(hand), SolverCfg())
     whole_model_check(env)
 
 
 def test_masked_fingers_of_a_batch_have_zero_rows(hand):
     problems = [gt.random_reachable_problem(hand, s) for s in (1, 2, 5)]
-    env = build_environment(hand, problems, gt.load_finger_ik(hand), SolverCfg(), runs=2)
+    env = build_environment(hand, problems, load_finger_ik(hand), SolverCfg(), runs=2)
     whole_model_check(env, B=6)
     x = env.random_whole(6, torch.Generator().manual_seed(1))
     tips, J = env.whole_tips(x, torch.arange(6))
@@ -84,7 +85,7 @@ def test_arm_hand_whole_jacobian():
     problem = gt.GraspProblem.from_mapping({"robot": "arm_hand", "contacts": [
         {"finger": f, "position": tips[robot.finger_index(f)].tolist()} for f in ("thumb", "index", "ring")]},
         source="arm")
-    env = build_environment(robot, problem, gt.load_finger_ik(robot), SolverCfg())
+    env = build_environment(robot, problem, load_finger_ik(robot), SolverCfg())
     whole_model_check(env)
 
 
@@ -95,7 +96,7 @@ def test_mimic_prismatic_and_padded_fingers_whole_jacobian(tmp_path):
         lo, hi = (torch.as_tensor(a[robot.finger_index(name)]) for a in robot.finger_limits)
         experts[name] = ExpertSet(robot.fingers[name].n_joints, torch.zeros(3), torch.ones(3),
                                   lo[: robot.fingers[name].n_joints], hi[: robot.fingers[name].n_joints])
-    ik = gt.FingerIK(robot, experts)  # untrained: the Jacobian needs none of it
+    ik = FingerIK(robot, experts)  # untrained: the Jacobian needs none of it
     zero = robot.fingertips_world(torch.zeros(6, dtype=torch.float64), robot.home_posture().fingers)
     problem = gt.GraspProblem.from_mapping({"robot": "oddhand", "contacts": [
         {"finger": f, "position": zero[robot.finger_index(f)].tolist()} for f in robot.finger_names]},
@@ -119,7 +120,7 @@ def test_levenberg_marquardt_lands_on_random_reachable_hand_problems(hand, seed)
     """From random starts within the bounds (solver=dls's restarts), the analytic model takes
     rows of each problem below 1 micron, within the bounds, and the reported error is the model's."""
     problem = gt.random_reachable_problem(hand, seed)
-    env = build_environment(hand, problem, gt.load_finger_ik(hand), SolverCfg())
+    env = build_environment(hand, problem, load_finger_ik(hand), SolverCfg())
     x = env.random_whole(32, torch.Generator().manual_seed(seed))
     solved = env.local_solve(x, 100, tol=1e-6)
     lo, hi = env.whole_bounds()

@@ -11,11 +11,12 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.solver import FingersCfg, TrialResult
 from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.solver.search_space import contact_frame, palm_search_space, palm_space_around
 from graspnet_torch.tasks.objects import random_pose
 
-PAPER_NO_REFINE = gt.SolverCfg.paper(fingers=gt.FingersCfg(final_refine=0))  # the palm pose and fingers as found
+PAPER_NO_REFINE = gt.SolverCfg.paper(fingers=FingersCfg(final_refine=0))  # the palm pose and fingers as found
 
 
 def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -204,7 +205,7 @@ def test_no_success_says_a_contact_is_out_of_reach(tmp_path):
     assert HandEnvironment.unreachable(robot, problem) == ["thumb"]
     moved = problem.moved(np.eye(4))  # the search space built from the contacts: reachable by construction
     assert HandEnvironment.unreachable(robot, moved) == []
-    trial = gt.TrialResult(success=False, iterations=5, reinforcement=0.5, wall_time_s=0.0,
+    trial = TrialResult(success=False, iterations=5, reinforcement=0.5, wall_time_s=0.0,
                            fingertip_error_mm={"thumb": 3.0, "index": 0.5}, total_error_mm=3.5)
     reason = failure_reason(robot, problem, [trial], None, [False], 1.0)
     assert reason.startswith("out of reach: no configuration in the search space brings the thumb fingertip")

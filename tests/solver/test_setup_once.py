@@ -10,7 +10,9 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.fcnn import FingerIK
 from graspnet_torch.paths import repo_root
+from graspnet_torch.robot import load_robot_cfg
 from graspnet_torch.robot.fingers import FingerKernel
 from tests.conftest import uniform
 
@@ -18,7 +20,7 @@ pk = pytest.importorskip("pytorch_kinematics")
 
 
 @pytest.fixture(scope="module")
-def shipped_ik() -> gt.FingerIK:
+def shipped_ik() -> FingerIK:
     return gt.Solver("hand").finger_ik
 
 
@@ -27,7 +29,7 @@ def test_bank_built_once_per_robot_across_finger_subsets(shipped_ik):
     the search; the polish's float64 kernel needs no stack), derive one bank per subset, and take
     each subset's kernel from the robot's, the same object every time."""
     robot = gt.load_robot("hand")
-    ik = gt.FingerIK(robot, shipped_ik.experts)
+    ik = FingerIK(robot, shipped_ik.experts)
     solver = gt.Solver(robot, finger_ik=ik, trials=2, max_iterations=5)
     problems = [gt.random_reachable_problem(robot, 900 + k, (2, 5)) for k in range(8)]
     subsets = {p.fingers for p in problems}
@@ -64,7 +66,7 @@ def test_a_subset_answers_as_the_fingers_alone(hand, shipped_ik, fingers, gen):
     q_true = uniform(*hand.finger_limits, 64, gen)
     targets = hand.fingertips_base(q_true)[:, idx]  # reachable: fingertips of random postures
     q, err = shipped_ik.solve_fingers(targets, fingers, refine=2)
-    alone = gt.FingerIK(hand, {f: shipped_ik.experts[f] for f in fingers})
+    alone = FingerIK(hand, {f: shipped_ik.experts[f] for f in fingers})
     q_alone, err_alone = alone.solve_fingers(targets, fingers, refine=2)
     assert torch.equal(q, q_alone) and torch.equal(err, err_alone)
     tips = _pk_tips(hand, fingers, q)  # pytorch-kinematics keeps joint origins in float32: ~1e-8 m
@@ -95,11 +97,11 @@ def test_nothing_is_shared_between_two_robots(shipped_ik):
     """Two robots (two loads of the hand, and the trifinger by config) keep their own kernels and
     banks: a finger IK selects from its own robot's kernel, and each robot solves its problems."""
     first, second = gt.load_robot("hand"), gt.load_robot("hand")
-    tri_cfg = gt.load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml"))
+    tri_cfg = load_robot_cfg(str(repo_root() / "examples" / "trifinger" / "trifinger.yaml"))
     tri_solver = gt.Solver(tri_cfg, trials=4)
     tri = tri_solver.robot
-    a = gt.FingerIK(first, shipped_ik.experts)
-    b = gt.FingerIK(second, shipped_ik.experts)
+    a = FingerIK(first, shipped_ik.experts)
+    b = FingerIK(second, shipped_ik.experts)
     pair = ("thumb", "index")
     assert a.kernel(pair) is first.finger_kernel.select((0, 1))
     assert b.kernel(pair) is second.finger_kernel.select((0, 1)) and b.kernel(pair) is not a.kernel(pair)

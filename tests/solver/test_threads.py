@@ -7,6 +7,7 @@ import torch
 
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
+from graspnet_torch.tasks import random_sequence
 from graspnet_torch.threads import default_threads, set_default_threads, torch_threads
 
 
@@ -48,7 +49,7 @@ def test_the_api_restores_the_callers_count_and_tracks_on_it_between_frames(two_
     assert gt.solve_many([problem, problem], trials=2, seed=0, max_iterations=30)[0].robot == "hand"
     assert torch.get_num_threads() == 2
     solver = gt.Solver("hand", trials=2, max_iterations=30)
-    counts = [torch.get_num_threads() for _ in solver.iter_track(gt.random_sequence(solver.robot, 0, 3))]
+    counts = [torch.get_num_threads() for _ in solver.iter_track(random_sequence(solver.robot, 0, 3))]
     assert counts == [2, 2, 2] and torch.get_num_threads() == 2
     same = gt.solve(problem, trials=2, seed=0, max_iterations=30, threads=1)
     assert same.best.palm_pose == one.best.palm_pose  # the default is one thread

@@ -11,6 +11,7 @@ import yaml
 
 import graspnet_torch as gt
 from graspnet_torch.paths import configs_dir, repo_root
+from graspnet_torch.solver import NoiseCfg
 from graspnet_torch.solver.postures import trial_posture
 
 
@@ -65,5 +66,5 @@ def test_an_environment_built_without_an_fcnn_refuses_the_search():
     solver, srv, reward = settings_of(robot, None, None, None, 5)
     env = build_environment(robot, problem, None, solver)
     with pytest.raises(gt.ProblemError, match="this environment has no FCNN") as err:
-        search(env, 2, 0, solver, srv, reward, gt.NoiseCfg())
+        search(env, 2, 0, solver, srv, reward, NoiseCfg())
     assert "\n" not in str(err.value)

@@ -9,10 +9,12 @@ import torch
 import graspnet_torch as gt
 from graspnet_torch.collision.scene import CollisionScene
 from graspnet_torch.collision.surface import pad_targets, surface_distance, surface_normals
+from graspnet_torch.robot import load_robot_cfg
 from graspnet_torch.robot.shape import Shape
 from graspnet_torch.robot.transforms import pose_to_matrix_np
 from graspnet_torch.solver.contact import surface_fields
 from graspnet_torch.solver.postures import trial_posture
+from graspnet_torch.synthesis import pad_contact_sets
 from graspnet_torch.synthesis.candidates import placeholder_problem
 from graspnet_torch.synthesis.closing import close_lines, closing_lines
 
@@ -40,7 +42,7 @@ def tip_pose(robot: gt.Robot, posture: gt.Posture, finger: str) -> np.ndarray:
 @pytest.mark.parametrize("obj", [cube(), Shape("sphere", (0.04,), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))],
                          ids=["box", "sphere"])
 def test_pad_contact_sets_touch_face_and_stay_out(robot: gt.Robot, obj: Shape) -> None:
-    sets = gt.pad_contact_sets(robot, obj, 4, FINGERS, seed=3)
+    sets = pad_contact_sets(robot, obj, 4, FINGERS, seed=3)
     assert sets
     problem = placeholder_problem(robot, obj, FINGERS)
     scene = CollisionScene(robot, problem, object_tolerance=0.001, touching=False, fingers_apart=True)
@@ -71,7 +73,7 @@ def test_sampled_tips_sit_on_the_surface_models_targets(robot: gt.Robot, mesh: s
         obj = Shape("mesh", (), np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0]), tmp_path / "blob.stl", 1.0)
     else:
         obj = gt.GraspProblem.from_task("glass3").object
-    sets = gt.pad_contact_sets(robot, obj, 6, FINGERS, seed=2)
+    sets = pad_contact_sets(robot, obj, 6, FINGERS, seed=2)
     assert sets
     home = robot.home_posture(torch.float64).fingers.numpy()
     others = [i for i, f in enumerate(robot.fingers) if f not in FINGERS]
@@ -135,9 +137,9 @@ def test_a_warm_start_without_search_is_one_trial(robot: gt.Robot) -> None:
 @pytest.mark.slow
 def test_pad_contact_sets_deterministic(robot: gt.Robot) -> None:
     obj = gt.GraspProblem.from_task("glass3").object
-    a = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
-    b = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
-    c = gt.pad_contact_sets(robot, obj, 2, FINGERS, seed=6)
+    a = pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
+    b = pad_contact_sets(robot, obj, 2, FINGERS, seed=5)
+    c = pad_contact_sets(robot, obj, 2, FINGERS, seed=6)
     assert len(a) == len(b) == 2
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(x.contacts, y.contacts)
@@ -226,7 +228,7 @@ def test_closing_only_the_chosen_fingers_closes_them_as_closing_every_finger_doe
     obj = cube()
     lo, hi = robot.finger_limits
     q0, q1 = closing_lines(robot, lo, hi - lo, np.random.default_rng(0), 64)
-    head = gt.pad_contact_sets(robot, obj, 1, FINGERS, seed=3)[0].posture.palm_pose.expand(64, 6)  # a palm that touches
+    head = pad_contact_sets(robot, obj, 1, FINGERS, seed=3)[0].posture.palm_pose.expand(64, 6)  # a palm that touches
     depth = np.array([robot.pads[f].depth for f in robot.fingers])
     q_all, touched_all = close_lines(robot, obj, head, q0, q1, depth)
     rows = [0, 2]
@@ -248,7 +250,7 @@ def test_a_robot_by_name_gives_what_the_built_robot_gives(robot: gt.Robot) -> No
     obj = cube()
     built = gt.synthesize_grasps(robot, obj, n_grasps=1, candidates=4, seed=1)
     named = gt.synthesize_grasps("hand", obj, n_grasps=1, candidates=4, seed=1)
-    by_cfg = gt.synthesize_grasps(gt.load_robot_cfg("hand"), obj, n_grasps=1, candidates=4, seed=1)
+    by_cfg = gt.synthesize_grasps(load_robot_cfg("hand"), obj, n_grasps=1, candidates=4, seed=1)
     assert built and len(named) == len(by_cfg) == len(built)
     for a, b, c in zip(built, named, by_cfg, strict=True):
         np.testing.assert_array_equal(a.contacts, b.contacts)

@@ -8,6 +8,7 @@ import dataclasses
 import pytest
 
 import graspnet_torch as gt
+from graspnet_torch.robot import load_robot_cfg
 from graspnet_torch.tasks.auto_contacts import AutoContacts
 
 CUBE = {"shape": "box", "size": [0.06, 0.06, 0.06], "pose": [0, 0, 0.2, 0, 0, 0]}
@@ -67,7 +68,7 @@ def test_auto_contacts_need_a_hand_free_or_named_by_its_arm():
             {"finger": "thumb", "position": [0.0, 0.0, 0.0]}]}, "p.yaml")
     gripper = gt.GraspProblem.from_mapping({"robot": "manus", "object": CUBE, "contacts": "auto"}, "p.yaml")
     assert gripper.auto == AutoContacts((), 5)  # a gripper's contacts: auto is its points: auto
-    cfg = gt.load_robot_cfg("arm_hand")
+    cfg = load_robot_cfg("arm_hand")
     assert cfg.hand == "hand"
     assert gt.GraspProblem.from_mapping({"robot": "arm_hand", "object": CUBE, "contacts": "auto"}, "p.yaml").auto
     nameless = dataclasses.replace(cfg, hand=None)

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 import graspnet_torch as gt
+from graspnet_torch.robot import load_robot_cfg
 
 GOOD = {"robot": "hand",
         "object": {"shape": "cylinder", "size": [0.035, 0.12], "pose": [0.0, 0.0, 0.06, 0, 0, 90]},
@@ -35,7 +36,7 @@ def test_valid_problem_file(tmp_path, name):
     np.testing.assert_allclose(world[0], [0.0, 0.035, 0.08], atol=1e-12)
     assert p.palm_bounds is None and p.bounds() is None  # the search space follows the contacts
     robot_box = gt.GraspProblem.from_mapping({**GOOD, "palm_bounds": "robot"})
-    np.testing.assert_allclose(robot_box.bounds().lower, gt.load_robot_cfg("hand").palm_bounds.lower)
+    np.testing.assert_allclose(robot_box.bounds().lower, load_robot_cfg("hand").palm_bounds.lower)
     assert robot_box.to_mapping()["palm_bounds"] == "robot"
 
 
