@@ -17,7 +17,7 @@ For B rows at once, each with its own goal, bounds and damping, minimise |g - f(
     dx = J^T (J J^T + lambda^2 I)^-1 e        (:func:`damped_pinv_step`, the package's one step)
 
 Joints at a bound that the step pushes outward leave the Jacobian and the step is solved again
-(an active set; ``active_set=False``: the step is only clamped to the bounds). A step is kept
+(an active set; ``LMOptions(active_set=False)``: the step is only clamped to the bounds). A step is kept
 only where it lowers |e| and, with a collision count, does not raise it: never worse. Kept:
 lambda / 3, else lambda * 4, within [lam_min, lam_max] (lam_min = lam_max: a fixed damping). A
 row stops once |e| < ``tol``, once ``done`` says so (e.g. enough rows of its problem have
@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["LMResult", "Model", "damped_pinv_step", "frame_model", "levenberg_marquardt", "numerical_jacobian",
-           "solve3_symmetric"]
+__all__ = ["LMOptions", "LMResult", "Model", "Prior", "damped_pinv_step", "frame_model", "levenberg_marquardt",
+           "numerical_jacobian", "solve3_symmetric"]
 
 SMALL_BATCH = 256
 
@@ -144,13 +144,66 @@ def frame_model(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]
     return frame
 
 
-def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int, *,
-                        lam: float = 1e-3, lam_min: float = 1e-6, lam_max: float = 1.0, edge: float = 1e-12,
-                        tol: float = 0.0, min_gain: float = 0.0, active_set: bool = True,
-                        converged: Callable[[Tensor], Tensor] | None = None,
-                        count: Callable[[Tensor, Tensor], Tensor] | None = None,
-                        done: Callable[[Tensor], Tensor] | None = None, trace: list[Tensor] | None = None,
-                        prior: tuple[Tensor, Tensor] | None = None) -> LMResult:
+@dataclass(frozen=True)
+class LMOptions:
+    """How :func:`levenberg_marquardt` damps, when its rows stop and what it records.
+
+    Attributes:
+        lam, lam_min, lam_max: the damping's start and range (lam_min = lam_max: a fixed damping).
+        edge: a value within this of a bound counts as at it.
+        tol: a row stops once |e| < tol.
+        min_gain: a row whose kept step lowered |e| by less than this fraction of it has settled
+            (a local minimum above ``tol``) and stops: its last steps gain nothing worth their cost.
+        active_set: joints at a bound that the step pushes outward leave the Jacobian and the step
+            is solved again; False: the step is only clamped to the bounds.
+        converged: ``converged(e (B, k))`` -> (B,) bool, the rows that have converged, in place of
+            ``|e| < tol`` (a model whose residuals have different scales: some must vanish, others
+            only be small).
+        count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
+        done: ``done(converged (B,) bool)`` -> (B,) bool, the rows that stop (at least the
+            converged ones; e.g. every row of a problem with enough converged rows).
+        trace: a list that receives |e| (B,) after every step (curves for TensorBoard).
+    """
+
+    lam: float = 1e-3
+    lam_min: float = 1e-6
+    lam_max: float = 1.0
+    edge: float = 1e-12
+    tol: float = 0.0
+    min_gain: float = 0.0
+    active_set: bool = True
+    converged: Callable[[Tensor], Tensor] | None = None
+    count: Callable[[Tensor, Tensor], Tensor] | None = None
+    done: Callable[[Tensor], Tensor] | None = None
+    trace: list[Tensor] | None = None
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A residual term toward a centre: ``weight * (x - centre)``, m residuals appended to a
+    model's (Jacobian rows diag(weight)), their goal 0: among the x that fit the goal, one nearer
+    the centre. centre: (m,) or (B, m); weight: (m,)."""
+
+    centre: Tensor
+    weight: Tensor
+
+    def appended(self, f: Model, goal: Tensor) -> tuple[Model, Tensor]:
+        """The model with this term's m residuals appended and the goal (B, k) with m zeros
+        appended: (B, k + m)."""
+        B, m = goal.shape[0], self.weight.shape[0]
+        centre, weight = self.centre.expand(B, m), self.weight
+        tikhonov = torch.diag(weight)
+
+        def with_prior(xx: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
+            v, J = f(xx, rows)
+            return (torch.cat([v, weight * (xx - centre[rows])], 1),
+                    torch.cat([J, tikhonov.expand(xx.shape[0], m, m)], 1))
+
+        return with_prior, torch.cat([goal, goal.new_zeros(B, m)], 1)
+
+
+def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tensor, iterations: int,
+                        options: LMOptions = LMOptions(), prior: Prior | None = None) -> LMResult:
     """Levenberg-Marquardt on B rows (float64, the device of ``x``).
 
     Args:
@@ -161,52 +214,39 @@ def levenberg_marquardt(f: Model, goal: Tensor, x: Tensor, lo: Tensor, hi: Tenso
         x: (B, m) start, clamped to the bounds first.
         lo, hi: (m,) or (B, m) bounds.
         iterations: most steps per row.
-        lam, lam_min, lam_max: the damping's start and range.
-        edge: a value within this of a bound counts as at it.
-        active_set: joints at a bound that the step pushes outward leave the Jacobian and the step
-            is solved again; False: the step is only clamped to the bounds.
-        tol: a row stops once |e| < tol.
-        converged: ``converged(e (B, k))`` -> (B,) bool, the rows that have converged, in place of
-            ``|e| < tol`` (a model whose residuals have different scales: some must vanish, others
-            only be small).
-        min_gain: a row whose kept step lowered |e| by less than this fraction of it has settled
-            (a local minimum above ``tol``) and stops: its last steps gain nothing worth their cost.
-        count: ``count(x, rows)`` -> (b,) collisions; a step may not raise it.
-        done: ``done(converged (B,) bool)`` -> (B,) bool, the rows that stop (at least the
-            converged ones; e.g. every row of a problem with enough converged rows).
-        trace: a list that receives |e| (B,) after every step (curves for TensorBoard).
-        prior: (centre (m,) or (B, m), weight (m,)): also minimise |weight * (x - centre)|, m
-            residuals appended to the model's (the result's ``err`` and ``value`` are the model's
-            alone): among the x that fit the goal, one nearer the centre.
+        options: the damping, the stopping rules, the collision count and the trace (:class:`LMOptions`).
+        prior: a residual term toward a centre (:class:`Prior`), appended to the model's; the
+            result's ``err`` and ``value`` are the model's alone.
     """
+    o = options
     B, m = x.shape
     goal = goal.expand(B, -1) if goal.dim() == 1 else goal
     k = goal.shape[1]
     if prior is not None:
-        f, goal = _with_prior(f, goal, prior, m)
+        f, goal = prior.appended(f, goal)
     lo, hi = (b.expand(B, m) if b.dim() == 1 else b for b in (lo, hi))
     x = torch.minimum(torch.maximum(x, lo), hi).clone()
     all_rows = torch.arange(B, device=x.device)
-    s = _first_state(f, count, goal, x, all_rows, lam)
-    checks = tol > 0 or done is not None or converged is not None  # else only a settled row stops
-    fixed = lam == lam_min == lam_max  # a fixed damping: lambda never changes
+    s = _first_state(f, o.count, goal, x, all_rows, o.lam)
+    checks = o.tol > 0 or o.done is not None or o.converged is not None  # else only a settled row stops
+    fixed = o.lam == o.lam_min == o.lam_max  # a fixed damping: lambda never changes
     for it in range(iterations):
-        stopped = _stopped(s, goal, tol, converged, done) if checks else s.settled
+        stopped = _stopped(s, goal, o.tol, o.converged, o.done) if checks else s.settled
         chosen = _rows_to_step(stopped, s.stalled, all_rows)
         if chosen is None:  # every row stopped, or nothing changes any more: the rows run the budget out
             if not bool(stopped.all()):
                 s.steps += (~stopped).long() * (iterations - it)
-                if trace is not None:
-                    trace.extend(s.err.clone() for _ in range(iterations - it))
+                if o.trace is not None:
+                    o.trace.extend(s.err.clone() for _ in range(iterations - it))
             break
         rows, ids, running = chosen
         part = _Rows(s.x[rows], s.value[rows], s.jac[rows], goal[rows], lo[rows], hi[rows], s.lams[rows])
-        dx = _damped_step(part, edge, active_set)
-        _accept_or_reject(f, count, s, part, rows, ids, dx, min_gain=min_gain, lam_min=lam_min, lam_max=lam_max,
-                          fixed=fixed)
+        dx = _damped_step(part, o.edge, o.active_set)
+        _accept_or_reject(f, o.count, s, part, rows, ids, dx, min_gain=o.min_gain, lam_min=o.lam_min,
+                          lam_max=o.lam_max, fixed=fixed)
         s.steps += 1 if running is None else running.long()  # a stalled row counts the steps it would repeat
-        if trace is not None:
-            trace.append(s.err.clone())
+        if o.trace is not None:
+            o.trace.append(s.err.clone())
     value, err = s.value, s.err
     if prior is not None:  # the model's residuals alone
         value = value[:, :k]
@@ -238,21 +278,6 @@ class _LMState:
     steps: Tensor
     stalled: Tensor
     settled: Tensor
-
-
-def _with_prior(f: Model, goal: Tensor, prior: tuple[Tensor, Tensor], m: int) -> tuple[Model, Tensor]:
-    """The model with the prior's m residuals ``weight * (x - centre)`` appended (Jacobian rows
-    diag(weight)) and the goal (B, k) with m zeros appended: (B, k + m)."""
-    B = goal.shape[0]
-    centre, weight = prior[0].expand(B, m), prior[1]
-    tikhonov = torch.diag(weight)
-
-    def with_prior(xx: Tensor, rows: Tensor) -> tuple[Tensor, Tensor]:
-        v, J = f(xx, rows)
-        return (torch.cat([v, weight * (xx - centre[rows])], 1),
-                torch.cat([J, tikhonov.expand(xx.shape[0], m, m)], 1))
-
-    return with_prior, torch.cat([goal, goal.new_zeros(B, m)], 1)
 
 
 def _first_state(f: Model, count: Callable[[Tensor, Tensor], Tensor] | None, goal: Tensor, x: Tensor,

@@ -7,7 +7,7 @@ import math
 import torch
 
 import graspnet_torch as gt
-from graspnet_torch.least_squares import frame_model, levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, frame_model, levenberg_marquardt
 
 
 def test_a_back_off_target_is_a_frame_residual_on_the_lm():
@@ -20,7 +20,7 @@ def test_a_back_off_target_is_a_frame_residual_on_the_lm():
     R0, t0 = robot.palm_frame(q0)
     away = t0 - torch.tensor([0.3, 0.0, 0.2], dtype=torch.float64)  # away from a point (a grasp's contacts)
     goal = torch.cat([t0 + 0.05 * away / away.norm(dim=-1, keepdim=True), torch.zeros(6, 3, dtype=torch.float64)], 1)
-    out = levenberg_marquardt(frame_model(robot.palm_frame_jacobian, R0), goal, q0, lo, hi, 100, tol=1e-6)
+    out = levenberg_marquardt(frame_model(robot.palm_frame_jacobian, R0), goal, q0, lo, hi, 100, LMOptions(tol=1e-6))
     R, t = robot.palm_frame(out.x)
     assert ((t - goal[:, :3]).norm(dim=-1) < 1e-4).all()
     cos = ((R0 @ R.transpose(-1, -2)).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
@@ -40,12 +40,12 @@ def test_converged_replaces_the_norm_test_row_by_row():
     lo, hi = torch.tensor([-10.0, -0.25], dtype=torch.float64), torch.tensor([10.0, 10.0], dtype=torch.float64)
     x0 = torch.tensor([[1.0, 0.0], [5.0, 3.0]], dtype=torch.float64)
     goal = torch.zeros(2, dtype=torch.float64)
-    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-9)
+    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, LMOptions(tol=1e-9))
     assert (plain.steps == 50).all()  # |e| >= 0.05 at the bound: never below tol
 
     def near(e):
         return (e[:, 0].abs() < 1e-9) & (e[:, 1].abs() < 0.1)
 
-    out = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-9, converged=near)
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 50, LMOptions(tol=1e-9, converged=near))
     assert out.steps[0] < 50 and out.steps[1] < 50
     assert near(goal - out.value).all()

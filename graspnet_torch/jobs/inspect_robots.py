@@ -16,7 +16,7 @@ from torch import Tensor
 from graspnet_torch.errors import ConfigError, say
 from graspnet_torch.files import check_output_path
 from graspnet_torch.jobs.configs import InspectRobotsJobCfg
-from graspnet_torch.least_squares import levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, levenberg_marquardt
 from graspnet_torch.robot import Posture, Robot, available_robots, load_robot
 from graspnet_torch.robot.opposition import hand_axes
 from graspnet_torch.settings import build, clip
@@ -123,8 +123,8 @@ def opposition_posture(robot: Robot, a: str, b: str, start: Posture, restarts: i
         return converged.any().expand_as(converged)
 
     solved = levenberg_marquardt(gap, torch.zeros(3, dtype=dtype), q[:, [ia, ib]].reshape(restarts, 2 * n),
-                                 lo[[ia, ib]].reshape(-1), hi[[ia, ib]].reshape(-1), iterations, lam=damping,
-                                 tol=tol, done=one_closed)
+                                 lo[[ia, ib]].reshape(-1), hi[[ia, ib]].reshape(-1), iterations,
+                                 LMOptions(lam=damping, tol=tol, done=one_closed))
     best = int(torch.argmin(solved.err))
     fingers = q[best].clone()
     fingers[[ia, ib]] = solved.x[best].view(2, n)

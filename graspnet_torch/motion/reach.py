@@ -30,7 +30,7 @@ import torch
 
 from graspnet_torch.collision.scene import CollisionScene, has_environment
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.least_squares import frame_model, levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, frame_model, levenberg_marquardt
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path, step_aside
@@ -273,9 +273,10 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
     lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
 
     goal = torch.cat([goal_t, torch.zeros(3, dtype=torch.float64)])
-    fixed = {"lam": BACK_OFF_DAMPING, "lam_min": BACK_OFF_DAMPING, "lam_max": BACK_OFF_DAMPING}
+    fixed = LMOptions(lam=BACK_OFF_DAMPING, lam_min=BACK_OFF_DAMPING, lam_max=BACK_OFF_DAMPING, active_set=False,
+                      tol=1e-4)
     frame = frame_model(robot.palm_frame_jacobian, R0)  # the palm frame: position, then its turn back to R0
-    q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, active_set=False, tol=1e-4, **fixed).x[0]
+    q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, fixed).x[0]
     R, t = robot.palm_frame(q)
     E = R0 @ R.T
     turn = float(torch.arccos(((E.trace() - 1) / 2).clamp(-1, 1)))

@@ -15,7 +15,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from graspnet_torch.least_squares import damped_pinv_step, frame_model, levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, damped_pinv_step, frame_model, levenberg_marquardt
 
 __all__ = ["frame_ik", "limited_step", "refine"]
 
@@ -76,8 +76,8 @@ def refine(
         p, J = p.reshape(B, 3), J.reshape(B, 3, n)
         return (p, J) if every else (p[rows], J[rows])
 
-    solved = levenberg_marquardt(positions, goal, start, lo, hi, iterations, lam=damping,
-                                 lam_min=damping_range[0], lam_max=damping_range[1], tol=tol)
+    solved = levenberg_marquardt(positions, goal, start, lo, hi, iterations,
+                                 LMOptions(lam=damping, lam_min=damping_range[0], lam_max=damping_range[1], tol=tol))
     return solved.x.view(shape), solved.err.view(shape[:-1])
 
 
@@ -98,7 +98,7 @@ def frame_ik(frame_jacobian: Callable[[Tensor], tuple[Tensor, Tensor, Tensor]], 
     R = R_goal.repeat_interleave(K, 0)
     goal = torch.cat([t_goal.repeat_interleave(K, 0), t_goal.new_zeros(B * K, 3)], 1)
     solved = levenberg_marquardt(frame_model(frame_jacobian, R), goal, starts.reshape(B * K, m), lower, upper,
-                                 iterations, tol=tol, min_gain=min_gain)
+                                 iterations, LMOptions(tol=tol, min_gain=min_gain))
     e = (goal - solved.value).view(B, K, 6)
     pos, rot = e[..., :3].norm(dim=-1), e[..., 3:].norm(dim=-1)
     best = (pos + rot * 0.1).argmin(dim=1)  # a tenth of a metre per radian

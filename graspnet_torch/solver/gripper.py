@@ -21,7 +21,7 @@ from torch import Tensor
 from graspnet_torch.collision.cache import proxy_for
 from graspnet_torch.collision.scene import has_environment
 from graspnet_torch.errors import ProblemError
-from graspnet_torch.least_squares import LMResult, levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, LMResult, levenberg_marquardt
 from graspnet_torch.rewards import manus_reward, r1
 from graspnet_torch.robot.frames import RobotLevels
 from graspnet_torch.robot.robot import Posture, Robot
@@ -200,9 +200,8 @@ class GripperEnvironment(Environment):
                 tried.append((rows, x, frames))
             return pts.reshape(-1, 6), J
 
-        solved = levenberg_marquardt(points, goal, q, lower, upper, steps,
-                                     lam=SETTLE_DAMPING, lam_min=SETTLE_DAMPING, lam_max=SETTLE_DAMPING,
-                                     active_set=False)
+        settle = LMOptions(lam=SETTLE_DAMPING, lam_min=SETTLE_DAMPING, lam_max=SETTLE_DAMPING, active_set=False)
+        solved = levenberg_marquardt(points, goal, q, lower, upper, steps, settle)
         if self.proxy is None:
             return solved.x, None, solved.value.view(T, 2, 3)
         for rows, x, frames in tried:  # each row's frames: those of the trial point it kept (else q's)
@@ -260,9 +259,9 @@ class GripperEnvironment(Environment):
             return self._count(x, pid)
 
         lam, lam_min, lam_max = POLISH_DAMPING
-        return levenberg_marquardt(points, goal, q, lo, hi, iterations, lam=lam, lam_min=lam_min, lam_max=lam_max,
-                                   edge=BOUND_EDGE, tol=tol, done=done, trace=trace,
-                                   count=count if self.proxy is not None else None)
+        return levenberg_marquardt(points, goal, q, lo, hi, iterations, LMOptions(
+            lam=lam, lam_min=lam_min, lam_max=lam_max, edge=BOUND_EDGE, tol=tol, done=done, trace=trace,
+            count=count if self.proxy is not None else None))
 
     # solver=dls: the whole configuration is the body's joints (no fingers)
 

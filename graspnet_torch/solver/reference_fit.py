@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from graspnet_torch.least_squares import levenberg_marquardt, numerical_jacobian
+from graspnet_torch.least_squares import Prior, levenberg_marquardt, numerical_jacobian
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.transforms import compose, pose_to_rt, rt_to_pose
 from graspnet_torch.solver.search_space import palm_search_space
@@ -75,7 +75,7 @@ def find_reference_posture(robot: Robot, problem: GraspProblem, restarts: int = 
     lo_t, hi_t = torch.as_tensor(lo), torch.as_tensor(hi)
     centre = torch.as_tensor(np.concatenate([pose_mid, mid]))
     weight = torch.as_tensor(np.concatenate([center_pull / pose_half, np.full(mid.size, joint_pull)]))
-    fit = levenberg_marquardt(residual, contacts.reshape(-1), x0, lo_t, hi_t, iterations, prior=(centre, weight))
+    fit = levenberg_marquardt(residual, contacts.reshape(-1), x0, lo_t, hi_t, iterations, prior=Prior(centre, weight))
     errs = torch.linalg.vector_norm(tips(fit.x) - contacts, dim=-1)  # (R, C)
     best = int(torch.argmin(errs.sum(1)))
     x = fit.x[best].numpy()

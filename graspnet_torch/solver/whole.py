@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Self
 import torch
 from torch import Tensor
 
-from graspnet_torch.least_squares import levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, Prior, levenberg_marquardt
 from graspnet_torch.robot.transforms import frame_point_jacobian, transform_points
 from graspnet_torch.solver.environment import Done, Evaluation
 from graspnet_torch.solver.pad_term import PadTerm, skew
@@ -226,14 +226,15 @@ class WholeConfiguration:
 
     def local_solve(self, x: Tensor, iterations: int, tol: float = 0.0, done: Done | None = None,
                     trace: list[Tensor] | None = None, rows: Tensor | None = None,
-                    prior: tuple[Tensor, Tensor] | None = None, pad_margin: float | None = None) -> LMResult:
+                    prior: Prior | None = None, pad_margin: float | None = None) -> LMResult:
         """Levenberg-Marquardt (:func:`~graspnet_torch.least_squares.levenberg_marquardt`)
         on x (B, m) of the trials ``rows`` (None: all, in order): the contact fingertips onto
         their contacts, within bounds and limits, never into a collision the proxy sees (when
         there is one; the point model). The surface model instead adds residuals: the pads'
         normals (:meth:`whole_pads`) and, where there is an object, each link's depth in it, in
-        the obstacles and in another finger (:meth:`whole_depths`). ``prior``: its (centre,
-        weight), see there; ``pad_margin``: the pads' hinge chord (None: the term's own)."""
+        the obstacles and in another finger (:meth:`whole_depths`). ``prior``: a residual term
+        toward a centre (:class:`~graspnet_torch.least_squares.Prior`); ``pad_margin``: the pads'
+        hinge chord (None: the term's own)."""
         trials = None if rows is None else rows.cpu()
 
         def tips(xx: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
@@ -271,10 +272,9 @@ class WholeConfiguration:
             return (e[:, :k].norm(dim=-1) < max(tol, SURFACE_TIPS_M)) & pads & deep
 
         lo, hi = self.whole_bounds(trials)
-        return levenberg_marquardt(model, goal, x, lo, hi, iterations, tol=tol, done=done,
-                                   converged=converged if self.pads is not None and tol > 0 else None,
-                                   trace=trace, count=count if filtered else None,
-                                   min_gain=self.min_gain, prior=prior)
+        options = LMOptions(tol=tol, done=done, converged=converged if self.pads is not None and tol > 0 else None,
+                            trace=trace, count=count if filtered else None, min_gain=self.min_gain)
+        return levenberg_marquardt(model, goal, x, lo, hi, iterations, options, prior)
 
     def centre(self, x: Tensor, weight: float, iterations: int) -> Tensor:
         """x (B, m) moved toward the middle of the contact fingers' joint ranges while their
@@ -289,7 +289,7 @@ class WholeConfiguration:
         middle = torch.zeros_like(w)
         middle[self.n:] = (lo + hi) / 2
         for k in range(6):
-            x = self.local_solve(x, iterations, prior=(middle, w / 3 ** k)).x
+            x = self.local_solve(x, iterations, prior=Prior(middle, w / 3 ** k)).x
         return x
 
     def whole_result(self, solved: LMResult, like: Tensor, rows: Tensor | None = None) -> tuple[Tensor, Evaluation]:

@@ -11,7 +11,7 @@ from omegaconf import OmegaConf
 
 import graspnet_torch as gt
 from graspnet_torch.errors import ConfigError
-from graspnet_torch.least_squares import levenberg_marquardt
+from graspnet_torch.least_squares import LMOptions, Prior, levenberg_marquardt
 from graspnet_torch.paths import repo_root
 from graspnet_torch.settings import build, unset
 from graspnet_torch.solver import SolverCfg
@@ -47,13 +47,13 @@ def test_levenberg_marquardt_respects_bounds_never_worsens_and_stops_rows():
     lo, hi = torch.zeros(2, dtype=torch.float64), torch.ones(2, dtype=torch.float64)
     x0 = torch.tensor([[0.1, 0.1], [1.0, 0.5]], dtype=torch.float64)
     trace = []
-    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, tol=1.0 + 1e-9, trace=trace)
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, LMOptions(tol=1.0 + 1e-9, trace=trace))
     assert bool(((out.x >= lo) & (out.x <= hi)).all())
     assert out.steps[1] == 0  # |e| = 1: within tol from the start
     assert out.x[0, 0] == pytest.approx(1.0) and out.x[0, 1] == pytest.approx(0.5, abs=1e-6)
     errs = torch.stack(trace)
     assert bool((errs[1:] <= errs[:-1] + 1e-15).all())
-    never = levenberg_marquardt(f, goal, x0, lo, hi, 40, done=lambda stopped: torch.ones_like(stopped))
+    never = levenberg_marquardt(f, goal, x0, lo, hi, 40, LMOptions(done=lambda stopped: torch.ones_like(stopped)))
     assert never.steps.tolist() == [0, 0]
 
 
@@ -72,8 +72,8 @@ def test_levenberg_marquardt_stops_a_row_settled_in_a_local_minimum():
     goal = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]], dtype=torch.float64)
     lo, hi = torch.full((2,), -5.0, dtype=torch.float64), torch.full((2,), 5.0, dtype=torch.float64)
     x0 = torch.tensor([[-1.2, 1.0], [-1.2, 1.0]], dtype=torch.float64)
-    full = levenberg_marquardt(f, goal, x0, lo, hi, 200, tol=1e-12, lam_max=1e4)
-    cut = levenberg_marquardt(f, goal, x0, lo, hi, 200, tol=1e-12, lam_max=1e4, min_gain=1e-3)
+    full = levenberg_marquardt(f, goal, x0, lo, hi, 200, LMOptions(tol=1e-12, lam_max=1e4))
+    cut = levenberg_marquardt(f, goal, x0, lo, hi, 200, LMOptions(tol=1e-12, lam_max=1e4, min_gain=1e-3))
     assert int(cut.steps[0]) < 40 and int(full.steps[0]) == 200
     assert float(cut.err[0]) == pytest.approx(float(full.err[0]), rel=2e-3) and float(full.err[0]) >= 1.0
     assert float(cut.err[1]) < 1e-9 and cut.x[1].tolist() == pytest.approx([1.0, 1.0])
@@ -96,13 +96,13 @@ def test_levenberg_marquardt_with_a_prior_lands_nearest_the_centre():
     x = x0 = torch.zeros(1, 3, dtype=torch.float64)
     for k in range(6):
         weight = torch.full((3,), 1.0 / 3 ** k, dtype=torch.float64)
-        out = levenberg_marquardt(f, goal, x, lo, hi, 50, prior=(c, weight))
+        out = levenberg_marquardt(f, goal, x, lo, hi, 50, prior=Prior(c, weight))
         assert out.value.shape == (1, 1) and float(out.err[0]) == pytest.approx(float((goal - out.x @ A.T).abs()[0]))
         x = out.x
-    x = levenberg_marquardt(f, goal, x, lo, hi, 50, tol=1e-12).x
+    x = levenberg_marquardt(f, goal, x, lo, hi, 50, LMOptions(tol=1e-12)).x
     nearest_c = c + A[0] * (goal - A @ c) / (A @ A.T)[0]
     assert x[0].tolist() == pytest.approx(nearest_c.tolist(), abs=1e-9)
-    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, tol=1e-12).x
+    plain = levenberg_marquardt(f, goal, x0, lo, hi, 50, LMOptions(tol=1e-12)).x
     assert plain[0].tolist() == pytest.approx((A[0] * goal / (A @ A.T)[0]).tolist(), abs=1e-6)
 
 
@@ -120,7 +120,7 @@ def test_levenberg_marquardt_stops_evaluating_a_row_refused_at_the_largest_dampi
     lo, hi = torch.zeros(1, dtype=torch.float64), torch.ones(1, dtype=torch.float64)
     x0 = torch.tensor([[1.0], [0.0]], dtype=torch.float64)
     trace = []
-    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, lam=0.5, lam_max=1.0, trace=trace)
+    out = levenberg_marquardt(f, goal, x0, lo, hi, 40, LMOptions(lam=0.5, lam_max=1.0, trace=trace))
     assert out.steps.tolist() == [40, 40] and len(trace) == 40
     assert out.x[0, 0] == 1.0 and float(out.err[0]) == pytest.approx(1.0)
     assert sum(int((r == 0).sum()) for r in seen[1:]) <= 2  # row 0: refused at 0.5 * 4 -> lam_max, then dropped
