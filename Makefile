@@ -117,7 +117,7 @@ bench-proposal: $(STAMP)  ## gt.solve_many from posture proposals beside random 
 bench-solvers: $(STAMP)  ## the experiment solvers: every solver (srv, paper, cmaes, dls) on the same problems, targets (~11 min)
 	$(call EXPERIMENT_RUN,solvers)
 
-bench-reports: $(STAMP)  ## every benchmark the docs quote, each in a fresh process -> reports/bench_NAME.md (~45 min; each bench-* target writes its own)
+bench-reports: $(STAMP)  ## every benchmark the docs quote, each in a fresh process -> reports/bench_*.md (~45 min; each bench-* target writes its own)
 	$(PY) -c 'import dexmate_urdf' 2>/dev/null || $(PIP) install -e '.[hands]'
 	$(PY) -c 'import dex_retargeting' 2>/dev/null || $(PIP) install -e '.[retarget]'
 	$(PY) benchmarks/report.py bench_kinematics bench_fcnn bench_fcnn_training bench_solver bench_threads bench_validation \

@@ -1,15 +1,15 @@
 """Run benchmarks in fresh processes and keep what each printed as a report the docs can quote.
 
-    python benchmarks/report.py calls api_speed       # -> reports/bench_calls.md, reports/bench_api_speed.md
+    python benchmarks/report.py calls bench_manus     # -> reports/bench_calls.md, reports/bench_manus.md
     python benchmarks/report.py calls --out DIR       # into DIR
 
 Each NAME runs as ``python benchmarks/NAME.py --check`` (one torch thread, its own defaults) in a
-new process, and ``reports/bench_NAME.md`` gets its whole standard output (its tables, its ratios
-against the peer measured in the same run and its targets, met or MISSED), the command, the date,
-the wall time, the exit status and the machine with the commit (``graspnet_torch.experiments.report
-.machine``). A report is written atomically, also when a target is missed; a benchmark that crashed
-writes none. Exit status: 0 when every benchmark met its targets, 1 when one missed a target, 2 for
-an unknown name or a crash (one line on stderr each).
+new process, and ``reports/bench_NAME.md`` (NAME without a leading ``bench_``) gets its whole
+standard output (its tables, its ratios against the peer measured in the same run and its targets,
+met or MISSED), the command, the date, the wall time, the exit status and the machine with the
+commit (``graspnet_torch.experiments.report.machine``). A report is written atomically, also when
+a target is missed; a benchmark that crashed writes none. Exit status: 0 when every benchmark met
+its targets, 1 when one missed a target, 2 for an unknown name or a crash (one line on stderr each).
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ def _report(name: str, command: list[str], done: subprocess.CompletedProcess[str
 
 
 def run(name: str, out: Path) -> int:
-    """Run ``benchmarks/<name>.py --check`` and write ``out/bench_<name>.md``; its exit status
-    (2 when it crashed: no report)."""
+    """Run ``benchmarks/<name>.py --check`` and write ``out/bench_<name>.md`` (``name`` without a
+    leading ``bench_``); its exit status (2 when it crashed: no report)."""
     from graspnet_torch.io import atomic_write_text
 
     script = HERE / f"{name}.py"
@@ -51,7 +51,7 @@ def run(name: str, out: Path) -> int:
         last = (done.stderr.strip().splitlines() or [f"exit status {done.returncode}"])[-1]
         print(f"report: {name} failed: {last}", file=sys.stderr)
         return 2
-    path = atomic_write_text(out / f"bench_{name}.md", _report(name, command[1:], done, wall))
+    path = atomic_write_text(out / f"bench_{name.removeprefix('bench_')}.md", _report(name, command[1:], done, wall))
     print(f"wrote {path} ({wall:.0f} s, {'targets met' if done.returncode == 0 else 'a target missed'})")
     return done.returncode
 
