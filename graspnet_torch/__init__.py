@@ -14,7 +14,6 @@ from graspnet_torch.physics import PhysicsCfg, PhysicsReport, check_until_failur
 from graspnet_torch.quality import grasp_quality
 from graspnet_torch.robot import Posture, Robot, load_robot
 from graspnet_torch.solver import GraspResult, PolishCfg, RewardCfg, Solver, SolverCfg, solve, solve_many
-from graspnet_torch.solver import kinds as _kinds  # noqa: F401  registers the robot kinds
 from graspnet_torch.synthesis import SynthesizedGrasp, baseline_grasps, synthesize_grasps
 from graspnet_torch.tasks import GraspProblem, Shape, random_reachable_problem
 from graspnet_torch.threads import set_default_threads

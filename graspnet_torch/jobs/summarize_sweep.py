@@ -21,8 +21,8 @@ import yaml
 
 from graspnet_torch.errors import ConfigError, say
 from graspnet_torch.io import atomic_write_text
-from graspnet_torch.robot.kinds import KINDS
 from graspnet_torch.settings import clip
+from graspnet_torch.solver.environments import ENVIRONMENTS
 from graspnet_torch.solver.result import GraspResult
 from graspnet_torch.table import markdown_table
 from graspnet_torch.viz.plots import _plt
@@ -57,7 +57,7 @@ def collect_sweep(sweep: str | Path) -> tuple[list[str], list[dict]]:
             key, sep, value = str(item).partition("=")
             if sep and not key.startswith(("hydra", "~")):
                 settings[key.lstrip("+")] = _value(value)
-        error_keys = tuple(dict.fromkeys(row.environment.error_key for row in KINDS.values()))  # every kind's
+        error_keys = tuple(dict.fromkeys(env.error_key for env in ENVIRONMENTS.values()))  # every kind's
         try:
             best = GraspResult.from_dict(json.loads(result_path.read_text()), error_keys=error_keys).best
         except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError):

@@ -10,6 +10,7 @@ import torch
 
 from graspnet_torch.motion.config import ReachCfg
 from graspnet_torch.motion.validity import MotionChecker
+from graspnet_torch.robot.heads import head_of
 from graspnet_torch.robot.ik import refine
 from graspnet_torch.robot.robot import Robot
 from graspnet_torch.tasks.problem import GraspProblem
@@ -56,8 +57,8 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     palm = posture.palm_pose[:3].numpy()
     out = np.where(norms > 1e-6, out / np.maximum(norms, 1e-12), (palm - contacts) /
                    np.maximum(np.linalg.norm(palm - contacts, axis=1, keepdims=True), 1e-12))
-    head = robot.head.values(posture)
-    tips = robot.head.fingertips(head, posture.fingers)
+    head = head_of(robot).values(posture)
+    tips = head_of(robot).fingertips(head, posture.fingers)
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
     rows = [robot.finger_index(f) for f in problem.fingers]
     res = (cfg.resolution_deg, cfg.resolution_mm)
@@ -68,7 +69,7 @@ def openings(checker: MotionChecker, problem: GraspProblem, goal: np.ndarray, cf
     for direction, distance in [(out, d) for d in OPENINGS_M] + [(inward, d) for d in OPENINGS_M]:
         targets = tips.clone()
         targets[rows] = torch.as_tensor(contacts + distance * direction)
-        bases = robot.head.world_to_bases(targets, head)
+        bases = head_of(robot).world_to_bases(targets, head)
         q, _err = refine(robot.fingertips_base_jacobian, posture.fingers, bases, lo, hi, OPENING_IK_STEPS)
         candidates.append(q[mask].numpy())
     home = robot.home_posture(torch.float64).fingers[mask].numpy()

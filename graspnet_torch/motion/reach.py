@@ -36,6 +36,7 @@ from graspnet_torch.motion.openings import OPENINGS_M, opening, openings
 from graspnet_torch.motion.planner import plan_path, step_aside
 from graspnet_torch.motion.trajectory import TooManyRows, Trajectory, time_path
 from graspnet_torch.motion.validity import MotionChecker, StateLayout
+from graspnet_torch.robot.heads import head_of
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import pose_to_rt, rt_to_pose
 from graspnet_torch.solver.api import robot_of
@@ -66,7 +67,7 @@ def start_posture(robot: Robot, problem: GraspProblem) -> Posture:
     if not problem.start:
         return home
     where = f"{problem.source}: start"
-    if not robot.head.anchored:
+    if not head_of(robot).anchored:
         raise ProblemError(f"{where}: robot '{robot.name}' has no body (a free hand's motion is its approach)")
     body, fingers = home.body.clone(), home.fingers.clone()
     finger_slots = {name: (k, i) for k, f in enumerate(robot.fingers.values())
@@ -103,7 +104,7 @@ def check_start(robot: Robot, problem: GraspProblem) -> None:
     its limits, or colliding (FCL, with the fingers as given)."""
     _refuse_shared(robot, problem)
     posture = start_posture(robot, problem)
-    if not robot.head.anchored:  # a free palm starts at its approach, not at a configuration
+    if not head_of(robot).anchored:  # a free palm starts at its approach, not at a configuration
         return
 
     if has_environment(robot, problem):
@@ -142,7 +143,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
     res = (cfg.resolution_deg, cfg.resolution_mm)
     fine = (res[0] / DETOUR_FINER, res[1] / DETOUR_FINER)  # a grazing motion's way around is checked at this
     deadline = t0 + cfg.timeout_s
-    if robot.head.anchored:
+    if head_of(robot).anchored:
         corners, reason = _body_path(robot, problem, checker, goal, cfg, deadline, pregrasp)
     else:
         corners, reason = _hand_path(robot, problem, checker, goal, cfg, pregrasp)
@@ -162,7 +163,7 @@ def plan_reach(problem: GraspProblem, result: GraspResult | TrialResult, cfg: Re
         # (the detour moves the joints that segment moves)
         u, v = corners[j], corners[j + 1]
         moving = np.nonzero(np.abs(v - u) > 1e-12)[0]
-        if not robot.head.anchored or np.any(moving >= layout.body):  # a straight part (fingers, approach): no detour
+        if not head_of(robot).anchored or np.any(moving >= layout.body):  # a straight part (fingers, approach)
             reason = "a straight part of the motion collides between its rows at the check step"
             break
         for divide in (1, DETOUR_FINER):  # the detour's motions checked at the step (finer where that is not enough)
@@ -377,7 +378,7 @@ def check_motion(robot: Robot, problem: GraspProblem, trial: TrialResult, trajec
     goal = checker.state(trial_posture(robot, trial))
     if np.max(np.abs(x[-1] - goal)) > 1e-6:
         out.append(f"the last row differs from the reported configuration by {np.max(np.abs(x[-1] - goal)):.3g}")
-    if robot.head.anchored:
+    if head_of(robot).anchored:
         start = checker.state(start_posture(robot, problem))
         if np.max(np.abs(x[0] - start)) > 1e-6:
             out.append(f"the first row differs from the start by {np.max(np.abs(x[0] - start)):.3g}")

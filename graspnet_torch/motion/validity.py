@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from graspnet_torch.collision.scene import CollisionScene
-from graspnet_torch.robot.heads import urdf_velocity
+from graspnet_torch.robot.heads import head_of, urdf_velocity
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -47,9 +47,9 @@ class StateLayout:
 
     @classmethod
     def of(cls, robot: Robot, palm_speed: float = 0.5) -> StateLayout:
-        """The robot's head values (:attr:`Robot.head`: a free palm's pose or the body joints), then
-        every finger's free joints by URDF name."""
-        head = robot.head
+        """The robot's head values (:func:`~graspnet_torch.robot.heads.head_of`: a free palm's pose
+        or the body joints), then every finger's free joints by URDF name."""
+        head = head_of(robot)
         names, revolute = list(head.names), list(head.revolute)
         lower, upper, velocity = list(head.lower), list(head.upper), list(head.velocity(palm_speed))
         flo, fhi = robot.finger_limits
@@ -79,7 +79,7 @@ def state_postures(robot: Robot, layout: StateLayout, states: np.ndarray) -> lis
     """The :class:`Posture` of each state (B, n) (internal units), the palm poses of a robot with a
     body by one batched forward kinematics (:meth:`Head.postures <graspnet_torch.robot.heads.Head.postures>`)."""
     x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-    return robot.head.postures(x[:, :layout.body], _finger_joints(robot, x, layout.body))
+    return head_of(robot).postures(x[:, :layout.body], _finger_joints(robot, x, layout.body))
 
 
 def _finger_joints(robot: Robot, x: torch.Tensor, m: int) -> torch.Tensor:
@@ -118,7 +118,7 @@ class MotionChecker:
                               (points - self._targets.flip(0)).norm(dim=-1).amax(-1))
             return (d <= self.touch).numpy()[:, None]
         q = _finger_joints(robot, x, m)
-        tips = robot.head.fingertips(x[:, :m], q)
+        tips = head_of(robot).fingertips(x[:, :m], q)
         return ((tips[:, self._rows] - self._targets).norm(dim=-1) <= self.touch).numpy()
 
     def arrived(self, states: np.ndarray) -> np.ndarray:
@@ -135,7 +135,7 @@ class MotionChecker:
 
     def state(self, posture: Posture) -> np.ndarray:
         """The state (1-D) of a posture."""
-        head = self.robot.head.values(posture)
+        head = head_of(self.robot).values(posture)
         fingers = posture.fingers[torch.as_tensor(self.robot.finger_mask)]
         return np.concatenate([head.numpy().astype(np.float64), fingers.numpy().astype(np.float64)])
 
@@ -143,7 +143,7 @@ class MotionChecker:
         """The links' names and world poses (B, L, 4, 4) in states (B, n)."""
         robot, m = self.robot, self.layout.body
         x = torch.as_tensor(np.asarray(states, dtype=np.float64))
-        return robot.head.link_frames(x[:, :m], _finger_joints(robot, x, m))
+        return head_of(robot).link_frames(x[:, :m], _finger_joints(robot, x, m))
 
     def clear(self, states: np.ndarray) -> np.ndarray:
         """(B,) which states (B, n) are clear (module docstring)."""

@@ -2,14 +2,15 @@
 
 A free hand's palm is placed by its pose (x, y, z, rx, ry, rz: m, rad) (:class:`FreePalm`); a
 robot with a body (an arm, a mobile base and an arm) by its body joints, the palm at the end of the
-body chain (:class:`BodyChain`). The kind's row (:mod:`graspnet_torch.robot.kinds`) names its head;
-code that plans, checks or draws a configuration asks the head (``robot.head``) and never branches
-on the robot's kind. Every method is batched over leading dimensions unless it says otherwise.
+body chain (:class:`BodyChain`). :data:`HEADS` names each kind's head; code that plans, checks or
+draws a configuration asks the robot's head (:func:`head_of`) and never branches on the robot's
+kind. Every method is batched over leading dimensions unless it says otherwise.
 """
 
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -21,7 +22,7 @@ from graspnet_torch.robot.robot import Robot
 from graspnet_torch.robot.structure import Posture
 from graspnet_torch.robot.transforms import rt_to_pose
 
-__all__ = ["BodyChain", "FreePalm", "Head", "urdf_velocity"]
+__all__ = ["HEADS", "BodyChain", "FreePalm", "Head", "head_of", "urdf_velocity"]
 
 
 def urdf_velocity(robot: Robot, joint: str) -> float:
@@ -168,3 +169,17 @@ class BodyChain(Head):
             if arm_joints and name in arm_joints:
                 body[k] = arm_joints[name]
         return body
+
+
+HEADS: dict[str, type[Head]] = {"hand": FreePalm, "arm_hand": BodyChain, "gripper": BodyChain}
+"""Robot kind -> its head: a free hand's palm pose, else the body chain's joints."""
+
+_MADE: weakref.WeakKeyDictionary[Robot, Head] = weakref.WeakKeyDictionary()
+
+
+def head_of(robot: Robot) -> Head:
+    """How a robot's palm is placed: its kind's head (:data:`HEADS`), made once per robot."""
+    head = _MADE.get(robot)
+    if head is None:
+        head = _MADE[robot] = HEADS[robot.kind](robot)
+    return head

@@ -21,7 +21,6 @@ import math
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -33,7 +32,6 @@ from graspnet_torch.robot.config import ChainCfg, PoseBounds, RobotCfg, load_rob
 from graspnet_torch.robot.fingers import FingerChain, FingerKernel
 from graspnet_torch.robot.joint_files import JointValues
 from graspnet_torch.robot.kernel import ChainKernel
-from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.kinematics import Kinematics
 from graspnet_torch.robot.link_frames import LinkFrames
 from graspnet_torch.robot.opposition import facing_pads
@@ -273,12 +271,6 @@ class Robot(Kinematics, JointValues, LinkFrames):
         body chain with two marked gripper points, no fingers): which environment solves it
         (:attr:`RobotCfg.kind <graspnet_torch.robot.config.RobotCfg.kind>`)."""
         return self.cfg.kind
-
-    @cached_property
-    def head(self) -> Any:
-        """How its palm is placed (its kind's :class:`~graspnet_torch.robot.heads.Head`: a free
-        palm pose or the body joints): motions, checks and pictures ask it, not the kind."""
-        return robot_kind(self).head(self)
 
     @property
     def dof(self) -> int:

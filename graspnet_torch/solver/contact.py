@@ -36,6 +36,7 @@ from graspnet_torch.collision.cache import scene_for
 from graspnet_torch.collision.scene import OBJECT_TOLERANCE_M, CollisionScene, has_environment
 from graspnet_torch.collision.surface import pad_targets, surface_distance, surface_normals
 from graspnet_torch.errors import ProblemError
+from graspnet_torch.robot.heads import head_of
 from graspnet_torch.robot.ik import refine
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.solver.config import SolverCfg
@@ -177,14 +178,14 @@ def grasp_postures(robot: Robot, problem: GraspProblem, postures: Sequence[Postu
     normals = surface_normals(problem.object, contacts)
     tips = tip_targets(robot, problem, "surface")
     rows = [robot.finger_index(f) for f in problem.fingers]
-    head = torch.stack([robot.head.values(p) for p in postures])  # (T, n)
+    head = torch.stack([head_of(robot).values(p) for p in postures])  # (T, n)
     q0 = torch.stack([p.fingers for p in postures])  # (T, F, j)
     lo, hi = (torch.as_tensor(a) for a in robot.finger_limits)
     shifts = (solver.pregrasp_mm / 1000, -solver.squeeze_mm / 1000)
-    targets = robot.head.fingertips(head, q0).repeat(len(shifts), 1, 1, 1)  # (2, T, F, 3): every finger where it is
+    targets = head_of(robot).fingertips(head, q0).repeat(len(shifts), 1, 1, 1)  # (2, T, F, 3): every finger where it is
     for k, shift in enumerate(shifts):
         targets[k][:, rows] = torch.as_tensor(tips + shift * normals)
-    bases = robot.head.world_to_bases(targets, head.expand(len(shifts), -1, -1))
+    bases = head_of(robot).world_to_bases(targets, head.expand(len(shifts), -1, -1))
     q, _ = refine(robot.fingertips_base_jacobian, q0.expand(len(shifts), -1, -1, -1), bases, lo, hi, PREGRASP_STEPS,
                   tol=PREGRASP_TOL_M)
     return [(replace(p, fingers=q[0, t]), replace(p, fingers=q[1, t])) for t, p in enumerate(postures)]
@@ -196,7 +197,7 @@ def posture_fields(robot: Robot, posture: Posture) -> dict:
     pose = posture.palm_pose.tolist()
     out = {"palm_pose": pose[:3] + [math.degrees(a) for a in pose[3:]],
            "joints": robot.finger_joints_to_file(posture.fingers, posture.shared)}
-    if robot.head.anchored:
+    if head_of(robot).anchored:
         out["arm_joints"] = robot.body_joints_to_file(posture.body)
     return out
 

@@ -26,8 +26,8 @@ The contract comes in three parts, one module each, so that each concern reads o
 ==========================================  ====================================================
 
 :class:`Environment` is the three together with the attributes every solver reads. A new kind of
-robot is a new environment named by its kind's row (:mod:`graspnet_torch.solver.kinds`), never an
-edit of a solver; a part's methods with a default (``polish``, ``centre``, ``unreachable``, ...)
+robot is a new environment named in :data:`graspnet_torch.solver.environments.ENVIRONMENTS`, never
+an edit of a solver; a part's methods with a default (``polish``, ``centre``, ``unreachable``, ...)
 need no code where the default holds.
 """
 

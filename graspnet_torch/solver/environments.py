@@ -1,4 +1,4 @@
-"""Which environment solves a robot: its kind's row (:func:`graspnet_torch.robot.kinds.robot_kind`) names the class."""
+"""Which environment solves a robot: :data:`ENVIRONMENTS` names the class of each robot kind."""
 
 from __future__ import annotations
 
@@ -7,17 +7,26 @@ from collections.abc import Sequence
 import torch
 
 from graspnet_torch.fcnn.ik import FingerIK
-from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Posture, Robot
+from graspnet_torch.solver.arm import ArmHandEnvironment
 from graspnet_torch.solver.config import RewardCfg, SolverCfg
 from graspnet_torch.solver.environment import Environment
+from graspnet_torch.solver.gripper import GripperEnvironment
+from graspnet_torch.solver.hand import HandEnvironment
 from graspnet_torch.tasks.problem import GraspProblem
 
-__all__ = ["build_environment", "environment_class"]
+__all__ = ["ENVIRONMENTS", "build_environment", "environment_class"]
+
+ENVIRONMENTS: dict[str, type[Environment]] = {
+    "hand": HandEnvironment,  # a free palm with fingers: the palm pose, the FCNN places the fingers
+    "arm_hand": ArmHandEnvironment,  # fingers on an arm: its joints, the FCNN places the fingers
+    "gripper": GripperEnvironment,  # a body chain with two gripper points (MANUS)
+}
+"""Robot kind -> the environment class that solves it."""
 
 def environment_class(robot: Robot) -> type[Environment]:
-    """The environment class of a robot's kind (its row's ``environment``)."""
-    return robot_kind(robot).environment
+    """The environment class of a robot's kind (:data:`ENVIRONMENTS`)."""
+    return ENVIRONMENTS[robot.kind]
 
 
 def build_environment(robot: Robot, problem: GraspProblem | Sequence[GraspProblem], finger_ik: FingerIK | None,

@@ -11,9 +11,8 @@ known to exist.
 :func:`random_posed_problem`      a random posture and the problem it solves (proposal training)
 ================================  ================================================================
 
-Which generator, walk space and posed problem a robot gets is its kind's row
-(:func:`graspnet_torch.robot.kinds.robot_kind`): ``random_problem``, ``walk_space``,
-``posed_problem``. Each is deterministic in its seed. Problems among obstacles that must clear their posture are made
+Which generator, walk space and posed problem a robot gets is its kind's row of :data:`PROBLEMS`.
+Each is deterministic in its seed. Problems among obstacles that must clear their posture are made
 where collisions are known (:mod:`graspnet_torch.collision.problems`).
 """
 
@@ -26,16 +25,15 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from graspnet_torch.robot.kinds import robot_kind
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.robot.transforms import matrix_to_pose, pose_to_degrees, pose_to_rt
 from graspnet_torch.tasks.objects import random_pose
 from graspnet_torch.tasks.problem import GraspProblem
 from graspnet_torch.tasks.reference import reference_posture
 
-__all__ = ["WalkSpace", "arm_walk_space", "hand_walk_space", "random_arm_problem", "random_gripper_problems",
-           "random_hand_problem", "random_posed_fingers", "random_posed_gripper", "random_posed_problem",
-           "random_reachable_problem", "random_sequence"]
+__all__ = ["PROBLEMS", "KindProblems", "WalkSpace", "arm_walk_space", "hand_walk_space", "random_arm_problem",
+           "random_gripper_problems", "random_hand_problem", "random_posed_fingers", "random_posed_gripper",
+           "random_posed_problem", "random_reachable_problem", "random_sequence"]
 
 
 def _uniform(limits: tuple, g: torch.Generator) -> Tensor:
@@ -108,7 +106,7 @@ def random_reachable_problem(robot: Robot, seed: int, n_fingers: int | Sequence[
     ``n_fingers`` fingers (a number, or a range ``(lo, hi)`` drawn uniformly; default 2 to all)
     chosen at random touch their fingertips. Deterministic in ``seed``.
     """
-    generator = robot_kind(robot).random_problem
+    generator = PROBLEMS[robot.kind].random_problem
     if generator is None:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
     return generator(robot, seed, n_fingers)
@@ -190,7 +188,7 @@ def random_sequence(robot: Robot, seed: int, frames: int, n_fingers: int | Seque
     fingers (see :func:`random_reachable_problem`) touch their fingertips in every frame; each
     problem carries the posture that made it as its ``reference``. Deterministic in ``seed``.
     """
-    make_space = robot_kind(robot).walk_space
+    make_space = PROBLEMS[robot.kind].walk_space
     if make_space is None:
         raise ValueError(f"robot '{robot.name}' needs at least two fingers for a contact problem")
     if frames < 1 or step_m <= 0 or step_deg <= 0:
@@ -251,7 +249,7 @@ def random_posed_problem(robot: Robot, seed: int, n_fingers: int | Sequence[int]
     """A random posture of any robot and the problem it solves (what a posture proposal model
     learns from): its kind's ``posed_problem`` (:func:`random_posed_fingers`,
     :func:`random_posed_gripper`). Deterministic in ``seed``."""
-    return robot_kind(robot).posed_problem(robot, seed, n_fingers)
+    return PROBLEMS[robot.kind].posed_problem(robot, seed, n_fingers)
 
 
 def random_posed_fingers(robot: Robot, seed: int, n_fingers: int | Sequence[int] | None = None
@@ -280,6 +278,32 @@ def random_posed_gripper(robot: Robot, seed: int, n_fingers: int | Sequence[int]
 
 def _check_generator(robot: Robot, generator: Callable) -> None:
     """Refuse a generator that is not the one of the robot's kind."""
-    if robot_kind(robot).random_problem is not generator:
+    if PROBLEMS[robot.kind].random_problem is not generator:
         raise ValueError(f"robot '{robot.name}' ({robot.kind}): its random problems come from "
                          f"random_reachable_problem, not {generator.__name__}")
+
+
+@dataclass(frozen=True)
+class KindProblems:
+    """A robot kind's random problems (one row of :data:`PROBLEMS`).
+
+    Attributes:
+        posed_problem: ``(robot, seed, n_fingers) -> (GraspProblem, Posture)``: a random posture
+            and the problem it solves (what a posture proposal model learns from).
+        random_problem: ``(robot, seed, n_fingers) -> GraspProblem``, a random reachable contact
+            problem (:func:`random_reachable_problem`); None: the kind has no contacts.
+        walk_space: ``Robot -> WalkSpace``: the box its posture walks in for
+            :func:`random_sequence`; None: no sequences.
+    """
+
+    posed_problem: Callable[[Robot, int, int | Sequence[int] | None], tuple[GraspProblem, Posture]]
+    random_problem: Callable[[Robot, int, int | Sequence[int] | None], GraspProblem] | None = None
+    walk_space: Callable[[Robot], WalkSpace] | None = None
+
+
+PROBLEMS: dict[str, KindProblems] = {
+    "hand": KindProblems(random_posed_fingers, random_hand_problem, hand_walk_space),
+    "arm_hand": KindProblems(random_posed_fingers, random_arm_problem, arm_walk_space),
+    "gripper": KindProblems(random_posed_gripper),
+}
+"""Robot kind -> its random problems."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from graspnet_torch.robot.heads import head_of
 from graspnet_torch.robot.robot import Posture, Robot
 from graspnet_torch.tasks.problem import GraspProblem
 
@@ -20,5 +21,5 @@ def reference_posture(robot: Robot, problem: GraspProblem) -> Posture:
     q = home.fingers.clone()
     for f, v in ref.joints.items():
         q[robot.finger_index(f)] = torch.as_tensor(v, dtype=torch.float64)
-    head = robot.head.from_reference(ref.palm_pose, ref.arm_joints, problem.source)  # palm pose or arm joints
-    return robot.head.postures(head[None], q[None])[0]
+    head = head_of(robot).from_reference(ref.palm_pose, ref.arm_joints, problem.source)  # palm pose or arm joints
+    return head_of(robot).postures(head[None], q[None])[0]
