@@ -97,6 +97,7 @@ def test_quick_protocol_on_one_hand_writes_the_table(tmp_path, monkeypatch):
     assert len(row["holds"]) <= 1 and report.numbers["hand/top-1 holds %"] == (100.0 if row["holds"] == [6] else 0.0)
     assert any("gone" in what and not ok for what, ok in report.checks)
     assert any("long objects: none" in what and not ok for what, ok in report.checks)
+    assert ("public dexterous hands whose top-1 holds on >= 80 % of the objects: 0 (none) >= 8", False) in report.checks
 
 
 @pytest.mark.slow
