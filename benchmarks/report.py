@@ -34,8 +34,9 @@ def _report(name: str, command: list[str], done: subprocess.CompletedProcess[str
     head = (f"Written by `python benchmarks/report.py` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}: "
             f"`{' '.join(command)}` in a fresh process, {wall:.0f} s, exit status {done.returncode} ({status}). "
             "Below, everything it printed; the machine and the commit at the end.")
+    here = {**machine(), "torch threads": "the benchmark's --threads (default 1)"}  # not this process's
     return "\n".join([f"# Benchmark `{name}`", "", head, "", "```text", done.stdout.rstrip(), "```", "",
-                      "| machine | |", "|---|---|", *(f"| {k} | {v} |" for k, v in machine().items()), ""])
+                      "| machine | |", "|---|---|", *(f"| {k} | {v} |" for k, v in here.items()), ""])
 
 
 def run(name: str, out: Path, args: Sequence[str] = (), title: str | None = None) -> int:
