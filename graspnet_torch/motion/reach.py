@@ -272,10 +272,9 @@ def _backed_off(robot: Robot, problem: GraspProblem, checker: MotionChecker, sta
         return None
     goal_t = t0 + torch.as_tensor(distance * away / np.linalg.norm(away))
     lo, hi = (torch.as_tensor(a) for a in robot.body_limits)
-
     goal = torch.cat([goal_t, torch.zeros(3, dtype=torch.float64)])
-    fixed = LMOptions(lam=BACK_OFF_DAMPING, lam_min=BACK_OFF_DAMPING, lam_max=BACK_OFF_DAMPING, active_set=False,
-                      tol=1e-4)
+    d = BACK_OFF_DAMPING
+    fixed = LMOptions(lam=d, lam_min=d, lam_max=d, active_set=False, tol=1e-4)
     frame = frame_model(robot.palm_frame_jacobian, R0)  # the palm frame: position, then its turn back to R0
     q = levenberg_marquardt(frame, goal, q[None], lo, hi, BACK_OFF_STEPS, fixed).x[0]
     R, t = robot.palm_frame(q)
