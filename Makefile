@@ -124,7 +124,7 @@ bench-reports: $(STAMP)  ## every benchmark the docs quote, each in a fresh proc
 	  bench_arm bench_manus any_hand mesh_objects calls api_speed quality contact_models retarget synthesis decomposition proposal
 	test -d examples/schunk_svh/dex-urdf || $(PY) scripts/fetch_hands.py
 	-$(PY) benchmarks/report.py any_hand --args "--robot examples/schunk_svh/schunk_svh_right.yaml --fingers 2 5" --as any_hand_schunk
-	-$(PY) benchmarks/report.py sweep_launchers --args "--long"
+	-$(PY) benchmarks/report.py sweep_launchers --args=--long
 
 report-manus: $(STAMP)  ## the experiment manus: section 7.2, 64 positions x 30 runs, DLS and CMA-ES, checks, Fig. 12 (~7 min)
 	$(call EXPERIMENT_RUN,manus)

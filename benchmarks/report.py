@@ -2,7 +2,7 @@
 
     python benchmarks/report.py calls bench_manus     # -> reports/bench_calls.md, reports/bench_manus.md
     python benchmarks/report.py calls --out DIR       # into DIR
-    python benchmarks/report.py any_hand --args "--robot examples/schunk_svh/schunk_svh_right.yaml --fingers 2 5" \
+    python benchmarks/report.py any_hand --args="--robot examples/schunk_svh/schunk_svh_right.yaml --fingers 2 5" \
         --as any_hand_schunk                          # one benchmark with options -> reports/bench_any_hand_schunk.md
 
 Each NAME runs as ``python benchmarks/NAME.py --check`` (one torch thread, its own defaults) in a
