@@ -92,10 +92,10 @@ class ArmHandEnvironment(FingerEnvironment):
             J = torch.cat([J, J.new_zeros(*J.shape[:-1], self.shared_slots)], dim=-1)
         return R, t, J
 
-    def bounds64(self) -> tuple[Tensor, Tensor]:
+    def _exact_bounds(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
 
-    def palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
+    def _palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
         """With a collision proxy, its arm chain gives the palm too (one pass of forward kinematics)."""
         if self.proxy is None:
             return self.palm_frame(config), None
@@ -105,7 +105,7 @@ class ArmHandEnvironment(FingerEnvironment):
     def body(self, config: Tensor) -> Tensor:
         return config[:, : self.m]
 
-    def config_of(self, posture: Posture) -> Tensor:
+    def _config_of(self, posture: Posture) -> Tensor:
         """The posture's arm joints (1, n) (then the shared joints, where they are)."""
         config = posture.body.to(torch.float64).reshape(1, -1)
         if self.shared_slots:
@@ -113,7 +113,7 @@ class ArmHandEnvironment(FingerEnvironment):
             config = torch.cat([config, shared.to(config).reshape(1, -1)], dim=1)
         return config
 
-    def add_fields(self, fields: list[dict], config: Tensor) -> None:
+    def _add_fields(self, fields: list[dict], config: Tensor) -> None:
         """``arm_joints`` by URDF joint name in chain order (degrees; metres for prismatic joints)."""
         for k, f in enumerate(fields):
             f["arm_joints"] = self.robot.body_joints_to_file(config[k, : self.m])

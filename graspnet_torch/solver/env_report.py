@@ -53,12 +53,12 @@ class ReportPart(ABC):
         part = Evaluation(**{k: v[rows[at].to(v.device)] for k, v in evaluation.tensors().items()})
         report = self.report(config[rows[at].to(config.device)], part, rows[at])
         for k, trial in zip(at.tolist(), report.fields, strict=True):
-            rule, posture = self.rule_of(int(pid[k])), trial_posture(self.robot, trial)
+            rule, posture = self._rule_of(int(pid[k])), trial_posture(self.robot, trial)
             scene = rule.scene(self.robot, problems[k])
             clear[k] = scene.check(posture).count == 0  # the pads' cone is in the model's error (pad_term.py)
         return clear
 
-    def rule_of(self, problem: int) -> ContactRule:
+    def _rule_of(self, problem: int) -> ContactRule:
         """The contact rule of the environment's problem ``problem`` (its index in the batch):
         default the point model's (:mod:`graspnet_torch.solver.contact`)."""
         return POINT_RULE

@@ -40,7 +40,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
 
     Subclasses set ``n``, ``lower``, ``upper`` ((n,), or (T, n) for a batch) and define
     :meth:`palm_frame` (the palm in the world for a configuration), :meth:`palm_frame_jacobian`
-    (with its Jacobian, for the polish) and :meth:`bounds64` (the exact bounds, float64). The
+    (with its Jacobian, for the polish) and :meth:`_exact_bounds` (the exact bounds, float64). The
     whole configuration (the polish, ``solver=dls``, warm starts): :mod:`graspnet_torch.solver.whole`.
     """
 
@@ -118,7 +118,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
         self.counts_collisions = self.proxy is not None
         self.on_surface = self.pads is not None
 
-    def rule_of(self, problem: int) -> ContactRule:
+    def _rule_of(self, problem: int) -> ContactRule:
         """The contact rule of problem ``problem`` of the batch (its contact model)."""
         return self.rules[problem]
 
@@ -144,14 +144,14 @@ class FingerEnvironment(WholeConfiguration, Environment):
         (rows d t / d config, then the angular velocity w: dR = [w]_x R)."""
         raise NotImplementedError
 
-    def bounds64(self) -> tuple[Tensor, Tensor]:
+    def _exact_bounds(self) -> tuple[Tensor, Tensor]:
         """The exact bounds of the configuration, float64 on the CPU: (n,) or (T, n) for a batch."""
         raise NotImplementedError
 
     def clamp(self, config: Tensor, rows: Tensor | None = None) -> Tensor:
         """(B, n) configurations of trials ``rows`` (None: all, in order) -> float64 on the CPU,
         within the exact bounds."""
-        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
+        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self._exact_bounds())
         return torch.minimum(torch.maximum(config.detach().to(torch.float64).cpu(), lo), hi)
 
     def _rows(self, value: Tensor | None, rows: Tensor | None) -> Tensor | None:
@@ -191,11 +191,11 @@ class FingerEnvironment(WholeConfiguration, Environment):
                                f"search needs the robot's trained finger IK")
         return self.ik
 
-    def shared_of(self, config: Tensor) -> Tensor | None:
+    def _shared_of(self, config: Tensor) -> Tensor | None:
         """The shared joints (B, S) of configurations (None: the robot holds them)."""
         return config[:, -self.shared_slots:] if self.shared_slots else None
 
-    def finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
+    def _finger_joints(self, config: Tensor, palm: tuple[Tensor, Tensor] | None = None, rows: Tensor | None = None
                       ) -> tuple[Tensor, Tensor]:
         """Finger joints (B, F, j) within limits and fingertip errors (B, F) in metres (zero for
         a finger a trial's problem does not use)."""
@@ -227,11 +227,11 @@ class FingerEnvironment(WholeConfiguration, Environment):
         """config: (B, n) of the trials ``trials`` (None: all, in order) -> E (B,) of eq. 3,
         per-finger errors (B, F), finger joints (B, F, j) and, with a collision proxy, the
         collision count (B,) of the whole posture (the fingers without a contact at home)."""
-        palm, levels = self.palm_and_levels(config)
-        q, errors = self.finger_joints(config, palm, trials)
+        palm, levels = self._palm_and_levels(config)
+        q, errors = self._finger_joints(config, palm, trials)
         contact = None
         if self.pads is not None:  # the surface model: a pad facing away counts as a tip off its target
-            penalty = self.pads.penalty(self.pad_normals(palm[0], config, q), trials)
+            penalty = self.pads.penalty(self._pad_normals(palm[0], config, q), trials)
             errors, contact = errors + penalty, self.pads.contact_errors(errors, penalty, trials)
         collisions = None
         if self.proxy is not None:
@@ -240,14 +240,14 @@ class FingerEnvironment(WholeConfiguration, Environment):
         return Evaluation(error=errors.sum(dim=1), finger_errors=errors, joints=q, collisions=collisions,
                           config=config, contact_errors=contact)
 
-    def pad_normals(self, R: Tensor, config: Tensor, q: Tensor) -> Tensor:
+    def _pad_normals(self, R: Tensor, config: Tensor, q: Tensor) -> Tensor:
         """The contact fingers' pad normals in the environment's frame (B, F, 3) with the palm
         turned by R (B, 3, 3), the bases of ``config`` (B, n) and the finger joints q (B, F, j)."""
         local, _ = self.pads.local(q)
         base_R = self.bases(config)[0]
         return (R.unsqueeze(1) @ base_R @ local.unsqueeze(-1)).squeeze(-1)
 
-    def palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
+    def _palm_and_levels(self, config: Tensor) -> tuple[tuple[Tensor, Tensor], list[Tensor] | None]:
         """The palm frame of configurations (T, n) and, where the proxy needs them, the body's chain
         frames (None: a free palm)."""
         return self.palm_frame(config), None
@@ -270,15 +270,15 @@ class FingerEnvironment(WholeConfiguration, Environment):
                 err = err * self.mask
             contact = None
             if self.pads is not None:
-                penalty = self.pads.penalty(self.pad_normals(self.palm_frame(config)[0], config, q))
+                penalty = self.pads.penalty(self._pad_normals(self.palm_frame(config)[0], config, q))
                 err, contact = err + penalty, self.pads.contact_errors(err, penalty).clone()
             evaluation = Evaluation(error=err.sum(dim=1).clone(), finger_errors=err.clone(), joints=q.clone(),
                                     collisions=evaluation.collisions, contact_errors=contact)
         if whole:
-            x = self.whole_start(config, evaluation.joints)
+            x = self._whole_start(config, evaluation.joints)
             config, evaluation = self.whole_result(self.local_solve(x, self.polish_iterations, self.polish_tol, done),
                                                    config)
-            config, evaluation = self.align(config, evaluation, self.tolerance_mm / 1000)  # the surface model
+            config, evaluation = self._align(config, evaluation, self.tolerance_mm / 1000)  # the surface model
         return config, evaluation
 
     @classmethod
@@ -316,7 +316,7 @@ class FingerEnvironment(WholeConfiguration, Environment):
             G_R, G_t = (self._rows(g, rows) if g.shape[0] > 1 else g for g in self.frame64)
             R, t = compose(G_R, G_t, R, t)
             contacts = transform_points(G_R.unsqueeze(-3), G_t.unsqueeze(-2), contacts)
-        shared = self.shared_of(exact)
+        shared = self._shared_of(exact)
         tips = transform_points(R.unsqueeze(-3), t.unsqueeze(-2), robot.fingertips_palm(q, shared))[:, self.idx]
         err = torch.linalg.vector_norm(tips - contacts, dim=-1)  # (T, F), metres
         palm = rt_to_pose(R, t).tolist()
@@ -337,12 +337,12 @@ class FingerEnvironment(WholeConfiguration, Environment):
                 "fingertip_error_mm": {f: e * 1000 for f, e in errors.items()},
                 "total_error_mm": total[-1] * 1000,
             })
-        self.add_fields(out, exact)
+        self._add_fields(out, exact)
         return Report(fields=out, evaluation=Evaluation(error=torch.tensor(total, dtype=torch.float64)),
                       error_mm=[f["total_error_mm"] for f in out],
                       landed=[max(f["fingertip_error_mm"].values()) <= self.tolerance_mm for f in out])
 
-    def add_fields(self, fields: list[dict], config: Tensor) -> None:
+    def _add_fields(self, fields: list[dict], config: Tensor) -> None:
         """Add what a subclass reports beyond the fingers to each trial's ``fields`` (an arm's joints);
         ``config``: (T, n) the reported configurations, float64 within the exact bounds."""
 

@@ -152,10 +152,10 @@ class HandEnvironment(FingerEnvironment):
             J = torch.cat([J, J.new_zeros(*J.shape[:-1], self.shared_slots)], dim=-1)
         return R, t, J
 
-    def bounds64(self) -> tuple[Tensor, Tensor]:
+    def _exact_bounds(self) -> tuple[Tensor, Tensor]:
         return self._bounds64
 
-    def config_of(self, posture: Posture) -> Tensor:
+    def _config_of(self, posture: Posture) -> Tensor:
         """The posture's palm pose in the (first) search frame G: G^-1 o pose (1, 6); each angle
         taken within 2 pi of the middle of its bounds."""
 

@@ -27,7 +27,7 @@ __all__ = ["DEPTH_STEP", "WholeConfiguration"]
 
 DEPTH_STEP = 1e-7  # the forward differences' step of the depth residuals (radians, metres; float64)
 DEPTH_ROWS = 128  # whole_depths' rows per chunk: 128 x (m + 1) configurations' frames at a time
-ALIGN_SHARE = 0.5  # a grasp's pads are turned in with the hinge at this share of the cone (align)
+ALIGN_SHARE = 0.5  # a grasp's pads are turned in with the hinge at this share of the cone (_align)
 SURFACE_TIPS_M = 1e-5  # the surface model's polish has converged once its pads are within this of their
 SURFACE_SLACK_M = 5e-5  # contacts (or the polish tolerance, if larger), each pad within this of its hinge
 SURFACE_DEPTH_SHARE = 0.25  # (0.06 degrees) and each link's depth within this share of the allowance:
@@ -37,7 +37,7 @@ SURFACE_DEPTH_SHARE = 0.25  # (0.06 degrees) and each link's depth within this s
 
 class WholeConfiguration:
     """The whole-configuration methods of :class:`~graspnet_torch.solver.fingers.FingerEnvironment`
-    (its attributes below; :meth:`palm_frame_jacobian`, :meth:`bounds64`, :meth:`clamp`,
+    (its attributes below; :meth:`palm_frame_jacobian`, :meth:`_exact_bounds`, :meth:`clamp`,
     :meth:`bases` and the others it calls are the environment's)."""
 
     robot: Robot
@@ -82,12 +82,12 @@ class WholeConfiguration:
         box = self.joint_box if self.joint_box is not None else \
             tuple(torch.as_tensor(a)[self.idx] for a in self.robot.finger_limits)
         flo, fhi = (b.reshape(-1) for b in box)
-        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self.bounds64())
+        lo, hi = (b if b.dim() == 1 or rows is None else b[rows.cpu()] for b in self._exact_bounds())
         if lo.dim() == 2:
             flo, fhi = flo.expand(lo.shape[0], -1), fhi.expand(lo.shape[0], -1)
         return torch.cat([lo, flo], -1), torch.cat([hi, fhi], -1)
 
-    def whole_start(self, config: Tensor, joints: Tensor, rows: Tensor | None = None) -> Tensor:
+    def _whole_start(self, config: Tensor, joints: Tensor, rows: Tensor | None = None) -> Tensor:
         """x (B, m) of configurations (B, n) and contact-finger joints (B, F, j), within bounds."""
         lo, hi = self.whole_bounds(rows)
         B = config.shape[0]
@@ -95,11 +95,11 @@ class WholeConfiguration:
         return torch.minimum(torch.maximum(x, lo), hi)
 
     def whole_of(self, posture: Posture) -> Tensor:
-        """x (1, m) of a posture: :meth:`config_of` its palm (or body), its contact fingers' joints."""
+        """x (1, m) of a posture: :meth:`_config_of` its palm (or body), its contact fingers' joints."""
         joints = posture.fingers[self.idx].to(torch.float64).unsqueeze(0)
-        return self.whole_start(self.config_of(posture), joints, None if self.mask is None else torch.zeros(1).long())
+        return self._whole_start(self._config_of(posture), joints, None if self.mask is None else torch.zeros(1).long())
 
-    def config_of(self, posture: Posture) -> Tensor:
+    def _config_of(self, posture: Posture) -> Tensor:
         """(1, n) the configuration that places the palm (or the body) where ``posture`` has it."""
         raise NotImplementedError
 
@@ -310,7 +310,7 @@ class WholeConfiguration:
             joints=solved.x[:, self.n:].reshape(B, F, j).to(**kw),
             collisions=None if count is None else count.to(like.device), contact_errors=contact)
 
-    def align(self, config: Tensor, evaluation: Evaluation, tolerance: float) -> tuple[Tensor, Evaluation]:
+    def _align(self, config: Tensor, evaluation: Evaluation, tolerance: float) -> tuple[Tensor, Evaluation]:
         """The grasps among the configurations (T, n) (``grasped`` within ``tolerance``) with
         their pads turned toward the object's inward normals as far as they stay grasps (the
         surface model): the whole polish with the pads' hinge at :data:`ALIGN_SHARE` of the cone,
@@ -323,7 +323,7 @@ class WholeConfiguration:
         if self.pads is None or not bool(landed.any()):
             return config, evaluation
         idx = landed.nonzero().squeeze(1)
-        x = self.whole_start(config[idx], evaluation.joints[idx], idx)
+        x = self._whole_start(config[idx], evaluation.joints[idx], idx)
         half = 2 * math.sin(ALIGN_SHARE * math.asin(self.pads.cone / 2))  # the chord of the narrower cone
         turned = self.local_solve(x, self.polish_iterations, rows=idx, pad_margin=half).x
         back = self.local_solve(turned, self.polish_iterations, self.polish_tol, rows=idx)
@@ -350,7 +350,7 @@ class WholeConfiguration:
         from the reported ones, of the trials ``trials``: never worse. The loop finds the basin;
         the fingers alone, with the palm fixed, end where the palm left them (a few mm), the whole
         polish lands in it. Rows stop below ``solver.polish.tolerance_mm`` or when ``done`` says so."""
-        x = self.whole_start(config, evaluation.joints, trials)
+        x = self._whole_start(config, evaluation.joints, trials)
         solved = self.local_solve(x, self.polish_iterations, self.polish_tol, done, rows=trials)
         return self.whole_result(solved, config, trials)
 
