@@ -87,9 +87,11 @@ def _copy_icub(share: Path, config: Path, part: Path) -> None:
     ``share`` into ``part`` (laid out as ``share``)."""
     rel = str(yaml.safe_load(config.read_text(encoding="utf-8"))["urdf"]).removeprefix(f"{ICUB}/")
     urdf = share / rel
-    if not urdf.is_file():
+    if ".." in Path(rel).parts or not urdf.is_file():
         raise ConfigError(f"fetch_hands: {config.name}: {ICUB_DIST} has no {rel}")
     for name in (rel, *dict.fromkeys(_MESH.findall(urdf.read_text(encoding="utf-8")))):
+        if Path(name).is_absolute() or ".." in Path(name).parts:  # nothing from or to outside the model's folders
+            raise ConfigError(f"fetch_hands: {config.name}: {clip(name, 120)} leads out of {ICUB}/")
         (part / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(share / name, part / name)
     licence = share / "LICENSE" if (share / "LICENSE").is_file() else _icub_licence()

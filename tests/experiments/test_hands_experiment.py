@@ -179,3 +179,30 @@ def test_fetch_hands_refuses_a_missing_icub_model_and_writes_nothing(tmp_path):
     with pytest.raises(ConfigError, match=r"icub\.yaml: icub-models has no robots/no_such_model/model\.urdf"):
         fetch_hands(str(source), "HEAD", examples, icub=_icub_share(tmp_path))
     assert sorted(p.name for p in examples.rglob("*")) == before  # the dex-urdf clones made first are gone
+
+
+def test_fetch_hands_refuses_a_mesh_leading_out_of_the_model_and_writes_nothing(tmp_path):
+    share = _icub_share(tmp_path)
+    (share / "robots" / "hand_mk3" / "model.urdf").write_text(
+        '<robot name="h"><link name="a"><collision><geometry><mesh filename="package://iCub/../../secret.stl"/>'
+        '</geometry></collision></link></robot>')
+    examples = tmp_path / "examples"
+    (examples / "icub").mkdir(parents=True)
+    (examples / "icub" / "icub.yaml").write_text("urdf: iCub/robots/hand_mk3/model.urdf\n")
+    with pytest.raises(ConfigError, match=r"icub\.yaml: \.\./\.\./secret\.stl leads out of iCub/"):
+        fetch_hands("unused", "unused", examples, icub=share)
+    assert sorted(p.name for p in examples.rglob("*")) == ["icub", "icub.yaml"]
+
+
+def test_fetch_hands_without_icub_models_says_how_to_install_it_and_writes_nothing(tmp_path, monkeypatch):
+    from graspnet_torch.jobs import fetch_hands as module
+
+    examples = tmp_path / "examples"
+    (examples / "icub").mkdir(parents=True)
+    (examples / "icub" / "icub.yaml").write_text("urdf: iCub/robots/hand_mk3/model.urdf\n")
+    real = module.importlib.util.find_spec
+    monkeypatch.setattr(module.importlib.util, "find_spec",
+                        lambda name, *a: None if name == "icub_models" else real(name, *a))
+    with pytest.raises(ConfigError, match=r"icub-models is not installed \(pip install icub-models"):
+        fetch_hands("unused", "unused", examples)
+    assert sorted(p.name for p in examples.rglob("*")) == ["icub", "icub.yaml"]
